@@ -1,0 +1,86 @@
+//! Geometry input: indexed triangle meshes and draws.
+
+use glam::{Mat4, Vec3};
+
+/// Why a mesh cannot be drawn.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum MeshError {
+    #[error("vertex {index} has a non-finite coordinate {value:?}")]
+    NonFinite { index: usize, value: [f32; 3] },
+    #[error("triangle {tri} refers to vertex {index}, but the mesh has {vertices} vertices")]
+    IndexOutOfRange { tri: usize, index: u32, vertices: usize },
+    #[error("normals: {normals} given for {vertices} vertices")]
+    NormalCount { normals: usize, vertices: usize },
+}
+
+/// An indexed triangle mesh. Triangle `i` is primitive id `i` of every draw of it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Mesh {
+    pub positions: Vec<Vec3>,
+    /// Optional per-vertex normals (same length as `positions`).
+    pub normals: Option<Vec<Vec3>>,
+    pub indices: Vec<[u32; 3]>,
+}
+
+impl Mesh {
+    /// Checks that every position is finite and every index in range.
+    pub fn validate(&self) -> Result<(), MeshError> {
+        for (index, p) in self.positions.iter().enumerate() {
+            if !p.is_finite() {
+                return Err(MeshError::NonFinite { index, value: p.to_array() });
+            }
+        }
+        if let Some(n) = &self.normals {
+            if n.len() != self.positions.len() {
+                return Err(MeshError::NormalCount { normals: n.len(), vertices: self.positions.len() });
+            }
+        }
+        let vertices = self.positions.len();
+        for (tri, t) in self.indices.iter().enumerate() {
+            for &index in t {
+                if index as usize >= vertices {
+                    return Err(MeshError::IndexOutOfRange { tri, index, vertices });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len()
+    }
+
+    /// Axis-aligned bounds `(min, max)`; `None` for an empty mesh.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let first = *self.positions.first()?;
+        Some(self.positions.iter().fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))))
+    }
+
+    /// Appends another mesh (indices rebased).
+    pub fn append(&mut self, other: &Mesh) {
+        let base = self.positions.len() as u32;
+        self.positions.extend_from_slice(&other.positions);
+        match (&mut self.normals, &other.normals) {
+            (Some(a), Some(b)) => a.extend_from_slice(b),
+            _ => self.normals = None,
+        }
+        self.indices.extend(other.indices.iter().map(|t| t.map(|i| i + base)));
+    }
+}
+
+/// One draw: a mesh, drawn once per instance with that instance's model matrix, through a
+/// view-projection matrix (OpenGL conventions: clip space z in [-w, w]).
+#[derive(Clone, Debug)]
+pub struct Draw<'m> {
+    pub mesh: &'m Mesh,
+    /// One model matrix per instance (instance id = position in this list).
+    pub instances: Vec<Mat4>,
+    pub view_proj: Mat4,
+}
+
+impl<'m> Draw<'m> {
+    /// One instance with the identity model matrix.
+    pub fn new(mesh: &'m Mesh, view_proj: Mat4) -> Draw<'m> {
+        Draw { mesh, instances: vec![Mat4::IDENTITY], view_proj }
+    }
+}

@@ -1,0 +1,1 @@
+//! Homogeneous clipping against the near and far planes (and guard band planes).

@@ -1,0 +1,116 @@
+//! Rasterization: homogeneous clipping, fixed-point triangle setup, tile binning and
+//! per-tile coverage, as D3D11/OpenGL hardware does it.
+//!
+//! This module knows nothing of shading, memory or executors: it turns clip-space
+//! triangles into [`Fragment`]s, tile by tile, in API order.
+//!
+//! Rules (DESIGN.md 2.1):
+//! - 8 sub-pixel bits of fixed point ([`SUBPIXEL_BITS`]), pixel centres at +0.5;
+//! - top-left fill rule on integer (i64) edge functions: *watertight*, a sample on an edge
+//!   shared by two triangles is covered by exactly one of them; no duplicate fragments;
+//! - screen space has y pointing down (row 0 is the top row of the image); NDC +y is up;
+//! - depth `z_window = (z_ndc + 1) / 2` (OpenGL's default depth range), interpolated linearly
+//!   in screen space as an f32 plane; attributes are perspective-correct;
+//! - clipping against the near and far planes (and a guard band for x/y);
+//! - MSAA with 1, 2, 4 or 8 samples at the standard D3D positions.
+
+mod clip;
+mod coverage;
+mod setup;
+
+pub use setup::{bin_triangles, Binned, SetupTriangle};
+
+/// Sub-pixel precision of snapped vertex positions.
+pub const SUBPIXEL_BITS: u32 = 8;
+
+/// Number of samples per pixel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
+pub enum SampleCount {
+    #[default]
+    X1,
+    X2,
+    X4,
+    X8,
+}
+
+impl SampleCount {
+    pub fn count(self) -> usize {
+        match self {
+            SampleCount::X1 => 1,
+            SampleCount::X2 => 2,
+            SampleCount::X4 => 4,
+            SampleCount::X8 => 8,
+        }
+    }
+    pub fn from_count(n: u32) -> Option<SampleCount> {
+        match n {
+            1 => Some(SampleCount::X1),
+            2 => Some(SampleCount::X2),
+            4 => Some(SampleCount::X4),
+            8 => Some(SampleCount::X8),
+            _ => None,
+        }
+    }
+    /// Standard sample positions (D3D11 / Vulkan standard), as offsets in pixels from the
+    /// pixel's top-left corner (so the centre is (0.5, 0.5)).
+    pub fn positions(self) -> &'static [(f32, f32)] {
+        coverage::sample_positions(self)
+    }
+}
+
+/// Which faces are culled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub enum CullMode {
+    #[default]
+    None,
+    Front,
+    Back,
+}
+
+/// Which winding (in window space, as seen on screen) is front-facing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub enum FrontFace {
+    /// Counter-clockwise on screen (OpenGL's default).
+    #[default]
+    Ccw,
+    Cw,
+}
+
+/// Rasterizer state of one draw.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct RasterState {
+    pub cull: CullMode,
+    pub front_face: FrontFace,
+    pub samples: SampleCount,
+    /// Tile edge in pixels (a power of two from 8 to 256).
+    pub tile_size: u32,
+}
+
+impl Default for RasterState {
+    fn default() -> Self {
+        RasterState {
+            cull: CullMode::None,
+            front_face: FrontFace::Ccw,
+            samples: SampleCount::X1,
+            tile_size: 64,
+        }
+    }
+}
+
+/// Size of the render area in pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Viewport {
+    pub width: u32,
+    pub height: u32,
+}
+
+/// One covered pixel of one triangle (a fragment before shading).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fragment {
+    pub x: u32,
+    pub y: u32,
+    /// Index into [`Binned::tris`].
+    pub tri: u32,
+    /// Bit `s` set = sample `s` covered (bit 0 only, with one sample: the pixel centre).
+    pub coverage: u8,
+}
