@@ -8,7 +8,7 @@
 use crate::raster::SampleCount;
 use crate::state::{Format, FragmentState};
 
-/// Largest accepted width or height (and the pixel budget is `MAX_PIXELS`).
+/// Largest accepted width or height (the total budget is [`MAX_SAMPLES_TOTAL`]).
 pub const MAX_DIMENSION: u32 = 16384;
 /// Largest accepted `width * height * samples`.
 pub const MAX_SAMPLES_TOTAL: u64 = 1 << 28;
@@ -19,7 +19,12 @@ pub enum FramebufferError {
     #[error("viewport {width}x{height} is empty")]
     Empty { width: u32, height: u32 },
     #[error("viewport {width}x{height} with {samples} samples is larger than the supported {max} samples ({MAX_DIMENSION} pixels per side)")]
-    TooLarge { width: u32, height: u32, samples: usize, max: u64 },
+    TooLarge {
+        width: u32,
+        height: u32,
+        samples: usize,
+        max: u64,
+    },
     #[error("{0} render targets requested, at most 8 are supported")]
     TooManyTargets(usize),
     #[error("tile size {0} is not a power of two from 8 to 256")]
@@ -43,10 +48,54 @@ pub struct TileMemory {
 }
 
 impl TileMemory {
+    /// A tile at `(x0, y0)` of clamped size `w x h`, with every buffer full-size
+    /// (`tile_size * tile_size * samples`) so that tile-local indexing is the same for edge
+    /// tiles; colour cleared to 0, depth to 1.0, stencil to 0.
+    pub fn new(
+        x0: u32,
+        y0: u32,
+        w: u32,
+        h: u32,
+        tile_size: u32,
+        samples: u32,
+        targets: usize,
+    ) -> TileMemory {
+        let n = (tile_size * tile_size * samples) as usize;
+        TileMemory {
+            x0,
+            y0,
+            w,
+            h,
+            tile_size,
+            samples,
+            color: (0..targets).map(|_| vec![[0u32; 4]; n]).collect(),
+            depth: vec![1.0; n],
+            stencil: vec![0; n],
+        }
+    }
+
+    /// Index of sample `s` of tile-local pixel `(lx, ly)` in every buffer of the tile.
+    #[inline]
+    pub fn index(&self, lx: u32, ly: u32, s: u32) -> usize {
+        debug_assert!(lx < self.tile_size && ly < self.tile_size && s < self.samples);
+        ((ly * self.tile_size + lx) * self.samples + s) as usize
+    }
+
+    /// The bits of a sample mask that name existing samples (coverage bits beyond the
+    /// sample count are ignored rather than indexing a neighbouring pixel).
+    #[inline]
+    fn sample_bits(&self) -> u8 {
+        ((1u16 << self.samples) - 1) as u8
+    }
+
     /// Runs the stencil and depth tests of `state` on the covered samples of pixel
     /// `(lx, ly)`, applying the stencil ops and (when `write_depth`) depth writes, in the
     /// order GL specifies (stencil test, then depth test). `depths[s]` is the fragment's
     /// depth at sample `s`. Returns the mask of samples that passed.
+    ///
+    /// The arguments are the per-fragment inputs of the fixed-function test, passed flat so
+    /// the hot path builds no struct per fragment.
+    #[allow(clippy::too_many_arguments)]
     pub fn depth_stencil(
         &mut self,
         state: &FragmentState,
@@ -57,8 +106,61 @@ impl TileMemory {
         front_facing: bool,
         write_depth: bool,
     ) -> u8 {
-        let _ = (state, lx, ly, coverage, depths, front_facing, write_depth);
-        todo!()
+        let mut mask = coverage & state.sample_mask & self.sample_bits();
+        let stencil = &state.stencil;
+        let depth = &state.depth;
+        if !stencil.enabled && !depth.test {
+            // Nothing to test and nothing written: with the depth test disabled GL never
+            // writes depth, even when the depth write mask is set.
+            return mask;
+        }
+        let face = if front_facing {
+            &stencil.front
+        } else {
+            &stencil.back
+        };
+        let base = self.index(lx, ly, 0);
+        let mut bits = mask;
+        while bits != 0 {
+            let s = bits.trailing_zeros();
+            bits &= bits - 1;
+            let i = base + s as usize;
+            let stored_stencil = self.stencil[i];
+            if stencil.enabled
+                && !face.func.test(
+                    face.reference & face.read_mask,
+                    stored_stencil & face.read_mask,
+                )
+            {
+                self.stencil[i] =
+                    face.fail_op
+                        .apply(stored_stencil, face.reference, face.write_mask);
+                mask &= !(1 << s);
+                continue;
+            }
+            if depth.test {
+                if !depth.func.test(depths[s as usize], self.depth[i]) {
+                    if stencil.enabled {
+                        self.stencil[i] = face.depth_fail_op.apply(
+                            stored_stencil,
+                            face.reference,
+                            face.write_mask,
+                        );
+                    }
+                    mask &= !(1 << s);
+                    continue;
+                }
+                if write_depth && depth.write {
+                    self.depth[i] = depths[s as usize];
+                }
+            }
+            if stencil.enabled {
+                self.stencil[i] =
+                    face.pass_op
+                        .apply(stored_stencil, face.reference, face.write_mask);
+            }
+        }
+        mask
     }
 
     /// Writes the shader outputs (one per target, raw words) to the samples in `mask`,
@@ -71,8 +173,17 @@ impl TileMemory {
         mask: u8,
         outputs: &[[u32; 4]],
     ) {
-        let _ = (state, lx, ly, mask, outputs);
-        todo!()
+        let mask = mask & self.sample_bits();
+        let base = self.index(lx, ly, 0);
+        for (i, (target, out)) in state.targets.iter().zip(outputs).enumerate() {
+            let color = &mut self.color[i];
+            let mut bits = mask;
+            while bits != 0 {
+                let idx = base + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                color[idx] = target.combine(*out, color[idx]);
+            }
+        }
     }
 }
 
@@ -93,12 +204,18 @@ impl Image {
     }
     /// The texel as floats (f32 bits of float formats; u32 converted for integer formats).
     pub fn texel_f32(&self, x: u32, y: u32, sample: u32) -> [f32; 4] {
-        let _ = (x, y, sample);
-        todo!()
+        let t = self.texel(x, y, sample);
+        if self.format.is_integer() {
+            t.map(|w| w as f32)
+        } else {
+            t.map(f32::from_bits)
+        }
     }
 }
 
-/// Render targets plus depth and stencil, tile-major.
+/// Render targets plus depth and stencil, tile-major: tile `(tx, ty)` is
+/// `tiles()[ty * tiles_x + tx]` and covers pixels `tx*tile_size ..` and `ty*tile_size ..`
+/// (edge tiles clamped to the framebuffer in `w`, `h`, but with full-size buffers).
 pub struct Framebuffer {
     pub width: u32,
     pub height: u32,
@@ -119,8 +236,73 @@ impl Framebuffer {
         tile_size: u32,
         formats: &[Format],
     ) -> Result<Framebuffer, FramebufferError> {
-        let _ = (width, height, samples, tile_size, formats);
-        todo!()
+        if width == 0 || height == 0 {
+            return Err(FramebufferError::Empty { width, height });
+        }
+        let n = samples.count();
+        // The product is only computed once both dimensions are known to be <= 2^14 (the `||`
+        // short-circuits), so it is below 2^31 and cannot overflow u64; nothing is allocated
+        // before every check has passed.
+        if width > MAX_DIMENSION
+            || height > MAX_DIMENSION
+            || u64::from(width) * u64::from(height) * n as u64 > MAX_SAMPLES_TOTAL
+        {
+            return Err(FramebufferError::TooLarge {
+                width,
+                height,
+                samples: n,
+                max: MAX_SAMPLES_TOTAL,
+            });
+        }
+        if formats.len() > 8 {
+            return Err(FramebufferError::TooManyTargets(formats.len()));
+        }
+        if !(8..=256).contains(&tile_size) || !tile_size.is_power_of_two() {
+            return Err(FramebufferError::BadTileSize(tile_size));
+        }
+        let tiles_x = width.div_ceil(tile_size);
+        let tiles_y = height.div_ceil(tile_size);
+        let mut tiles = Vec::with_capacity((tiles_x * tiles_y) as usize);
+        for ty in 0..tiles_y {
+            for tx in 0..tiles_x {
+                let x0 = tx * tile_size;
+                let y0 = ty * tile_size;
+                tiles.push(TileMemory::new(
+                    x0,
+                    y0,
+                    tile_size.min(width - x0),
+                    tile_size.min(height - y0),
+                    tile_size,
+                    n as u32,
+                    formats.len(),
+                ));
+            }
+        }
+        Ok(Framebuffer {
+            width,
+            height,
+            samples,
+            tile_size,
+            tiles_x,
+            tiles_y,
+            formats: formats.to_vec(),
+            tiles,
+        })
+    }
+
+    /// The tile holding pixel `(x, y)` and the index of `sample` of that pixel in the tile's
+    /// buffers. Panics outside the framebuffer (the padding of edge tiles is not pixels).
+    pub fn locate(&self, x: u32, y: u32, sample: u32) -> (usize, usize) {
+        assert!(
+            x < self.width && y < self.height && (sample as usize) < self.samples.count(),
+            "pixel ({x}, {y}) sample {sample} outside the {}x{} framebuffer with {} samples",
+            self.width,
+            self.height,
+            self.samples.count()
+        );
+        let ts = self.tile_size;
+        let tile = ((y / ts) * self.tiles_x + x / ts) as usize;
+        (tile, self.tiles[tile].index(x % ts, y % ts, sample))
     }
     pub fn tiles(&self) -> &[TileMemory] {
         &self.tiles
@@ -129,33 +311,62 @@ impl Framebuffer {
         &mut self.tiles
     }
     /// Clears a target to raw words (every sample).
+    ///
+    /// The words are stored as given (no conversion to the format; channels beyond the
+    /// format's count should be 0, as `combine` keeps them).
     pub fn clear_color(&mut self, target: usize, value: [u32; 4]) {
-        let _ = (target, value);
-        todo!()
+        for t in &mut self.tiles {
+            t.color[target].fill(value);
+        }
     }
+    /// Clears depth on every sample.
     pub fn clear_depth(&mut self, value: f32) {
-        let _ = value;
-        todo!()
+        for t in &mut self.tiles {
+            t.depth.fill(value);
+        }
     }
+    /// Clears stencil on every sample.
     pub fn clear_stencil(&mut self, value: u8) {
-        let _ = value;
-        todo!()
+        for t in &mut self.tiles {
+            t.stencil.fill(value);
+        }
     }
+    /// Raw words of one sample of a target, global pixel coordinates.
     pub fn color(&self, target: usize, x: u32, y: u32, sample: u32) -> [u32; 4] {
-        let _ = (target, x, y, sample);
-        todo!()
+        let (t, i) = self.locate(x, y, sample);
+        self.tiles[t].color[target][i]
     }
+    /// Depth of one sample, global pixel coordinates.
     pub fn depth(&self, x: u32, y: u32, sample: u32) -> f32 {
-        let _ = (x, y, sample);
-        todo!()
+        let (t, i) = self.locate(x, y, sample);
+        self.tiles[t].depth[i]
     }
+    /// Stencil of one sample, global pixel coordinates.
     pub fn stencil(&self, x: u32, y: u32, sample: u32) -> u8 {
-        let _ = (x, y, sample);
-        todo!()
+        let (t, i) = self.locate(x, y, sample);
+        self.tiles[t].stencil[i]
     }
     /// Row-major snapshot of a target, for binding read-only in a later pass.
     pub fn image(&self, target: usize) -> Image {
-        let _ = target;
-        todo!()
+        let samples = self.samples.count();
+        let mut texels = vec![[0u32; 4]; self.width as usize * self.height as usize * samples];
+        let row = self.width as usize * samples;
+        for tile in &self.tiles {
+            let src = &tile.color[target];
+            // Each tile row is a contiguous run of `w * samples` texels in both layouts.
+            let run = tile.w as usize * samples;
+            for ly in 0..tile.h {
+                let from = tile.index(0, ly, 0);
+                let to = (tile.y0 + ly) as usize * row + tile.x0 as usize * samples;
+                texels[to..to + run].copy_from_slice(&src[from..from + run]);
+            }
+        }
+        Image {
+            width: self.width,
+            height: self.height,
+            samples: samples as u32,
+            format: self.formats[target],
+            texels,
+        }
     }
 }

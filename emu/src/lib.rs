@@ -1,9 +1,43 @@
 //! # fragrace-emu: a software GPU for multi-fragment rendering under races
 //!
-//! (crate docs are written in `docs/architecture.md` and below, as the modules land)
+//! A [`Device`] owns shared memory ([`Memory`], typed [`Buf`] handles) and runs passes:
+//! geometry passes ([`Device::draw`]) that rasterize a [`Draw`] into a [`Framebuffer`] and
+//! run a [`FragmentKernel`] once per fragment, and full-screen passes
+//! ([`Device::fullscreen`]) that run it once per pixel. Kernels are `async fn`s over a
+//! [`Frag`]: every shared-memory access is awaited, a place where another invocation may
+//! run. An [`ExecConfig`] picks the executor: `ordered` (the reference), `parallel` (real
+//! threads, fragments of one pixel at once on different threads) or `scheduled` (a seeded
+//! [`Policy`] interleaves invocations at every access, a hazard detector watches).
+//!
+//! Fixed-function state ([`state`]) is applied in API order whatever order the shaders
+//! ran in. Nothing in this crate knows about any multi-fragment algorithm.
+//!
+//! Module map: [`raster`] (clipping, setup, binning, coverage), [`state`] (depth, stencil,
+//! blending), [`framebuffer`] (tile-major targets), [`memory`] (buffers, atomics),
+//! [`kernel`] (the kernel API), [`exec`] (executors and policies), [`interlock`],
+//! [`hazard`] (the detector), [`stats`], [`pipeline`] (passes), [`sync`] (std or loom).
 
+pub mod exec;
 pub mod framebuffer;
 pub mod geometry;
+pub mod hazard;
+pub mod interlock;
+pub mod kernel;
+pub mod memory;
+pub mod pipeline;
 pub mod raster;
 pub mod state;
+pub mod stats;
 pub mod sync;
+
+pub use exec::{ExecConfig, ExecMode, Policy, ScheduleConfig};
+pub use framebuffer::{Framebuffer, Image};
+pub use geometry::{Draw, Mesh};
+pub use hazard::{Hazard, HazardCounts, HazardKind};
+pub use interlock::InterlockMode;
+pub use kernel::{FaultKind, Frag, FragmentKernel, KernelInfo};
+pub use memory::{Buf, Memory, Word};
+pub use pipeline::{Device, Fault, OcclusionQuery, PassError, PassReport, PassState};
+pub use raster::{CullMode, FrontFace, RasterState, SampleCount, Viewport};
+pub use state::{BlendEquation, BlendFactor, BlendState, CompareFunc, DepthState, EarlyTests, Format, FragmentState, LogicOp, StencilFace, StencilOp, StencilState, TargetState};
+pub use stats::Stats;

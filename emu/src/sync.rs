@@ -14,3 +14,10 @@ pub use loom::sync::atomic::{fence, AtomicBool, AtomicU32, AtomicU64, AtomicUsiz
 pub use loom::sync::{Arc, Mutex};
 #[cfg(loom)]
 pub use loom::thread;
+
+/// The executors' worker pool: scoped OS threads and a mutex for handing out batches.
+/// Always `std`: loom model-checks the memory and interlock protocols, not the pool.
+pub mod pool {
+    pub use std::sync::Mutex;
+    pub use std::thread::scope;
+}

@@ -1,26 +1,104 @@
 //! Triangle setup (snap to fixed point, edge functions, planes) and tile binning.
-use super::{Fragment, RasterState, Viewport};
+//!
+//! Pipeline of [`bin_triangles`], each step parallel over `threads` scoped threads:
+//! 1. every vertex is classified against the clip planes once and, when inside all of them,
+//!    snapped to 8-bit sub-pixel fixed point (a vertex shared by many triangles is projected
+//!    once, and shared vertices are bit-identical in all of them: the basis of watertightness);
+//! 2. triangles, in chunks: the snapped bounding box is tested for a sample first (most
+//!    triangles of a dense mesh are sub-pixel and end here), then area, facing and culling, an
+//!    exact sample test for tiny ones, the depth and barycentric planes, and the tile bins.
+//!    Triangles with a vertex outside a plane go through homogeneous clipping ([`super::clip`]);
+//! 3. chunk results are concatenated in chunk order, so setup indices follow API order, and the
+//!    per-tile lists are a stable counting sort of the chunks' `(tile, triangle)` pairs.
+use super::clip::{self, ClipVert, Planes, MAX_POLY, NON_FINITE};
+use super::coverage::{self, area2, bbox, Edges, SampleInfo, ONE};
+use super::{CullMode, Fragment, FrontFace, RasterState, SampleCount, Viewport, SUBPIXEL_BITS};
 use glam::Vec4;
 
+/// Largest magnitude of a snapped coordinate (sub-pixel units). The guard band keeps real
+/// coordinates below 2^28; the clamp only makes absurd inputs (viewports wider than the guard
+/// band) harmless.
+const COORD_LIMIT: f64 = (1u32 << 29) as f64;
+
+/// Largest viewport side handled (pixels); pixels beyond are never covered.
+const MAX_VIEWPORT: u32 = 1 << 20;
+
 /// A triangle after clipping and snapping, ready to rasterize.
-#[derive(Clone, Debug)]
+///
+/// 80 bytes, no heap: the snapped vertices (edge functions are rebuilt from them in a few
+/// integer operations when rasterizing), the depth plane, and the per-vertex values that make
+/// barycentrics perspective-correct and relative to the *source* triangle.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SetupTriangle {
     /// Index of the input triangle (into `indices`) this comes from (several setup triangles share one
     /// source when clipping split it).
     pub source: u32,
     pub front_facing: bool,
+    /// Index into `v` of the depth plane's reference vertex.
+    zref: u8,
+    /// Snapped window positions (sub-pixel units, y down), positively oriented
+    /// ([`coverage::area2`] > 0).
+    v: [[i32; 2]; 3],
+    /// Depth plane: `z(x, y) = depth[0] + depth[1] (x - xr) + depth[2] (y - yr)`, pixels.
+    depth: [f32; 3],
+    /// `q[i][k]` = weight of source vertex `k` at vertex `i`, divided by that vertex's clip `w`.
+    /// Interpolated linearly in screen space and normalised, they give perspective-correct
+    /// barycentrics of the source triangle (for unclipped triangles `q[i]` is `1/w` on one axis).
+    q: [[f32; 3]; 3],
 }
 
 impl SetupTriangle {
     /// Window depth in [0,1] at a screen position (pixels, y down), linear in screen space.
+    ///
+    /// The plane is computed from the snapped vertices taken in a canonical order (sorted by
+    /// position), so triangles with identical vertices give bit-identical depths whatever their
+    /// vertex order or winding.
     pub fn depth_at(&self, x: f32, y: f32) -> f32 {
-        let _ = (x, y);
-        todo!()
+        let r = self.v[self.zref as usize];
+        let scale = 1.0 / ONE as f64;
+        let dx = x as f64 - r[0] as f64 * scale;
+        let dy = y as f64 - r[1] as f64 * scale;
+        let z = self.depth[0] as f64 + self.depth[1] as f64 * dx + self.depth[2] as f64 * dy;
+        z.clamp(0.0, 1.0) as f32
     }
+
     /// Perspective-correct barycentrics of the *source* triangle's vertices at a screen position.
     pub fn bary_at(&self, x: f32, y: f32) -> [f32; 3] {
-        let _ = (x, y);
-        todo!()
+        let px = x as f64 * ONE as f64;
+        let py = y as f64 * ONE as f64;
+        // Screen-space weight of vertex k = edge function of the opposite edge (unnormalised).
+        let mut l = [0.0f64; 3];
+        for (k, lk) in l.iter_mut().enumerate() {
+            let p = self.v[(k + 1) % 3];
+            let q = self.v[(k + 2) % 3];
+            let (p0, p1) = (p[0] as f64, p[1] as f64);
+            *lk = (q[0] as f64 - p0) * (py - p1) - (q[1] as f64 - p1) * (px - p0);
+        }
+        let mut num = [0.0f64; 3];
+        for (k, lk) in l.iter().enumerate() {
+            for (j, n) in num.iter_mut().enumerate() {
+                *n += lk * self.q[k][j] as f64;
+            }
+        }
+        let s = num[0] + num[1] + num[2];
+        if s == 0.0 || !s.is_finite() {
+            return [1.0 / 3.0; 3];
+        }
+        [(num[0] / s) as f32, (num[1] / s) as f32, (num[2] / s) as f32]
+    }
+
+    /// Snapped vertex positions in sub-pixel units ([`super::SUBPIXEL_BITS`] fractional bits,
+    /// y down), oriented so that the interior is on the positive side of every edge (clockwise
+    /// on screen). Useful to tests and debugging tools.
+    pub fn fixed_vertices(&self) -> [[i32; 2]; 3] {
+        self.v
+    }
+
+    /// Coverage mask of pixel `(x, y)` for `samples`, evaluated exactly as the rasterizer does
+    /// (without the viewport/tile scissor).
+    pub fn coverage(&self, x: u32, y: u32, samples: SampleCount) -> u8 {
+        let si = SampleInfo::new(samples);
+        Edges::new(&self.v).mask_at(&si, (x as i64) << SUBPIXEL_BITS, (y as i64) << SUBPIXEL_BITS)
     }
 }
 
@@ -30,30 +108,353 @@ pub struct Binned {
     pub tiles_x: u32,
     pub tiles_y: u32,
     pub tile_size: u32,
-    /// Input triangles dropped for non-finite coordinates.
+    /// Input triangles dropped for non-finite coordinates (or out-of-range indices).
     pub rejected: u64,
+    /// The render area the triangles were set up for.
+    pub viewport: Viewport,
+    /// Samples per pixel the coverage masks refer to.
+    pub samples: SampleCount,
+    /// `tile_tris[tile_start[t]..tile_start[t + 1]]` are tile `t`'s triangles in API order.
+    tile_start: Vec<u32>,
+    tile_tris: Vec<u32>,
 }
 
 impl Binned {
     pub fn tile_count(&self) -> usize {
         (self.tiles_x * self.tiles_y) as usize
     }
+
     /// Pixel rectangle `(x0, y0, x1, y1)` (exclusive ends, clamped to the viewport) of a tile.
     pub fn tile_rect(&self, tile: usize) -> (u32, u32, u32, u32) {
-        let _ = tile;
-        todo!()
+        let tx = (tile % self.tiles_x.max(1) as usize) as u32;
+        let ty = (tile / self.tiles_x.max(1) as usize) as u32;
+        let ts = self.tile_size;
+        let x0 = (tx * ts).min(self.viewport.width);
+        let y0 = (ty * ts).min(self.viewport.height);
+        let x1 = (x0 + ts).min(self.viewport.width);
+        let y1 = (y0 + ts).min(self.viewport.height);
+        (x0, y0, x1, y1)
     }
+
+    /// Setup indices (into [`Binned::tris`]) of the triangles binned to a tile, ascending.
+    pub fn tile_triangles(&self, tile: usize) -> &[u32] {
+        if tile >= self.tile_count() {
+            return &[];
+        }
+        &self.tile_tris[self.tile_start[tile] as usize..self.tile_start[tile + 1] as usize]
+    }
+
     /// Emits the fragments of one tile in API order (by `tri`); within one triangle in
     /// row-major order.
     pub fn raster_tile(&self, tile: usize, mut emit: impl FnMut(Fragment)) {
-        let _ = (tile, &mut emit);
-        todo!()
+        if tile >= self.tile_count() {
+            return;
+        }
+        let (x0, y0, x1, y1) = self.tile_rect(tile);
+        if x0 >= x1 || y0 >= y1 {
+            return;
+        }
+        let si = SampleInfo::new(self.samples);
+        let (x0, y0, x1, y1) = (x0 as i32, y0 as i32, x1 as i32, y1 as i32);
+        for &ti in self.tile_triangles(tile) {
+            let t = &self.tris[ti as usize];
+            let Some(r) = si.pixel_rect(bbox(&t.v), x1, y1) else { continue };
+            let r = [r[0].max(x0), r[1].max(y0), r[2], r[3]];
+            if r[0] > r[2] || r[1] > r[3] {
+                continue;
+            }
+            let e = Edges::new(&t.v);
+            coverage::raster(&e, &si, r, |x, y, coverage| emit(Fragment { x, y, tri: ti, coverage }));
+        }
     }
+}
+
+/// Per-vertex result of step 1: snapped position, or `x == OUT` and `y` = outcode.
+#[derive(Clone, Copy, Debug, Default)]
+struct Snapped {
+    x: i32,
+    y: i32,
+}
+
+const OUT: i32 = i32::MIN;
+
+/// Viewport transform to fixed point. One function for every vertex, original or produced by
+/// clipping, so equal inputs snap to equal outputs.
+#[derive(Clone, Copy, Debug)]
+struct Xform {
+    /// `W * ONE / 2` and `H * ONE / 2`.
+    sx: f64,
+    sy: f64,
+}
+
+impl Xform {
+    #[inline]
+    fn snap(&self, x: f64, y: f64, w: f64) -> [i32; 2] {
+        let iw = 1.0 / w;
+        [round_fixed((x * iw + 1.0) * self.sx), round_fixed((1.0 - y * iw) * self.sy)]
+    }
+}
+
+/// Round to nearest (ties up) into i32, clamped to [`COORD_LIMIT`]. Adding 2^31 makes the value
+/// positive so that truncation is floor (faster than `f64::round` on baseline x86-64).
+#[inline]
+fn round_fixed(v: f64) -> i32 {
+    const BIAS: f64 = 2_147_483_648.0;
+    let c = if v.is_nan() { 0.0 } else { v.clamp(-COORD_LIMIT, COORD_LIMIT) };
+    ((c + (0.5 + BIAS)) as i64 - BIAS as i64) as i32
+}
+
+/// Window depth `(z/w + 1) / 2` and `1/w` of a clip-space vertex.
+#[inline]
+fn depth_w(z: f64, w: f64) -> (f32, f32) {
+    let iw = 1.0 / w;
+    ((z * iw * 0.5 + 0.5) as f32, iw as f32)
+}
+
+#[inline]
+fn vec4_f64(p: Vec4) -> [f64; 4] {
+    [p.x as f64, p.y as f64, p.z as f64, p.w as f64]
+}
+
+/// Depth plane through the three vertices taken in canonical (sorted by y then x) order:
+/// returns the reference vertex index and `[z_ref, dz/dx, dz/dy]` per pixel.
+fn depth_plane(v: &[[i32; 2]; 3], zw: &[f32; 3]) -> (u8, [f32; 3]) {
+    let key = |i: usize| (v[i][1], v[i][0]);
+    let mut o = [0usize, 1, 2];
+    if key(o[1]) < key(o[0]) {
+        o.swap(0, 1);
+    }
+    if key(o[2]) < key(o[1]) {
+        o.swap(1, 2);
+    }
+    if key(o[1]) < key(o[0]) {
+        o.swap(0, 1);
+    }
+    let s = 1.0 / ONE as f64;
+    let p = |i: usize| (v[i][0] as f64 * s, v[i][1] as f64 * s, zw[i] as f64);
+    let (x0, y0, z0) = p(o[0]);
+    let (x1, y1, z1) = p(o[1]);
+    let (x2, y2, z2) = p(o[2]);
+    let (dx1, dy1, dz1) = (x1 - x0, y1 - y0, z1 - z0);
+    let (dx2, dy2, dz2) = (x2 - x0, y2 - y0, z2 - z0);
+    let d = dx1 * dy2 - dx2 * dy1;
+    let zx = (dz1 * dy2 - dz2 * dy1) / d;
+    let zy = (dx1 * dz2 - dx2 * dz1) / d;
+    (o[0] as u8, [zw[o[0]], zx as f32, zy as f32])
+}
+
+/// Everything a worker needs, shared read-only.
+struct Ctx<'a> {
+    positions: &'a [Vec4],
+    indices: &'a [[u32; 3]],
+    snapped: &'a [Snapped],
+    planes: Planes,
+    xf: Xform,
+    si: SampleInfo,
+    /// Viewport in pixels (clamped to [`MAX_VIEWPORT`]).
+    w: i32,
+    h: i32,
+    tile_size: i32,
+    tiles_x: u32,
+    cull: CullMode,
+    /// `FrontFace::Ccw`: front-facing when counter-clockwise on screen.
+    ccw_front: bool,
+}
+
+/// What one chunk of triangles produced.
+#[derive(Default)]
+struct ChunkOut {
+    tris: Vec<SetupTriangle>,
+    /// `(tile, index into tris)` in triangle order.
+    bins: Vec<[u32; 2]>,
+    rejected: u64,
+}
+
+impl Ctx<'_> {
+    /// Facing from the snapped signed area (`a2 < 0`: counter-clockwise on screen, see
+    /// [`coverage::area2`]); `None` when culled.
+    #[inline]
+    fn facing(&self, a2_negative: bool) -> Option<bool> {
+        let front = a2_negative == self.ccw_front;
+        match (self.cull, front) {
+            (CullMode::Back, false) | (CullMode::Front, true) => None,
+            _ => Some(front),
+        }
+    }
+
+    /// Exact sample test for triangles spanning at most 2x2 pixels: most triangles of a dense
+    /// mesh whose bounding box reaches a sample still miss it, and are dropped here instead of
+    /// costing a setup record, a bin entry and a rasterization.
+    #[inline]
+    fn tiny_and_empty(&self, v: &[[i32; 2]; 3], r: [i32; 4]) -> bool {
+        r[2] - r[0] <= 1 && r[3] - r[1] <= 1 && !coverage::any_covered(&Edges::new(v), &self.si, r)
+    }
+
+    fn run(&self, range: std::ops::Range<usize>, out: &mut ChunkOut) {
+        let sv = self.snapped;
+        for t in range {
+            let [ia, ib, ic] = self.indices[t];
+            let (Some(&a), Some(&b), Some(&c)) =
+                (sv.get(ia as usize), sv.get(ib as usize), sv.get(ic as usize))
+            else {
+                out.rejected += 1;
+                continue;
+            };
+            if a.x == OUT || b.x == OUT || c.x == OUT {
+                self.clipped(t as u32, [ia, ib, ic], [a, b, c], out);
+                continue;
+            }
+            let v = [[a.x, a.y], [b.x, b.y], [c.x, c.y]];
+            let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else { continue };
+            let a2 = area2(&v);
+            if a2 == 0 {
+                continue;
+            }
+            let Some(front) = self.facing(a2 < 0) else { continue };
+            let (v, perm) = if a2 > 0 { (v, [0, 1, 2]) } else { ([v[0], v[2], v[1]], [0, 2, 1]) };
+            if self.tiny_and_empty(&v, r) {
+                continue;
+            }
+            let idx = [ia, ib, ic];
+            let mut zw = [0.0f32; 3];
+            let mut q = [[0.0f32; 3]; 3];
+            for i in 0..3 {
+                let p = self.positions[idx[perm[i]] as usize];
+                let (z, iw) = depth_w(p.z as f64, p.w as f64);
+                zw[i] = z;
+                q[i][perm[i]] = iw;
+            }
+            self.finish(out, t as u32, front, v, r, zw, q);
+        }
+    }
+
+    /// Slow path: a vertex is outside a clip plane (or not finite).
+    #[cold]
+    fn clipped(&self, source: u32, idx: [u32; 3], s: [Snapped; 3], out: &mut ChunkOut) {
+        let oc = s.map(|s| if s.x == OUT { s.y as u32 } else { 0 });
+        if (oc[0] | oc[1] | oc[2]) & NON_FINITE != 0 {
+            out.rejected += 1;
+            return;
+        }
+        if oc[0] & oc[1] & oc[2] != 0 {
+            return; // entirely outside one plane
+        }
+        let tri = [0, 1, 2].map(|k| {
+            let mut b = [0.0; 3];
+            b[k] = 1.0;
+            ClipVert { p: vec4_f64(self.positions[idx[k] as usize]), b }
+        });
+        let poly = clip::clip_triangle(&self.planes, tri, oc[0] | oc[1] | oc[2]);
+        let n = poly.n;
+        if n < 3 {
+            return;
+        }
+        let mut pts = [[0i64; 2]; MAX_POLY + 1];
+        let mut fixed = [[0i32; 2]; MAX_POLY + 1];
+        let mut zw = [0.0f32; MAX_POLY + 1];
+        let mut iw = [0.0f32; MAX_POLY + 1];
+        for j in 0..n {
+            let [x, y, z, w] = poly.v[j].p;
+            fixed[j] = self.xf.snap(x, y, w);
+            pts[j] = [fixed[j][0] as i64, fixed[j][1] as i64];
+            (zw[j], iw[j]) = depth_w(z, w);
+        }
+        // Facing from the whole snapped polygon (shoelace), so all pieces agree.
+        let mut a2: i128 = 0;
+        for j in 0..n {
+            let (p, q) = (pts[j], pts[(j + 1) % n]);
+            a2 += p[0] as i128 * q[1] as i128 - q[0] as i128 * p[1] as i128;
+        }
+        if a2 == 0 {
+            return;
+        }
+        let Some(front) = self.facing(a2 < 0) else { return };
+        let mut hull = [0usize; MAX_POLY + 1];
+        let m = clip::convex_hull(&pts[..n], &mut hull);
+        for i in 1..m.saturating_sub(1) {
+            let h = [hull[0], hull[i], hull[i + 1]];
+            let v = h.map(|j| fixed[j]);
+            let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else { continue };
+            if area2(&v) <= 0 || self.tiny_and_empty(&v, r) {
+                continue;
+            }
+            let z = h.map(|j| zw[j]);
+            let q = h.map(|j| {
+                let b = poly.v[j].b;
+                let iw = iw[j] as f64;
+                [(b[0] * iw) as f32, (b[1] * iw) as f32, (b[2] * iw) as f32]
+            });
+            self.finish(out, source, front, v, r, z, q);
+        }
+    }
+
+    /// Stores a setup triangle and bins it into the tiles its pixel rectangle `r` touches
+    /// (skipping, for large triangles, tiles that lie entirely outside one edge).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn finish(
+        &self,
+        out: &mut ChunkOut,
+        source: u32,
+        front_facing: bool,
+        v: [[i32; 2]; 3],
+        r: [i32; 4],
+        zw: [f32; 3],
+        q: [[f32; 3]; 3],
+    ) {
+        let (zref, depth) = depth_plane(&v, &zw);
+        let idx = out.tris.len() as u32;
+        out.tris.push(SetupTriangle { source, front_facing, zref, v, depth, q });
+        let ts = self.tile_size;
+        let (tx0, ty0, tx1, ty1) = (r[0] / ts, r[1] / ts, r[2] / ts, r[3] / ts);
+        if tx0 == tx1 && ty0 == ty1 {
+            out.bins.push([ty0 as u32 * self.tiles_x + tx0 as u32, idx]);
+            return;
+        }
+        let e = Edges::new(&v);
+        let one = ONE as i64;
+        for ty in ty0..=ty1 {
+            let y0 = (ty * ts) as i64 * one;
+            let y1 = ((ty + 1) * ts).min(self.h) as i64 * one;
+            for tx in tx0..=tx1 {
+                let x0 = (tx * ts) as i64 * one;
+                let x1 = ((tx + 1) * ts).min(self.w) as i64 * one;
+                if !e.rect_outside(x0, y0, x1, y1) {
+                    out.bins.push([ty as u32 * self.tiles_x + tx as u32, idx]);
+                }
+            }
+        }
+    }
+}
+
+/// Runs `f(i)` for `i in 0..n` on up to `threads` threads (the calling thread included),
+/// item `i` going to thread `i % threads`, and returns the results in index order.
+fn par_map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    let threads = threads.clamp(1, n.max(1));
+    if threads == 1 {
+        return (0..n).map(f).collect();
+    }
+    let f = &f;
+    let work = move |k: usize| (k..n).step_by(threads).map(|i| (i, f(i))).collect::<Vec<_>>();
+    let mut parts: Vec<Vec<(usize, T)>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (1..threads).map(|k| s.spawn(move || work(k))).collect();
+        let mut parts = vec![work(0)];
+        parts.extend(handles.into_iter().map(|h| h.join().expect("raster worker panicked")));
+        parts
+    });
+    let mut slots: Vec<Option<T>> = (0..n).map(|_| None).collect();
+    for part in parts.iter_mut() {
+        for (i, t) in part.drain(..) {
+            slots[i] = Some(t);
+        }
+    }
+    slots.into_iter().map(|t| t.expect("every item computed")).collect()
 }
 
 /// Clips, culls, snaps and bins triangles. Uses up to `threads` threads.
 /// `positions` are clip-space vertex positions, `indices` the triangles in API order.
-/// Triangles with a NaN or infinite coordinate are dropped (and counted in [`Binned::rejected`]).
+/// Triangles with a NaN or infinite coordinate are dropped (and counted in [`Binned::rejected`]),
+/// so are triangles with an index out of range (the caller should validate meshes first).
 pub fn bin_triangles(
     positions: &[Vec4],
     indices: &[[u32; 3]],
@@ -61,6 +462,145 @@ pub fn bin_triangles(
     viewport: Viewport,
     threads: usize,
 ) -> Binned {
-    let _ = (positions, indices, state, viewport, threads);
-    todo!()
+    let threads = threads.max(1);
+    let tile_size = state.tile_size.max(1);
+    let tiles_x = viewport.width.div_ceil(tile_size);
+    let tiles_y = viewport.height.div_ceil(tile_size);
+    let ntiles = tiles_x as usize * tiles_y as usize;
+    let w = viewport.width.min(MAX_VIEWPORT);
+    let h = viewport.height.min(MAX_VIEWPORT);
+    let planes = Planes::new(w.max(1), h.max(1));
+    let xf = Xform {
+        sx: viewport.width as f64 * (ONE / 2) as f64,
+        sy: viewport.height as f64 * (ONE / 2) as f64,
+    };
+
+    // 1. Vertices.
+    const VCHUNK: usize = 1 << 15;
+    let vchunks = positions.len().div_ceil(VCHUNK);
+    let snapped: Vec<Snapped> = par_map(vchunks, threads, |c| {
+        let src = &positions[c * VCHUNK..((c + 1) * VCHUNK).min(positions.len())];
+        src.iter()
+            .map(|&p| {
+                let p = vec4_f64(p);
+                let oc = planes.outcode(&p);
+                if oc != 0 {
+                    Snapped { x: OUT, y: oc as i32 }
+                } else {
+                    let [x, y] = xf.snap(p[0], p[1], p[3]);
+                    Snapped { x, y }
+                }
+            })
+            .collect::<Vec<_>>()
+    })
+    .concat();
+
+    // 2. Triangles.
+    let ctx = Ctx {
+        positions,
+        indices,
+        snapped: &snapped,
+        planes,
+        xf,
+        si: SampleInfo::new(state.samples),
+        w: w as i32,
+        h: h as i32,
+        tile_size: tile_size.min(MAX_VIEWPORT) as i32,
+        tiles_x,
+        cull: state.cull,
+        ccw_front: state.front_face == FrontFace::Ccw,
+    };
+    let n = indices.len();
+    let chunk = if threads == 1 { n.max(1) } else { (n / (threads * 8)).clamp(4096, 1 << 16) };
+    let nchunks = n.div_ceil(chunk);
+    let chunks: Vec<ChunkOut> = par_map(nchunks, threads, |c| {
+        let range = c * chunk..((c + 1) * chunk).min(n);
+        let mut out = ChunkOut {
+            tris: Vec::with_capacity(range.len() / 4 + 16),
+            bins: Vec::with_capacity(range.len() / 4 + 16),
+            rejected: 0,
+        };
+        if ntiles > 0 {
+            ctx.run(range, &mut out);
+        } else {
+            // Empty viewport: nothing is drawn, but bad input is still counted.
+            for t in range {
+                let bad = indices[t].iter().any(|&i| !matches!(positions.get(i as usize), Some(p) if p.is_finite()));
+                out.rejected += u64::from(bad);
+            }
+        }
+        out
+    });
+
+    // 3. Merge in chunk order.
+    let total: usize = chunks.iter().map(|c| c.tris.len()).sum();
+    let mut tris = Vec::with_capacity(total);
+    let mut tile_start = vec![0u32; ntiles + 1];
+    let mut rejected = 0;
+    for c in &chunks {
+        tris.extend_from_slice(&c.tris);
+        rejected += c.rejected;
+        for &[tile, _] in &c.bins {
+            tile_start[tile as usize + 1] += 1;
+        }
+    }
+    for i in 0..ntiles {
+        tile_start[i + 1] += tile_start[i];
+    }
+    let mut cursor = tile_start.clone();
+    let mut tile_tris = vec![0u32; tile_start[ntiles] as usize];
+    let mut base = 0u32;
+    for c in &chunks {
+        for &[tile, i] in &c.bins {
+            let k = &mut cursor[tile as usize];
+            tile_tris[*k as usize] = base + i;
+            *k += 1;
+        }
+        base += c.tris.len() as u32;
+    }
+    Binned {
+        tris,
+        tiles_x,
+        tiles_y,
+        tile_size,
+        rejected,
+        viewport,
+        samples: state.samples,
+        tile_start,
+        tile_tris,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_fixed_is_round_half_up_and_clamped() {
+        assert_eq!(round_fixed(0.49), 0);
+        assert_eq!(round_fixed(0.5), 1);
+        assert_eq!(round_fixed(-0.5), 0);
+        assert_eq!(round_fixed(-0.51), -1);
+        assert_eq!(round_fixed(-1.5), -1);
+        assert_eq!(round_fixed(1e300), COORD_LIMIT as i32);
+        assert_eq!(round_fixed(-1e300), -(COORD_LIMIT as i32));
+        assert_eq!(round_fixed(f64::NAN), 0);
+    }
+
+    #[test]
+    fn depth_plane_is_order_independent() {
+        let v = [[100, 7], [900, 300], [-50, 800]];
+        let z = [0.25f32, 0.75, 0.5];
+        let a = depth_plane(&v, &z);
+        let v2 = [v[2], v[0], v[1]];
+        let z2 = [z[2], z[0], z[1]];
+        let b = depth_plane(&v2, &z2);
+        assert_eq!(a.1, b.1);
+        assert_eq!(v[a.0 as usize], v2[b.0 as usize]);
+    }
+
+    #[test]
+    fn setup_triangle_is_compact() {
+        assert!(std::mem::size_of::<SetupTriangle>() <= 80);
+    }
 }

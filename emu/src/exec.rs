@@ -1,0 +1,110 @@
+//! Executors: who runs which kernel invocation when.
+//!
+//! - [`ExecMode::Ordered`]: one invocation at a time, in API order: the reference.
+//! - [`ExecMode::Parallel`]: real worker threads and real atomics. A pass's fragments are
+//!   cut into batches (warps) that workers take in API order, so fragments of one pixel
+//!   run at the same time on different threads; within a batch the lanes advance in
+//!   lockstep, one memory access each in turn (`lockstep`), as a SIMT warp does.
+//! - [`ExecMode::Scheduled`]: one thread, a window of in-flight invocations, and a seeded
+//!   [`Policy`] that picks who takes the next step (one memory access, interlock entry or
+//!   exit). Same inputs and seed: bit-identical result. Every step goes through the
+//!   [`crate::hazard::Detector`].
+//!
+//! This module knows nothing of rasterization or algorithms: it is handed fragment inputs
+//! in API order and a kernel, and returns each fragment's outputs.
+
+mod policy;
+mod run;
+
+pub use policy::{Policy, PolicyParseError};
+pub use run::Fault;
+pub(crate) use run::{shade, FragOut, ShadeOutcome};
+
+/// Configuration of the `scheduled` executor.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct ScheduleConfig {
+    pub policy: Policy,
+    pub seed: u64,
+    /// Invocations in flight at once (the GPU's occupancy).
+    pub window: usize,
+    /// Record the schedule (one byte per step) for replay with [`Policy::Bytes`].
+    pub record: bool,
+}
+
+impl Default for ScheduleConfig {
+    fn default() -> Self {
+        ScheduleConfig { policy: Policy::Random, seed: 0, window: 64, record: false }
+    }
+}
+
+/// Which executor runs the invocations.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum ExecMode {
+    Ordered,
+    Parallel,
+    Scheduled(ScheduleConfig),
+}
+
+impl ExecMode {
+    pub fn name(&self) -> &'static str {
+        match self {
+            ExecMode::Ordered => "ordered",
+            ExecMode::Parallel => "parallel",
+            ExecMode::Scheduled(_) => "scheduled",
+        }
+    }
+}
+
+/// Executor configuration.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct ExecConfig {
+    pub mode: ExecMode,
+    /// Worker threads (rasterization and the parallel executor).
+    pub threads: usize,
+    /// Fragments per batch (warp) in the parallel executor.
+    pub batch: usize,
+    /// Parallel executor: lanes of a batch take turns at every memory access (SIMT
+    /// lockstep); otherwise each lane runs to completion before the next starts.
+    pub lockstep: bool,
+    /// Watchdog: most steps one invocation may take.
+    pub max_steps: u64,
+    /// Watchdog: most times one invocation may find the interlock taken (direct modes).
+    pub max_waits: u64,
+    /// Measure per-address contention in the parallel executor (three extra atomics per
+    /// access).
+    pub contention: bool,
+}
+
+impl Default for ExecConfig {
+    fn default() -> Self {
+        ExecConfig {
+            mode: ExecMode::Parallel,
+            threads: default_threads(),
+            batch: 64,
+            lockstep: true,
+            max_steps: 1 << 20,
+            max_waits: 1 << 26,
+            contention: false,
+        }
+    }
+}
+
+impl ExecConfig {
+    pub fn ordered() -> ExecConfig {
+        ExecConfig { mode: ExecMode::Ordered, ..Default::default() }
+    }
+    pub fn parallel(threads: usize) -> ExecConfig {
+        ExecConfig { mode: ExecMode::Parallel, threads: threads.max(1), ..Default::default() }
+    }
+    pub fn scheduled(policy: Policy, seed: u64) -> ExecConfig {
+        ExecConfig {
+            mode: ExecMode::Scheduled(ScheduleConfig { policy, seed, ..Default::default() }),
+            ..Default::default()
+        }
+    }
+}
+
+/// All cores.
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+}

@@ -1,0 +1,231 @@
+//! Scheduling policies of the `scheduled` executor.
+
+use std::fmt;
+use std::str::FromStr;
+
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+
+/// How the `scheduled` executor picks the next invocation to step.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Policy {
+    /// Uniformly random among the runnable invocations.
+    Random,
+    /// Probabilistic concurrency testing (Burckhardt et al. 2010) with bug depth `depth`:
+    /// random priorities, `depth - 1` priority change points; the highest-priority
+    /// runnable invocation always runs.
+    Pct { depth: u32 },
+    /// Lockstep warps of `lanes` invocations (consecutive in API order): lanes take one step
+    /// each in turn, warps round robin.
+    Warp { lanes: u32 },
+    /// Latest primitive first.
+    Reverse,
+    /// Earliest first (API order, with the window's overlap).
+    Fifo,
+    /// Farthest fragment first: fragments arrive in descending depth, the worst case for
+    /// k-buffer culling.
+    FarFirst,
+    /// An explicit schedule: at step k, run the `bytes[k] % n`-th runnable invocation (in
+    /// API order); earliest first once the bytes run out. Any byte string is valid, which
+    /// makes schedules fuzzable and shrinkable; a recorded schedule replays exactly.
+    Bytes(Vec<u8>),
+}
+
+impl fmt::Display for Policy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Policy::Random => write!(f, "random"),
+            Policy::Pct { depth } => write!(f, "pct:{depth}"),
+            Policy::Warp { lanes } => write!(f, "warp:{lanes}"),
+            Policy::Reverse => write!(f, "reverse"),
+            Policy::Fifo => write!(f, "fifo"),
+            Policy::FarFirst => write!(f, "far-first"),
+            Policy::Bytes(b) => {
+                write!(f, "bytes:")?;
+                for x in b {
+                    write!(f, "{x:02x}")?;
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// A policy string that does not parse.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error("unknown policy `{0}`: expected random, pct:D, warp:N, reverse, fifo, far-first or bytes:HEX")]
+pub struct PolicyParseError(pub String);
+
+impl FromStr for Policy {
+    type Err = PolicyParseError;
+    fn from_str(s: &str) -> Result<Policy, PolicyParseError> {
+        let err = || PolicyParseError(s.to_string());
+        let (name, arg) = match s.split_once(':') {
+            Some((n, a)) => (n, Some(a)),
+            None => (s, None),
+        };
+        let num = |d: u32| -> Result<u32, PolicyParseError> {
+            match arg {
+                None => Ok(d),
+                Some(a) => a.parse::<u32>().ok().filter(|&v| v >= 1).ok_or_else(err),
+            }
+        };
+        Ok(match name {
+            "random" => Policy::Random,
+            "pct" => Policy::Pct { depth: num(3)? },
+            "warp" => Policy::Warp { lanes: num(32)? },
+            "reverse" => Policy::Reverse,
+            "fifo" => Policy::Fifo,
+            "far-first" => Policy::FarFirst,
+            "bytes" => {
+                let a = arg.unwrap_or("");
+                if a.len() % 2 != 0 {
+                    return Err(err());
+                }
+                let bytes = (0..a.len())
+                    .step_by(2)
+                    .map(|i| u8::from_str_radix(&a[i..i + 2], 16))
+                    .collect::<Result<Vec<u8>, _>>()
+                    .map_err(|_| err())?;
+                Policy::Bytes(bytes)
+            }
+            _ => return Err(err()),
+        })
+    }
+}
+
+impl Policy {
+    /// The named policies (for sweeps over every policy).
+    pub fn all() -> Vec<Policy> {
+        vec![
+            Policy::Random,
+            Policy::Pct { depth: 3 },
+            Policy::Warp { lanes: 32 },
+            Policy::Reverse,
+            Policy::Fifo,
+            Policy::FarFirst,
+        ]
+    }
+}
+
+/// A candidate for the next step.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Candidate {
+    pub seq: u64,
+    pub depth: f32,
+}
+
+/// The running state of a policy during one scheduled pass.
+pub(crate) struct Chooser {
+    policy: Policy,
+    rng: SmallRng,
+    /// PCT: priority per invocation seq (higher runs first), change points.
+    priorities: std::collections::HashMap<u64, u64>,
+    change_points: Vec<u64>,
+    next_low: u64,
+    /// Warp: last chosen seq.
+    cursor: Option<u64>,
+    /// Bytes: position.
+    pos: usize,
+}
+
+impl Chooser {
+    /// `steps_estimate` spreads PCT's change points over the expected run length.
+    pub fn new(policy: &Policy, seed: u64, steps_estimate: u64) -> Chooser {
+        let mut rng = SmallRng::seed_from_u64(seed ^ 0x6672_6167_7261_6365);
+        let mut change_points = Vec::new();
+        if let Policy::Pct { depth } = policy {
+            for _ in 1..*depth {
+                change_points.push(rng.gen_range(0..steps_estimate.max(1)));
+            }
+            change_points.sort_unstable();
+        }
+        Chooser {
+            policy: policy.clone(),
+            rng,
+            priorities: Default::default(),
+            change_points,
+            next_low: 0,
+            cursor: None,
+            pos: 0,
+        }
+    }
+
+    /// A new invocation entered the window.
+    pub fn admit(&mut self, seq: u64) {
+        if let Policy::Pct { depth } = self.policy {
+            // Initial priorities sit above the `depth` low values used at change points.
+            let p = depth as u64 + 1 + self.rng.gen_range(0..1u64 << 40);
+            self.priorities.insert(seq, p);
+        }
+    }
+
+    pub fn retire(&mut self, seq: u64) {
+        self.priorities.remove(&seq);
+    }
+
+    /// Picks one of `cands` (sorted by seq, non-empty) at global step `step`; returns its
+    /// position in `cands`.
+    pub fn choose(&mut self, cands: &[Candidate], step: u64) -> usize {
+        debug_assert!(!cands.is_empty());
+        match &self.policy {
+            Policy::Random => self.rng.gen_range(0..cands.len()),
+            Policy::Fifo => 0,
+            Policy::Reverse => cands.len() - 1,
+            Policy::FarFirst => {
+                let mut best = 0;
+                for (i, c) in cands.iter().enumerate() {
+                    if c.depth > cands[best].depth {
+                        best = i;
+                    }
+                }
+                best
+            }
+            Policy::Pct { .. } => {
+                let pick = |prio: &std::collections::HashMap<u64, u64>| {
+                    let mut best = 0;
+                    for (i, c) in cands.iter().enumerate() {
+                        if prio.get(&c.seq) > prio.get(&cands[best].seq) {
+                            best = i;
+                        }
+                    }
+                    best
+                };
+                let mut best = pick(&self.priorities);
+                while self.change_points.first().is_some_and(|&c| c <= step) {
+                    self.change_points.remove(0);
+                    // The running invocation drops below everyone admitted so far.
+                    self.next_low += 1;
+                    let low = (self.change_points.len() as u64 + 1).saturating_sub(self.next_low);
+                    self.priorities.insert(cands[best].seq, low);
+                    best = pick(&self.priorities);
+                }
+                best
+            }
+            Policy::Warp { lanes } => {
+                let lanes = *lanes as u64;
+                let i = match self.cursor {
+                    None => 0,
+                    Some(cur) => {
+                        let warp = cur / lanes;
+                        cands
+                            .iter()
+                            .position(|c| c.seq > cur && c.seq / lanes == warp)
+                            .or_else(|| cands.iter().position(|c| c.seq / lanes > warp))
+                            .unwrap_or(0)
+                    }
+                };
+                self.cursor = Some(cands[i].seq);
+                i
+            }
+            Policy::Bytes(bytes) => {
+                let i = match bytes.get(self.pos) {
+                    Some(&b) => b as usize % cands.len(),
+                    None => 0,
+                };
+                self.pos += 1;
+                i
+            }
+        }
+    }
+}

@@ -1,0 +1,399 @@
+//! The three executors' shared machinery: invocation slots, polling, harvesting results.
+
+use std::future::Future;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::pin::Pin;
+use std::task::{Context, Poll, Waker};
+
+use super::policy::{Candidate, Chooser};
+use super::{ExecConfig, ExecMode, ScheduleConfig};
+use crate::hazard::{Detector, Hazard, HazardCounts, InvocationId};
+use crate::kernel::{FaultKind, Frag, FragInput, FragmentKernel, Invocation, PassEnv, StepKind};
+use crate::stats::Stats;
+use crate::sync::pool;
+
+/// What one invocation left for the fixed-function stages.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct FragOut {
+    pub discarded: bool,
+    pub faulted: bool,
+    pub depth: Option<f32>,
+}
+
+/// A fault, with the invocation it ended.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Fault {
+    pub invocation: InvocationId,
+    pub kind: FaultKind,
+}
+
+/// What shading a list of fragments produced besides outputs.
+#[derive(Default)]
+pub(crate) struct ShadeOutcome {
+    pub stats: Stats,
+    pub faults: Vec<Fault>,
+    pub hazard_counts: HazardCounts,
+    pub hazards: Vec<Hazard>,
+    pub heat: Vec<u32>,
+    pub schedule: Option<Vec<u8>>,
+    pub scheduled_hotspots: Vec<(crate::memory::Addr, u64, u32)>,
+}
+
+/// Faults kept in detail per pass (all are counted).
+const KEEP_FAULTS: usize = 64;
+
+fn id_of(i: &FragInput) -> InvocationId {
+    InvocationId { seq: i.seq, primitive: i.primitive_id, x: i.x, y: i.y }
+}
+
+/// One invocation's whole life: the kernel, then the hand-over of an interlock turn.
+fn invocation<'a, K: FragmentKernel>(kernel: &'a K, frag: Frag<'a>) -> impl Future<Output = ()> + 'a {
+    async move {
+        kernel.shade(frag).await;
+        frag.retire().await;
+    }
+}
+
+enum Polled {
+    Done,
+    Pending,
+}
+
+/// Polls the future in `slot`, turning a panic into a fault.
+fn poll_slot<F: Future<Output = ()>>(slot: &mut Option<F>, inv: &Invocation, cx: &mut Context<'_>) -> Polled {
+    let Some(fut) = slot.as_mut() else { return Polled::Done };
+    // SAFETY: the future lives in a slot of a Vec that is never resized or moved while any
+    // future is in it (allocated once per worker with its final length), and a future is
+    // only ever dropped in place (`*slot = None`), so it is never moved after this pin.
+    let pinned = unsafe { Pin::new_unchecked(fut) };
+    match catch_unwind(AssertUnwindSafe(|| pinned.poll(cx))) {
+        Ok(Poll::Ready(())) => Polled::Done,
+        Ok(Poll::Pending) => {
+            if inv.faulted() {
+                Polled::Done
+            } else {
+                Polled::Pending
+            }
+        }
+        Err(payload) => {
+            let message = payload
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "panic with a non-string payload".into());
+            let mut f = inv.fault.borrow_mut();
+            if f.is_none() {
+                *f = Some(FaultKind::Panic { message });
+            }
+            Polled::Done
+        }
+    }
+}
+
+/// Per-worker accumulation.
+#[derive(Default)]
+struct Acc {
+    stats: Stats,
+    faults: Vec<Fault>,
+    ops: [u32; 13],
+}
+
+impl Acc {
+    /// Copies a finished invocation's results out and counts it.
+    fn harvest(&mut self, inv: &Invocation, out: &mut FragOut, colors: &mut [[u32; 4]]) {
+        let input = inv.input.get();
+        let fault = inv.fault.borrow_mut().take();
+        out.faulted = fault.is_some();
+        out.discarded = inv.discarded.get();
+        out.depth = inv.depth_out.get();
+        for (c, o) in colors.iter_mut().zip(&inv.outputs) {
+            *c = o.get();
+        }
+        let s = &mut self.stats;
+        s.shaded += 1;
+        if out.discarded {
+            s.discarded += 1;
+        }
+        let steps = inv.steps.get();
+        s.steps += steps;
+        s.max_steps_per_invocation = s.max_steps_per_invocation.max(steps);
+        s.interlock_waits += inv.waits.get();
+        for (a, o) in self.ops.iter_mut().zip(&inv.ops) {
+            *a = a.saturating_add(o.get());
+        }
+        if let Some(kind) = fault {
+            s.faulted += 1;
+            if self.faults.len() < KEEP_FAULTS {
+                self.faults.push(Fault { invocation: id_of(&input), kind });
+            }
+        }
+    }
+
+    fn finish(mut self, out: &mut ShadeOutcome) {
+        self.stats.add_ops(&self.ops);
+        out.stats.merge(&self.stats);
+        out.faults.extend(self.faults);
+        out.faults.truncate(KEEP_FAULTS);
+    }
+}
+
+/// Shades `inputs` (API order) with `kernel` under `cfg`, writing `outs[i]` and
+/// `colors[i * targets .. (i + 1) * targets]`.
+pub(crate) fn shade<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    cfg: &ExecConfig,
+    inputs: &[FragInput],
+    outs: &mut [FragOut],
+    colors: &mut [[u32; 4]],
+    targets: usize,
+) -> ShadeOutcome {
+    let mut outcome = ShadeOutcome::default();
+    match &cfg.mode {
+        ExecMode::Ordered => {
+            let mut acc = Acc::default();
+            run_direct(kernel, env, inputs, outs, colors, targets, 1, false, &mut acc);
+            acc.finish(&mut outcome);
+        }
+        ExecMode::Parallel => run_parallel(kernel, env, cfg, inputs, outs, colors, targets, &mut outcome),
+        ExecMode::Scheduled(sc) => run_scheduled(kernel, env, sc, cfg.max_steps, inputs, outs, colors, targets, &mut outcome),
+    }
+    outcome
+}
+
+/// Runs a batch in direct mode: `width` lanes in flight; with `lockstep`, lanes take turns
+/// at every suspension point, otherwise each lane is polled until it finishes or waits.
+#[allow(clippy::too_many_arguments)] // one call site per executor; a struct would only rename them
+fn run_direct<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    inputs: &[FragInput],
+    outs: &mut [FragOut],
+    colors: &mut [[u32; 4]],
+    targets: usize,
+    width: usize,
+    lockstep: bool,
+    acc: &mut Acc,
+) {
+    let width = width.max(1);
+    let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
+    let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
+    futs.resize_with(width, || None);
+    let mut cx = Context::from_waker(Waker::noop());
+    let mut base = 0;
+    while base < inputs.len() {
+        let n = width.min(inputs.len() - base);
+        for lane in 0..n {
+            slots[lane].reset(inputs[base + lane]);
+            futs[lane] = Some(invocation(kernel, Frag { inv: &slots[lane], env }));
+        }
+        let mut left = n;
+        while left > 0 {
+            for lane in 0..n {
+                if futs[lane].is_none() {
+                    continue;
+                }
+                loop {
+                    match poll_slot(&mut futs[lane], &slots[lane], &mut cx) {
+                        Polled::Done => {
+                            futs[lane] = None;
+                            let i = base + lane;
+                            acc.harvest(&slots[lane], &mut outs[i], &mut colors[i * targets..(i + 1) * targets]);
+                            left -= 1;
+                            break;
+                        }
+                        // A lane that waits (interlock) lets the others run; in lockstep
+                        // every lane takes one step per turn.
+                        Polled::Pending if lockstep || slots[lane].waits.get() > 0 => break,
+                        Polled::Pending => {}
+                    }
+                }
+            }
+            if left > 0 && n < width {
+                // Everyone left is waiting on another worker: don't burn the core.
+                std::hint::spin_loop();
+            }
+        }
+        base += n;
+    }
+}
+
+#[allow(clippy::too_many_arguments)] // see run_direct
+fn run_parallel<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    cfg: &ExecConfig,
+    inputs: &[FragInput],
+    outs: &mut [FragOut],
+    colors: &mut [[u32; 4]],
+    targets: usize,
+    outcome: &mut ShadeOutcome,
+) {
+    let batch = cfg.batch.max(1);
+    let threads = cfg.threads.max(1).min(inputs.len().div_ceil(batch)).max(1);
+    // Batches are handed out in API order, so the predecessors of any fragment on its pixel
+    // are in batches already taken: ordered interlock cannot deadlock.
+    let mut chunks = Vec::with_capacity(inputs.len().div_ceil(batch));
+    let mut outs_rest = outs;
+    let mut colors_rest = colors;
+    for ins in inputs.chunks(batch) {
+        let (o, orest) = outs_rest.split_at_mut(ins.len());
+        let (c, crest) = colors_rest.split_at_mut(ins.len() * targets);
+        outs_rest = orest;
+        colors_rest = crest;
+        chunks.push((ins, o, c));
+    }
+    let queue = pool::Mutex::new(chunks.into_iter());
+    let accs: Vec<Acc> = pool::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut acc = Acc::default();
+                    loop {
+                        let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
+                        let Some((ins, o, c)) = next else { break };
+                        run_direct(kernel, env, ins, o, c, targets, batch, cfg.lockstep, &mut acc);
+                    }
+                    acc
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap_or_default()).collect()
+    });
+    for acc in accs {
+        acc.finish(outcome);
+    }
+}
+
+#[allow(clippy::too_many_arguments)] // see run_direct
+fn run_scheduled<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    sc: &ScheduleConfig,
+    max_steps: u64,
+    inputs: &[FragInput],
+    outs: &mut [FragOut],
+    colors: &mut [[u32; 4]],
+    targets: usize,
+    outcome: &mut ShadeOutcome,
+) {
+    let width = sc.window.max(1);
+    let names = (0..env.memory.buffer_sizes().len() as u32).map(|b| env.memory.buffer_name(b).to_string()).collect();
+    let mut detector = Detector::new(env.width, env.height, names);
+    let mut chooser = Chooser::new(&sc.policy, sc.seed, inputs.len() as u64 * 4);
+    let mut record = sc.record.then(Vec::new);
+    let mut acc = Acc::default();
+    let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
+    let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
+    futs.resize_with(width, || None);
+    let mut which = vec![0usize; width]; // input index per slot
+    let mut free: Vec<usize> = (0..width).rev().collect();
+    let mut inflight: Vec<usize> = Vec::with_capacity(width); // slots, in API order
+    let mut cands: Vec<Candidate> = Vec::with_capacity(width);
+    let mut cand_slots: Vec<usize> = Vec::with_capacity(width);
+    let mut cx = Context::from_waker(Waker::noop());
+    let mut next = 0usize;
+    let mut step: u64 = 0;
+
+    macro_rules! retire {
+        ($slot:expr) => {{
+            let s = $slot;
+            futs[s] = None;
+            let i = which[s];
+            let seq = inputs[i].seq;
+            acc.harvest(&slots[s], &mut outs[i], &mut colors[i * targets..(i + 1) * targets]);
+            detector.finish(seq, step);
+            chooser.retire(seq);
+            inflight.retain(|&x| x != s);
+            free.push(s);
+        }};
+    }
+
+    loop {
+        // Admit in API order while there is room.
+        while next < inputs.len() {
+            let Some(s) = free.pop() else { break };
+            slots[s].reset(inputs[next]);
+            which[s] = next;
+            futs[s] = Some(invocation(kernel, Frag { inv: &slots[s], env }));
+            detector.start(id_of(&inputs[next]), step);
+            chooser.admit(inputs[next].seq);
+            inflight.push(s);
+            next += 1;
+            // Run up to the first step.
+            if let Polled::Done = poll_slot(&mut futs[s], &slots[s], &mut cx) {
+                retire!(s);
+            }
+        }
+        if inflight.is_empty() {
+            break;
+        }
+        cands.clear();
+        cand_slots.clear();
+        for &s in &inflight {
+            let inv = &slots[s];
+            let runnable = match inv.pending.get() {
+                Some(StepKind::InterlockBegin) => match (env.interlock, env.interlock_mode) {
+                    (Some(l), Some(m)) => {
+                        let i = inv.input.get();
+                        l.can_enter(m, l.key(i.x, i.y), i.ticket)
+                    }
+                    _ => true,
+                },
+                Some(StepKind::PassTurn) => match env.interlock {
+                    Some(l) => {
+                        let i = inv.input.get();
+                        l.is_turn(l.key(i.x, i.y), i.ticket)
+                    }
+                    None => true,
+                },
+                Some(_) => true,
+                None => false,
+            };
+            if runnable {
+                let i = inv.input.get();
+                cands.push(Candidate { seq: i.seq, depth: i.depth });
+                cand_slots.push(s);
+            }
+        }
+        if cands.is_empty() {
+            // Everyone in flight waits on someone: a deadlock. Report and drop them all.
+            for s in inflight.clone() {
+                let inv = &slots[s];
+                let w = inv.waits.get() + 1;
+                *inv.fault.borrow_mut() = Some(FaultKind::Deadlock { waits: w });
+                retire!(s);
+            }
+            continue;
+        }
+        let k = chooser.choose(&cands, step);
+        if let Some(r) = record.as_mut() {
+            r.push(k as u8);
+        }
+        let s = cand_slots[k];
+        let inv = &slots[s];
+        let input = inv.input.get();
+        if let Some(StepKind::Mem { addr, op, record: rec }) = inv.pending.get() {
+            let lock = match env.interlock {
+                Some(l) if inv.in_interlock.get() => Some(l.key(input.x, input.y)),
+                _ => None,
+            };
+            detector.access(input.seq, addr, op, step, lock, rec.map(|r| (r.base, r.len, r.word)));
+        }
+        inv.granted.set(true);
+        step += 1;
+        let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
+        if !done && inv.steps.get() > max_steps {
+            *inv.fault.borrow_mut() = Some(FaultKind::Watchdog { steps: inv.steps.get() });
+            retire!(s);
+        } else if done {
+            retire!(s);
+        }
+    }
+    acc.finish(outcome);
+    outcome.hazard_counts = detector.counts();
+    outcome.hazards = detector.hazards().to_vec();
+    outcome.scheduled_hotspots = detector.hotspots(crate::stats::HOTSPOTS);
+    outcome.heat = std::mem::take(&mut detector.heat);
+    outcome.schedule = record;
+}

@@ -1,0 +1,338 @@
+//! The hazard detector of the `scheduled` executor. It sees every step in the order the
+//! schedule ran them and reports:
+//! - **lost updates**: A plain-loads X, another invocation B writes X, then A plain-stores
+//!   X (B's write is overwritten by a value computed from a stale read);
+//! - **data races**: conflicting accesses to X (at least one a write, at least one plain)
+//!   by two invocations whose lifetimes overlap, not both inside the interlock critical
+//!   section of the same pixel (interlock orders them);
+//! - **torn records**: another invocation writes a word of a multi-word record while A is
+//!   part-way through loading it ([`crate::Frag::load_record`]).
+//!
+//! Atomic-vs-atomic is never a race here (it is what atomics are for); the lost updates and
+//! atomicity violations built from atomics show up in the algorithms' invariant oracles.
+//! This module knows nothing of kernels or policies: the executor feeds it steps.
+
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+use crate::memory::{Addr, OpKind};
+
+/// The kinds of hazard.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+pub enum HazardKind {
+    LostUpdate,
+    Race,
+    Torn,
+}
+
+impl HazardKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            HazardKind::LostUpdate => "lost-update",
+            HazardKind::Race => "race",
+            HazardKind::Torn => "torn",
+        }
+    }
+}
+
+/// One invocation, as named in a report.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct InvocationId {
+    /// Position in API order within the pass.
+    pub seq: u64,
+    pub primitive: u32,
+    pub x: u32,
+    pub y: u32,
+}
+
+/// One hazard found.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Hazard {
+    pub kind: HazardKind,
+    pub buffer: String,
+    pub index: u32,
+    /// The invocation whose access completed the hazard (e.g. the stale store).
+    pub victim: InvocationId,
+    /// The other invocation (e.g. the write that was lost).
+    pub other: InvocationId,
+    /// Step (position in the schedule) at which it completed.
+    pub step: u64,
+}
+
+/// Hazard counts of a pass.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct HazardCounts {
+    pub lost_updates: u64,
+    pub races: u64,
+    pub torn: u64,
+}
+
+impl HazardCounts {
+    pub fn total(&self) -> u64 {
+        self.lost_updates + self.races + self.torn
+    }
+    pub fn add(&mut self, o: &HazardCounts) {
+        self.lost_updates += o.lost_updates;
+        self.races += o.races;
+        self.torn += o.torn;
+    }
+    fn bump(&mut self, k: HazardKind) {
+        match k {
+            HazardKind::LostUpdate => self.lost_updates += 1,
+            HazardKind::Race => self.races += 1,
+            HazardKind::Torn => self.torn += 1,
+        }
+    }
+}
+
+/// Fast multiplicative hasher for addresses and sequence numbers (no DoS concern here).
+#[derive(Default, Clone, Copy)]
+pub(crate) struct AddrHasher(u64);
+impl Hasher for AddrHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(5) ^ b as u64).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+        }
+    }
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0 ^ v).wrapping_mul(0x9E37_79B9_7F4A_7C15).rotate_left(29);
+    }
+    fn write_usize(&mut self, v: usize) {
+        self.write_u64(v as u64);
+    }
+}
+pub(crate) type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<AddrHasher>>;
+
+#[derive(Clone, Copy)]
+struct Access {
+    seq: u64,
+    step: u64,
+    plain: bool,
+    /// The interlock key held at the time, if any.
+    lock: Option<usize>,
+}
+
+#[derive(Default)]
+struct AddrState {
+    last_write: Option<Access>,
+    /// Reads since the last write (one entry per invocation, latest).
+    reads: Vec<Access>,
+    /// Invocations in flight that touched it (for peak concurrency).
+    touchers: Vec<u64>,
+    accesses: u64,
+    peak: u32,
+}
+
+struct InvState {
+    id: InvocationId,
+    start: u64,
+    end: Option<u64>,
+    /// Step of this invocation's latest plain load, per address.
+    loads: Vec<(Addr, u64)>,
+    /// An open record load: (base, len, interrupted by another's write).
+    record: Option<(Addr, u32, Option<(u64, u64)>)>,
+}
+
+/// Watches the steps of one scheduled pass.
+pub struct Detector {
+    invs: FastMap<u64, InvState>,
+    addrs: FastMap<Addr, AddrState>,
+    counts: HazardCounts,
+    hazards: Vec<Hazard>,
+    /// Per-pixel hazard counts (row-major).
+    pub heat: Vec<u32>,
+    width: u32,
+    /// How many hazards are kept in detail (all are counted).
+    pub keep: usize,
+    names: Vec<String>,
+    /// Pairs already reported, so a spin loop is one hazard, not thousands.
+    seen: FastMap<(u8, u64, u64, u64), ()>,
+}
+
+impl Detector {
+    /// A detector for a `width` x `height` pass; `names` are the buffer names by id.
+    pub fn new(width: u32, height: u32, names: Vec<String>) -> Detector {
+        Detector {
+            invs: FastMap::default(),
+            addrs: FastMap::default(),
+            counts: HazardCounts::default(),
+            hazards: Vec::new(),
+            heat: vec![0; width as usize * height as usize],
+            width,
+            keep: 256,
+            names,
+            seen: FastMap::default(),
+        }
+    }
+
+    /// An invocation was admitted at `step`.
+    pub fn start(&mut self, id: InvocationId, step: u64) {
+        self.invs.insert(id.seq, InvState { id, start: step, end: None, loads: Vec::new(), record: None });
+    }
+
+    /// An invocation finished (or was dropped after a fault) at `step`.
+    pub fn finish(&mut self, seq: u64, step: u64) {
+        if let Some(s) = self.invs.get_mut(&seq) {
+            s.end = Some(step);
+            s.loads.clear();
+            s.record = None;
+        }
+    }
+
+    /// Whether invocations `a` and `b` overlapped in time (neither finished before the
+    /// other started).
+    fn overlapped(&self, a: u64, b: u64) -> bool {
+        match (self.invs.get(&a), self.invs.get(&b)) {
+            (Some(x), Some(y)) => x.end.is_none_or(|e| e > y.start) && y.end.is_none_or(|e| e > x.start),
+            _ => false,
+        }
+    }
+
+    fn report(&mut self, kind: HazardKind, addr: Addr, victim: u64, other: u64, step: u64) {
+        let key = (kind as u8, addr.0, victim.min(other), victim.max(other));
+        if self.seen.insert(key, ()).is_some() {
+            return;
+        }
+        self.counts.bump(kind);
+        let (Some(v), Some(o)) = (self.invs.get(&victim), self.invs.get(&other)) else { return };
+        let (v, o) = (v.id, o.id);
+        if let Some(h) = self.heat.get_mut((v.y * self.width + v.x) as usize) {
+            *h += 1;
+        }
+        if self.hazards.len() < self.keep {
+            let buffer = self.names.get(addr.buffer() as usize).cloned().unwrap_or_default();
+            self.hazards.push(Hazard { kind, buffer, index: addr.index(), victim: v, other: o, step });
+        }
+    }
+
+    /// A memory access by `seq` at `step`; `lock` is the interlock key it holds, if any;
+    /// `record` is `(base, len, word)` for record accesses.
+    pub fn access(
+        &mut self,
+        seq: u64,
+        addr: Addr,
+        op: OpKind,
+        step: u64,
+        lock: Option<usize>,
+        record: Option<(Addr, u32, u32)>,
+    ) {
+        let plain = op.is_plain();
+        let write = op.is_write();
+        let me = Access { seq, step, plain, lock };
+        let state = self.addrs.entry(addr).or_default();
+        state.accesses += 1;
+        if !state.touchers.contains(&seq) {
+            state.touchers.push(seq);
+        }
+        let prev_write = state.last_write;
+        let reads = if write { std::mem::take(&mut state.reads) } else { Vec::new() };
+        // Conflicts with the last write (and, for a write, with the reads since it).
+        let mut conflicts: Vec<Access> = Vec::new();
+        if let Some(w) = prev_write {
+            if w.seq != seq && (plain || w.plain) {
+                conflicts.push(w);
+            }
+        }
+        for r in &reads {
+            if r.seq != seq && (plain || r.plain) {
+                conflicts.push(*r);
+            }
+        }
+        if write {
+            self.addrs.get_mut(&addr).expect("entry exists").last_write = Some(me);
+        } else {
+            let st = self.addrs.get_mut(&addr).expect("entry exists");
+            st.reads.retain(|r| r.seq != seq);
+            st.reads.push(me);
+        }
+        for c in conflicts {
+            let ordered = matches!((c.lock, lock), (Some(a), Some(b)) if a == b);
+            if !ordered && self.overlapped(c.seq, seq) {
+                self.report(HazardKind::Race, addr, seq, c.seq, step);
+            }
+        }
+        // Lost update: my plain store after my plain load, with another's write between.
+        if op == OpKind::Store {
+            let my_load = self.invs.get(&seq).and_then(|s| s.loads.iter().rev().find(|l| l.0 == addr).map(|l| l.1));
+            if let (Some(load_step), Some(w)) = (my_load, prev_write) {
+                if w.seq != seq && w.step > load_step {
+                    self.report(HazardKind::LostUpdate, addr, seq, w.seq, step);
+                }
+            }
+        }
+        if op == OpKind::Load {
+            if let Some(s) = self.invs.get_mut(&seq) {
+                match s.loads.iter_mut().find(|l| l.0 == addr) {
+                    Some(l) => l.1 = step,
+                    None => s.loads.push((addr, step)),
+                }
+            }
+        }
+        // Torn records: my record load interrupted by another's write.
+        if let Some((base, len, word)) = record {
+            if op == OpKind::Load {
+                let mut torn_by = None;
+                if let Some(s) = self.invs.get_mut(&seq) {
+                    if word == 0 {
+                        s.record = Some((base, len, None));
+                    } else if let Some((b, _, hit)) = s.record {
+                        if b == base && word + 1 == len {
+                            torn_by = hit;
+                            s.record = None;
+                        }
+                    }
+                }
+                if let Some((other, _)) = torn_by {
+                    self.report(HazardKind::Torn, base, seq, other, step);
+                }
+            }
+        }
+        if write {
+            let mut hits = Vec::new();
+            for (&other, s) in self.invs.iter() {
+                if other == seq || s.end.is_some() {
+                    continue;
+                }
+                if let Some((base, len, None)) = s.record {
+                    if base.buffer() == addr.buffer()
+                        && addr.index() >= base.index()
+                        && addr.index() < base.index().saturating_add(len)
+                    {
+                        hits.push(other);
+                    }
+                }
+            }
+            for other in hits {
+                if let Some(s) = self.invs.get_mut(&other) {
+                    if let Some((_, _, hit)) = &mut s.record {
+                        *hit = Some((seq, step));
+                    }
+                }
+            }
+        }
+        // Peak concurrency: touchers still in flight.
+        let live: Vec<u64> = self.addrs[&addr].touchers.clone();
+        let live: Vec<u64> =
+            live.into_iter().filter(|t| self.invs.get(t).is_some_and(|s| s.end.is_none())).collect();
+        let st = self.addrs.get_mut(&addr).expect("entry exists");
+        st.peak = st.peak.max(live.len() as u32);
+        st.touchers = live;
+    }
+
+    pub fn counts(&self) -> HazardCounts {
+        self.counts
+    }
+    pub fn hazards(&self) -> &[Hazard] {
+        &self.hazards
+    }
+    /// The hottest addresses: (address, accesses, peak concurrent accessors).
+    pub fn hotspots(&self, n: usize) -> Vec<(Addr, u64, u32)> {
+        let mut v: Vec<(Addr, u64, u32)> = self.addrs.iter().map(|(a, s)| (*a, s.accesses, s.peak)).collect();
+        v.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+        v.truncate(n);
+        v
+    }
+}

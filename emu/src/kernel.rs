@@ -1,0 +1,648 @@
+//! The kernel API: what a fragment (or full-screen) kernel is, and [`Frag`], the context
+//! through which one invocation sees its fragment, writes its outputs and touches shared
+//! memory.
+//!
+//! A kernel is written once, as an `async fn`, and runs under every executor. Each access
+//! to shared memory is an `.await`: a point where another invocation may run. Under the
+//! `ordered` and `parallel` executors an access completes at once; under `scheduled` the
+//! invocation suspends before every access and a seeded policy picks who goes next.
+//!
+//! ```ignore
+//! struct Count { counts: Buf<u32> }
+//! impl FragmentKernel for Count {
+//!     fn info(&self) -> KernelInfo { KernelInfo::new("count") }
+//!     async fn shade(&self, f: Frag<'_>) {
+//!         f.atomic_add(self.counts, f.pixel_index(), 1).await;
+//!     }
+//! }
+//! ```
+//!
+//! This module knows nothing of any algorithm, and nothing of how executors pick
+//! invocations: it only suspends (`Pending`) where the executor asked it to.
+
+use std::cell::{Cell, RefCell};
+use std::future::Future;
+use std::pin::Pin;
+use std::task::{Context, Poll};
+
+use crate::framebuffer::Image;
+use crate::interlock::{Interlock, InterlockMode};
+use crate::memory::{Addr, Buf, MemOp, Memory, OpKind, Word};
+use crate::raster::SetupTriangle;
+
+/// What a kernel declares about itself; the pipeline uses it to place depth tests and to
+/// set up interlock.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct KernelInfo {
+    pub name: &'static str,
+    /// The kernel may call [`Frag::discard`] (forces late depth tests under `EarlyTests::Auto`).
+    pub may_discard: bool,
+    /// The kernel may call [`Frag::write_depth`].
+    pub writes_depth: bool,
+    /// The kernel uses [`Frag::interlock_begin`] with this mode.
+    pub interlock: Option<InterlockMode>,
+}
+
+impl KernelInfo {
+    pub const fn new(name: &'static str) -> KernelInfo {
+        KernelInfo { name, may_discard: false, writes_depth: false, interlock: None }
+    }
+    pub const fn with_discard(mut self) -> KernelInfo {
+        self.may_discard = true;
+        self
+    }
+    pub const fn with_depth_write(mut self) -> KernelInfo {
+        self.writes_depth = true;
+        self
+    }
+    pub const fn with_interlock(mut self, mode: InterlockMode) -> KernelInfo {
+        self.interlock = Some(mode);
+        self
+    }
+}
+
+/// A fragment kernel (also used for full-screen passes, with one invocation per pixel).
+pub trait FragmentKernel: Sync {
+    fn info(&self) -> KernelInfo;
+    /// Shades one fragment. Every shared-memory access goes through `f` and is awaited.
+    fn shade(&self, f: Frag<'_>) -> impl Future<Output = ()>;
+}
+
+/// Everything a fragment knows about itself before shading.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FragInput {
+    /// Position of the invocation in API order within its pass (0, 1, ...).
+    pub seq: u64,
+    pub x: u32,
+    pub y: u32,
+    /// Index of the setup triangle (into the pass's triangles), `u32::MAX` in full-screen passes.
+    pub tri: u32,
+    pub primitive_id: u32,
+    pub instance_id: u32,
+    pub coverage: u8,
+    pub front_facing: bool,
+    /// Window depth at the pixel centre.
+    pub depth: f32,
+    /// Rank of this fragment among the shaded fragments of its pixel (API order), for
+    /// ordered interlock.
+    pub ticket: u32,
+}
+
+/// A fault that ended an invocation early. Never silent: every fault is in the pass report.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub enum FaultKind {
+    /// An access past the end of a buffer.
+    OutOfBounds { buffer: String, index: u64, len: u32 },
+    /// The invocation took more steps than the watchdog allows (an endless loop, a
+    /// spinlock that never gets its lock).
+    Watchdog { steps: u64 },
+    /// The invocation waited on interlock (or for its ordered turn) for too long, or every
+    /// invocation in flight was blocked.
+    Deadlock { waits: u64 },
+    /// The kernel panicked.
+    Panic { message: String },
+    /// Misuse of the kernel API (e.g. interlock without declaring it, nested interlock).
+    Misuse { message: String },
+}
+
+impl std::fmt::Display for FaultKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FaultKind::OutOfBounds { buffer, index, len } => {
+                write!(f, "out-of-bounds access: `{buffer}`[{index}] but it holds {len} words")
+            }
+            FaultKind::Watchdog { steps } => {
+                write!(f, "watchdog: the invocation ran {steps} steps without finishing")
+            }
+            FaultKind::Deadlock { waits } => {
+                write!(f, "deadlock: the invocation waited {waits} times without getting in")
+            }
+            FaultKind::Panic { message } => write!(f, "kernel panicked: {message}"),
+            FaultKind::Misuse { message } => write!(f, "kernel API misuse: {message}"),
+        }
+    }
+}
+
+/// What an invocation is about to do at its next step (known to the scheduler before it
+/// decides who runs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StepKind {
+    /// A memory access.
+    Mem { addr: Addr, op: OpKind, record: Option<RecordSpan> },
+    /// Entering the interlock critical section.
+    InterlockBegin,
+    /// Leaving it.
+    InterlockEnd,
+    /// Waiting for the ordered-interlock turn of a fragment that never entered the
+    /// critical section (it must still pass its turn on, as on hardware).
+    PassTurn,
+    /// A voluntary yield (spin loops).
+    Yield,
+}
+
+/// A multi-word record access: the word range and the position of this word in it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RecordSpan {
+    pub base: Addr,
+    pub len: u32,
+    pub word: u32,
+}
+
+/// Whether accesses suspend.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Mode {
+    /// Complete at once (ordered, parallel); every `yield_every` steps suspend once
+    /// (lockstep warps in the parallel executor), 0 = never.
+    Direct { yield_every: u32 },
+    /// Suspend before every step until the scheduler grants it.
+    Scheduled,
+}
+
+/// What every invocation of a pass shares.
+pub(crate) struct PassEnv<'a> {
+    pub memory: &'a Memory,
+    pub tris: &'a [SetupTriangle],
+    pub width: u32,
+    pub height: u32,
+    pub samples: u32,
+    pub interlock: Option<&'a Interlock>,
+    pub interlock_mode: Option<InterlockMode>,
+    pub mode: Mode,
+    pub max_steps: u64,
+    pub max_waits: u64,
+    /// Collect per-address contention (costs three atomics per access).
+    pub contention: Option<&'a crate::stats::ContentionTable>,
+}
+
+/// Per-invocation mutable state, owned by the executor (one per in-flight slot) and shared
+/// with the invocation's future through [`Frag`]. Single-threaded (`Cell`s).
+pub(crate) struct Invocation {
+    pub input: Cell<FragInput>,
+    pub outputs: [Cell<[u32; 4]>; 8],
+    pub discarded: Cell<bool>,
+    pub depth_out: Cell<Option<f32>>,
+    pub pending: Cell<Option<StepKind>>,
+    pub granted: Cell<bool>,
+    pub steps: Cell<u64>,
+    pub waits: Cell<u64>,
+    pub since_yield: Cell<u32>,
+    pub fault: RefCell<Option<FaultKind>>,
+    pub in_interlock: Cell<bool>,
+    pub entered_interlock: Cell<bool>,
+    pub ops: [Cell<u32>; 13],
+}
+
+impl Invocation {
+    pub fn new() -> Invocation {
+        Invocation {
+            input: Cell::new(FragInput::default()),
+            outputs: Default::default(),
+            discarded: Cell::new(false),
+            depth_out: Cell::new(None),
+            pending: Cell::new(None),
+            granted: Cell::new(false),
+            steps: Cell::new(0),
+            waits: Cell::new(0),
+            since_yield: Cell::new(0),
+            fault: RefCell::new(None),
+            in_interlock: Cell::new(false),
+            entered_interlock: Cell::new(false),
+            ops: Default::default(),
+        }
+    }
+
+    /// Resets the slot for a new fragment.
+    pub fn reset(&self, input: FragInput) {
+        self.input.set(input);
+        for o in &self.outputs {
+            o.set([0; 4]);
+        }
+        self.discarded.set(false);
+        self.depth_out.set(None);
+        self.pending.set(None);
+        self.granted.set(false);
+        self.steps.set(0);
+        self.waits.set(0);
+        self.since_yield.set(0);
+        *self.fault.borrow_mut() = None;
+        self.in_interlock.set(false);
+        self.entered_interlock.set(false);
+        for o in &self.ops {
+            o.set(0);
+        }
+    }
+
+    pub fn faulted(&self) -> bool {
+        self.fault.borrow().is_some()
+    }
+
+    fn set_fault(&self, f: FaultKind) {
+        let mut slot = self.fault.borrow_mut();
+        if slot.is_none() {
+            *slot = Some(f);
+        }
+    }
+}
+
+/// The context of one kernel invocation. Cheap to copy.
+#[derive(Clone, Copy)]
+pub struct Frag<'a> {
+    pub(crate) inv: &'a Invocation,
+    pub(crate) env: &'a PassEnv<'a>,
+}
+
+/// The future of one step: completes at once in direct mode, suspends until granted in
+/// scheduled mode, and never completes once the invocation has faulted (the executor then
+/// drops it, which ends the invocation).
+pub(crate) struct Step<'a> {
+    frag: Frag<'a>,
+    kind: StepKind,
+    yielded: bool,
+}
+
+impl Future for Step<'_> {
+    type Output = ();
+    fn poll(mut self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<()> {
+        let inv = self.frag.inv;
+        let env = self.frag.env;
+        if inv.faulted() {
+            return Poll::Pending;
+        }
+        match env.mode {
+            Mode::Direct { yield_every } => {
+                let steps = inv.steps.get() + 1;
+                if steps > env.max_steps {
+                    inv.set_fault(FaultKind::Watchdog { steps: steps - 1 });
+                    return Poll::Pending;
+                }
+                if yield_every > 0 && !self.yielded {
+                    let n = inv.since_yield.get() + 1;
+                    if n >= yield_every {
+                        inv.since_yield.set(0);
+                        self.yielded = true;
+                        inv.pending.set(Some(self.kind));
+                        return Poll::Pending;
+                    }
+                    inv.since_yield.set(n);
+                }
+                inv.pending.set(None);
+                inv.steps.set(steps);
+                Poll::Ready(())
+            }
+            Mode::Scheduled => {
+                if inv.granted.get() {
+                    inv.granted.set(false);
+                    inv.pending.set(None);
+                    inv.steps.set(inv.steps.get() + 1);
+                    Poll::Ready(())
+                } else {
+                    inv.pending.set(Some(self.kind));
+                    Poll::Pending
+                }
+            }
+        }
+    }
+}
+
+/// Waits for a condition in direct mode (interlock), counting waits for the watchdog.
+struct WaitUntil<'a, F: Fn() -> bool> {
+    frag: Frag<'a>,
+    ready: F,
+    kind: StepKind,
+}
+
+impl<F: Fn() -> bool> Future for WaitUntil<'_, F> {
+    type Output = ();
+    fn poll(self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<()> {
+        let inv = self.frag.inv;
+        if inv.faulted() {
+            return Poll::Pending;
+        }
+        if (self.ready)() {
+            inv.pending.set(None);
+            return Poll::Ready(());
+        }
+        let w = inv.waits.get() + 1;
+        inv.waits.set(w);
+        if w > self.frag.env.max_waits {
+            inv.set_fault(FaultKind::Deadlock { waits: w });
+        }
+        inv.pending.set(Some(self.kind));
+        Poll::Pending
+    }
+}
+
+/// A future that never completes: the invocation has faulted and will be dropped.
+struct Halt;
+impl Future for Halt {
+    type Output = ();
+    fn poll(self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<()> {
+        Poll::Pending
+    }
+}
+
+impl<'a> Frag<'a> {
+    fn input(&self) -> FragInput {
+        self.inv.input.get()
+    }
+    /// Pixel column (0 = left).
+    pub fn x(&self) -> u32 {
+        self.input().x
+    }
+    /// Pixel row (0 = top).
+    pub fn y(&self) -> u32 {
+        self.input().y
+    }
+    /// `y * width + x`: the index of this pixel in a row-major per-pixel buffer.
+    pub fn pixel_index(&self) -> u32 {
+        let i = self.input();
+        i.y * self.env.width + i.x
+    }
+    pub fn width(&self) -> u32 {
+        self.env.width
+    }
+    pub fn height(&self) -> u32 {
+        self.env.height
+    }
+    /// Samples per pixel of the pass.
+    pub fn samples(&self) -> u32 {
+        self.env.samples
+    }
+    /// Triangle index within the draw (GL's `gl_PrimitiveID`); 0 in full-screen passes.
+    pub fn primitive_id(&self) -> u32 {
+        self.input().primitive_id
+    }
+    pub fn instance_id(&self) -> u32 {
+        self.input().instance_id
+    }
+    pub fn front_facing(&self) -> bool {
+        self.input().front_facing
+    }
+    /// Window depth in [0,1] at the pixel centre (`gl_FragCoord.z`).
+    pub fn depth(&self) -> f32 {
+        self.input().depth
+    }
+    /// Covered samples (bit s = sample s).
+    pub fn coverage(&self) -> u8 {
+        self.input().coverage
+    }
+    /// Position of this invocation in API order within the pass.
+    pub fn invocation_id(&self) -> u64 {
+        self.input().seq
+    }
+    /// Perspective-correct barycentrics of the triangle's three vertices at the pixel
+    /// centre; `[1/3; 3]` in full-screen passes.
+    pub fn barycentrics(&self) -> [f32; 3] {
+        let i = self.input();
+        match self.env.tris.get(i.tri as usize) {
+            Some(t) => t.bary_at(i.x as f32 + 0.5, i.y as f32 + 0.5),
+            None => [1.0 / 3.0; 3],
+        }
+    }
+    /// Depth at sample `s` of this pixel (the centre depth in full-screen passes).
+    pub fn sample_depth(&self, s: u32) -> f32 {
+        let i = self.input();
+        match self.env.tris.get(i.tri as usize) {
+            Some(t) => {
+                let pos = crate::raster::SampleCount::from_count(self.env.samples)
+                    .map(|c| c.positions()[s as usize % c.count()])
+                    .unwrap_or((0.5, 0.5));
+                t.depth_at(i.x as f32 + pos.0, i.y as f32 + pos.1)
+            }
+            None => i.depth,
+        }
+    }
+
+    /// Writes colour output `target` as floats (float and RGBA8 targets).
+    pub fn output(&self, target: usize, value: [f32; 4]) {
+        self.output_bits(target, value.map(f32::to_bits));
+    }
+    /// Writes colour output `target` as unsigned integers (R32UI, RGBA32UI targets).
+    pub fn output_u32(&self, target: usize, value: [u32; 4]) {
+        self.output_bits(target, value);
+    }
+    fn output_bits(&self, target: usize, value: [u32; 4]) {
+        if let Some(o) = self.inv.outputs.get(target) {
+            o.set(value);
+        } else {
+            self.inv.set_fault(FaultKind::Misuse { message: format!("output to target {target}; at most 8 exist") });
+        }
+    }
+    /// Discards the fragment: no colour, depth or stencil write after the shader (memory
+    /// writes already made stay, as on a GPU).
+    pub fn discard(&self) {
+        self.inv.discarded.set(true);
+    }
+    /// Replaces the fragment's depth for the late depth test (`gl_FragDepth`).
+    pub fn write_depth(&self, z: f32) {
+        self.inv.depth_out.set(Some(z));
+    }
+
+    fn step(&self, kind: StepKind) -> Step<'a> {
+        Step { frag: *self, kind, yielded: false }
+    }
+
+    /// Checks bounds; on failure records the fault (the invocation ends at its next await).
+    fn addr<T: Word>(&self, buf: Buf<T>, index: u32) -> Option<Addr> {
+        if index < buf.len {
+            Some(Addr::new(buf.id, index))
+        } else {
+            self.inv.set_fault(FaultKind::OutOfBounds {
+                buffer: self.env.memory.buffer_name(buf.id).to_string(),
+                index: index as u64,
+                len: buf.len,
+            });
+            None
+        }
+    }
+
+    async fn access<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp, record: Option<RecordSpan>) -> T {
+        let Some(addr) = self.addr(buf, index) else {
+            Halt.await;
+            unreachable!("a halted invocation is never resumed")
+        };
+        let kind = op.kind();
+        self.step(StepKind::Mem { addr, op: kind, record }).await;
+        let k = kind as usize;
+        self.inv.ops[k].set(self.inv.ops[k].get() + 1);
+        let ordering = if kind.is_plain() {
+            crate::sync::Ordering::Relaxed
+        } else {
+            crate::sync::Ordering::AcqRel
+        };
+        if let Some(table) = self.env.contention {
+            let guard = table.enter(addr);
+            let bits = self.env.memory.apply::<T>(addr, op, ordering);
+            drop(guard);
+            T::from_bits(bits)
+        } else {
+            T::from_bits(self.env.memory.apply::<T>(addr, op, ordering))
+        }
+    }
+
+    /// Plain load (no atomicity, no ordering: as a GLSL load from a buffer).
+    pub async fn load<T: Word>(&self, buf: Buf<T>, index: u32) -> T {
+        self.access(buf, index, MemOp::Load, None).await
+    }
+    /// Plain store.
+    pub async fn store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) {
+        self.access(buf, index, MemOp::Store(value.to_bits()), None).await;
+    }
+    /// Atomic load (acquire).
+    pub async fn atomic_load<T: Word>(&self, buf: Buf<T>, index: u32) -> T {
+        self.access(buf, index, MemOp::AtomicLoad, None).await
+    }
+    /// Atomic store (release).
+    pub async fn atomic_store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) {
+        self.access(buf, index, MemOp::AtomicStore(value.to_bits()), None).await;
+    }
+    /// Atomic add; returns the previous value (wrapping for integers).
+    pub async fn atomic_add<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+        self.access(buf, index, MemOp::Add(value.to_bits()), None).await
+    }
+    /// Atomic subtract; returns the previous value.
+    pub async fn atomic_sub<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+        self.access(buf, index, MemOp::Sub(value.to_bits()), None).await
+    }
+    /// Atomic minimum (as `T`: signed for i32, float order for f32); returns the previous value.
+    pub async fn atomic_min<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+        self.access(buf, index, MemOp::Min(value.to_bits()), None).await
+    }
+    /// Atomic maximum; returns the previous value.
+    pub async fn atomic_max<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+        self.access(buf, index, MemOp::Max(value.to_bits()), None).await
+    }
+    /// Atomic bitwise and; returns the previous value.
+    pub async fn atomic_and<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+        self.access(buf, index, MemOp::And(value.to_bits()), None).await
+    }
+    /// Atomic bitwise or; returns the previous value.
+    pub async fn atomic_or<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+        self.access(buf, index, MemOp::Or(value.to_bits()), None).await
+    }
+    /// Atomic bitwise xor; returns the previous value.
+    pub async fn atomic_xor<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+        self.access(buf, index, MemOp::Xor(value.to_bits()), None).await
+    }
+    /// Atomic exchange; returns the previous value.
+    pub async fn atomic_exchange<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+        self.access(buf, index, MemOp::Exchange(value.to_bits()), None).await
+    }
+    /// Atomic compare-exchange: `Ok(previous)` if the word held `expected` and now holds
+    /// `new`, `Err(current)` otherwise (bitwise comparison, as GLSL's `atomicCompSwap`).
+    pub async fn atomic_compare_exchange<T: Word>(&self, buf: Buf<T>, index: u32, expected: T, new: T) -> Result<T, T> {
+        let prev: T = self.access(buf, index, MemOp::CompareExchange(expected.to_bits(), new.to_bits()), None).await;
+        if prev.to_bits() == expected.to_bits() {
+            Ok(prev)
+        } else {
+            Err(prev)
+        }
+    }
+
+    /// Loads a multi-word record `buf[base .. base + out.len()]` with plain loads, one step
+    /// per word. The hazard detector reports it *torn* if another invocation writes any of
+    /// its words between the first and the last load.
+    pub async fn load_record<T: Word>(&self, buf: Buf<T>, base: u32, out: &mut [T]) {
+        let len = out.len() as u32;
+        let span_base = Addr::new(buf.id, base);
+        for (w, slot) in out.iter_mut().enumerate() {
+            let record = Some(RecordSpan { base: span_base, len, word: w as u32 });
+            *slot = self.access(buf, base.wrapping_add(w as u32), MemOp::Load, record).await;
+        }
+    }
+    /// Stores a multi-word record with plain stores, one step per word.
+    pub async fn store_record<T: Word>(&self, buf: Buf<T>, base: u32, values: &[T]) {
+        let len = values.len() as u32;
+        let span_base = Addr::new(buf.id, base);
+        for (w, v) in values.iter().enumerate() {
+            let record = Some(RecordSpan { base: span_base, len, word: w as u32 });
+            self.access(buf, base.wrapping_add(w as u32), MemOp::Store(v.to_bits()), record).await;
+        }
+    }
+
+    /// A scheduling point with no memory access (in spin loops: lets others run and counts
+    /// towards the watchdog).
+    pub async fn yield_now(&self) {
+        self.step(StepKind::Yield).await;
+    }
+
+    /// Enters the per-pixel critical section declared in [`KernelInfo::interlock`]
+    /// (`beginInvocationInterlockARB`). Ordered mode enters in API order.
+    pub async fn interlock_begin(&self) {
+        let (Some(lock), Some(mode)) = (self.env.interlock, self.env.interlock_mode) else {
+            self.inv.set_fault(FaultKind::Misuse {
+                message: "interlock_begin without declaring interlock in KernelInfo".into(),
+            });
+            return Halt.await;
+        };
+        if self.inv.in_interlock.get() || self.inv.entered_interlock.get() {
+            self.inv.set_fault(FaultKind::Misuse { message: "interlock entered twice".into() });
+            return Halt.await;
+        }
+        let input = self.input();
+        let key = lock.key(input.x, input.y);
+        match self.env.mode {
+            Mode::Scheduled => {
+                // The scheduler grants this step only when the lock can be taken.
+                self.step(StepKind::InterlockBegin).await;
+                let ok = lock.try_enter(mode, key, input.ticket);
+                debug_assert!(ok, "scheduler granted an interlock that was not free");
+            }
+            Mode::Direct { .. } => {
+                WaitUntil { frag: *self, ready: || lock.try_enter(mode, key, input.ticket), kind: StepKind::InterlockBegin }
+                    .await;
+            }
+        }
+        self.inv.in_interlock.set(true);
+        self.inv.entered_interlock.set(true);
+    }
+
+    /// Leaves the critical section (`endInvocationInterlockARB`).
+    pub async fn interlock_end(&self) {
+        let (Some(lock), Some(mode)) = (self.env.interlock, self.env.interlock_mode) else {
+            return;
+        };
+        if !self.inv.in_interlock.get() {
+            self.inv.set_fault(FaultKind::Misuse { message: "interlock_end outside the critical section".into() });
+            return Halt.await;
+        }
+        if self.env.mode == Mode::Scheduled {
+            self.step(StepKind::InterlockEnd).await;
+        }
+        let input = self.input();
+        lock.leave(mode, lock.key(input.x, input.y), input.ticket);
+        self.inv.in_interlock.set(false);
+    }
+
+    /// Called by the executor after the kernel returns: leaves a critical section still
+    /// held, and in ordered mode passes the turn of a fragment that never entered.
+    pub(crate) async fn retire(&self) {
+        if self.inv.in_interlock.get() {
+            self.interlock_end().await;
+            return;
+        }
+        let (Some(lock), Some(mode)) = (self.env.interlock, self.env.interlock_mode) else {
+            return;
+        };
+        if self.inv.entered_interlock.get() || !mode.ordered {
+            return;
+        }
+        let input = self.input();
+        let key = lock.key(input.x, input.y);
+        match self.env.mode {
+            Mode::Scheduled => {
+                self.step(StepKind::PassTurn).await;
+                lock.pass_turn(key, input.ticket);
+            }
+            Mode::Direct { .. } => {
+                WaitUntil { frag: *self, ready: || lock.is_turn(key, input.ticket), kind: StepKind::PassTurn }.await;
+                lock.pass_turn(key, input.ticket);
+            }
+        }
+    }
+
+    /// A read-only image from an earlier pass (not shared memory: no step).
+    pub fn texel(&self, image: &Image, x: u32, y: u32, sample: u32) -> [u32; 4] {
+        image.texel(x.min(image.width.saturating_sub(1)), y.min(image.height.saturating_sub(1)), sample % image.samples.max(1))
+    }
+}

@@ -1,0 +1,526 @@
+//! Shared memory: storage buffers of 32-bit words (u32, i32, f32) and 64-bit words (u64),
+//! addressed through typed handles, accessed by kernels only through [`crate::Frag`].
+//!
+//! Every word is an atomic from [`crate::sync`]: a kernel's *plain* load or store is a
+//! relaxed atomic access (racy, as on a GPU, but never undefined behaviour) and its atomics
+//! are real read-modify-write instructions. This module knows nothing of invocations,
+//! schedules or hazards: it checks bounds and performs operations.
+
+use std::fmt;
+use std::marker::PhantomData;
+
+use crate::sync::{AtomicU32, AtomicU64, Ordering};
+
+/// Largest buffer, in words (4 GiB of 32-bit words would not be addressable by u32 indices).
+pub const MAX_BUFFER_WORDS: u64 = 1 << 31;
+/// Largest total storage of a device, in bytes.
+pub const MAX_TOTAL_BYTES: u64 = 16 << 30;
+
+/// A word type a buffer can hold.
+pub trait Word: Copy + PartialEq + fmt::Debug + Send + Sync + 'static + sealed::Sealed {
+    /// True for 64-bit words.
+    const WIDE: bool;
+    const NAME: &'static str;
+    const KIND: WordKind;
+    fn to_bits(self) -> u64;
+    fn from_bits(bits: u64) -> Self;
+}
+
+/// The word types, for dispatch in generic code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WordKind {
+    U32,
+    I32,
+    F32,
+    U64,
+}
+
+mod sealed {
+    pub trait Sealed {}
+    impl Sealed for u32 {}
+    impl Sealed for i32 {}
+    impl Sealed for f32 {}
+    impl Sealed for u64 {}
+}
+
+impl Word for u32 {
+    const WIDE: bool = false;
+    const NAME: &'static str = "u32";
+    const KIND: WordKind = WordKind::U32;
+    fn to_bits(self) -> u64 {
+        self as u64
+    }
+    fn from_bits(bits: u64) -> Self {
+        bits as u32
+    }
+}
+impl Word for i32 {
+    const WIDE: bool = false;
+    const NAME: &'static str = "i32";
+    const KIND: WordKind = WordKind::I32;
+    fn to_bits(self) -> u64 {
+        self as u32 as u64
+    }
+    fn from_bits(bits: u64) -> Self {
+        bits as u32 as i32
+    }
+}
+impl Word for f32 {
+    const WIDE: bool = false;
+    const NAME: &'static str = "f32";
+    const KIND: WordKind = WordKind::F32;
+    fn to_bits(self) -> u64 {
+        self.to_bits() as u64
+    }
+    fn from_bits(bits: u64) -> Self {
+        f32::from_bits(bits as u32)
+    }
+}
+impl Word for u64 {
+    const WIDE: bool = true;
+    const NAME: &'static str = "u64";
+    const KIND: WordKind = WordKind::U64;
+    fn to_bits(self) -> u64 {
+        self
+    }
+    fn from_bits(bits: u64) -> Self {
+        bits
+    }
+}
+
+/// A typed handle to a buffer of a [`Memory`]. Cheap to copy into kernel structs.
+pub struct Buf<T> {
+    pub(crate) id: u32,
+    pub(crate) len: u32,
+    _t: PhantomData<fn() -> T>,
+}
+
+impl<T> Clone for Buf<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<T> Copy for Buf<T> {}
+impl<T> fmt::Debug for Buf<T> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Buf#{}[{}]", self.id, self.len)
+    }
+}
+
+impl<T: Word> Buf<T> {
+    /// Number of words.
+    pub fn len(&self) -> u32 {
+        self.len
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    pub fn id(&self) -> u32 {
+        self.id
+    }
+}
+
+/// A global word address: buffer id in the high 32 bits, word index in the low 32.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+pub struct Addr(pub u64);
+
+impl Addr {
+    pub fn new(buffer: u32, index: u32) -> Addr {
+        Addr(((buffer as u64) << 32) | index as u64)
+    }
+    pub fn buffer(self) -> u32 {
+        (self.0 >> 32) as u32
+    }
+    pub fn index(self) -> u32 {
+        self.0 as u32
+    }
+}
+
+/// Why a buffer cannot be created.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum MemoryError {
+    #[error("buffer `{name}`: {words} words is more than the {MAX_BUFFER_WORDS} a buffer may hold")]
+    BufferTooLarge { name: String, words: u64 },
+    #[error("buffer `{name}`: {bytes} bytes would bring device storage past {MAX_TOTAL_BYTES} bytes")]
+    OutOfMemory { name: String, bytes: u64 },
+    #[error("buffer `{name}` holds {actual} words, but was used as {expected}")]
+    WrongType { name: String, actual: &'static str, expected: &'static str },
+    #[error("buffer #{0} does not exist on this device")]
+    NoSuchBuffer(u32),
+    #[error("write of {len} words at {offset} into buffer `{name}` of {words} words")]
+    OutOfRange { name: String, offset: u64, len: u64, words: u32 },
+}
+
+enum Words {
+    W32(Box<[AtomicU32]>),
+    W64(Box<[AtomicU64]>),
+}
+
+struct Buffer {
+    name: String,
+    ty: &'static str,
+    words: Words,
+}
+
+/// The storage of a device: every buffer, by id.
+#[derive(Default)]
+pub struct Memory {
+    buffers: Vec<Buffer>,
+    bytes: u64,
+}
+
+/// The kind of a memory operation, for statistics and hazard detection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+pub enum OpKind {
+    Load,
+    Store,
+    AtomicLoad,
+    AtomicStore,
+    Add,
+    Sub,
+    Min,
+    Max,
+    And,
+    Or,
+    Xor,
+    Exchange,
+    CompareExchange,
+}
+
+impl OpKind {
+    pub const ALL: [OpKind; 13] = [
+        OpKind::Load,
+        OpKind::Store,
+        OpKind::AtomicLoad,
+        OpKind::AtomicStore,
+        OpKind::Add,
+        OpKind::Sub,
+        OpKind::Min,
+        OpKind::Max,
+        OpKind::And,
+        OpKind::Or,
+        OpKind::Xor,
+        OpKind::Exchange,
+        OpKind::CompareExchange,
+    ];
+    /// Plain (non-atomic) access.
+    pub fn is_plain(self) -> bool {
+        matches!(self, OpKind::Load | OpKind::Store)
+    }
+    /// May change memory.
+    pub fn is_write(self) -> bool {
+        !matches!(self, OpKind::Load | OpKind::AtomicLoad)
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            OpKind::Load => "load",
+            OpKind::Store => "store",
+            OpKind::AtomicLoad => "atomic_load",
+            OpKind::AtomicStore => "atomic_store",
+            OpKind::Add => "add",
+            OpKind::Sub => "sub",
+            OpKind::Min => "min",
+            OpKind::Max => "max",
+            OpKind::And => "and",
+            OpKind::Or => "or",
+            OpKind::Xor => "xor",
+            OpKind::Exchange => "exchange",
+            OpKind::CompareExchange => "compare_exchange",
+        }
+    }
+}
+
+/// Order-preserving key of an f32 (total order: -NaN < -inf < ... < -0 < +0 < ... < +inf < NaN).
+pub fn f32_order_key(v: f32) -> u32 {
+    let b = v.to_bits();
+    if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    }
+}
+
+/// Compares two words of type `T` as `T` values (f32 through [`f32_order_key`]).
+#[inline]
+fn less<T: Word>(a: u64, b: u64) -> bool {
+    match T::KIND {
+        WordKind::I32 => (a as u32 as i32) < (b as u32 as i32),
+        WordKind::F32 => f32_order_key(f32::from_bits(a as u32)) < f32_order_key(f32::from_bits(b as u32)),
+        _ => a < b,
+    }
+}
+
+impl Memory {
+    pub fn new() -> Memory {
+        Memory::default()
+    }
+
+    /// Creates a zero-filled buffer of `len` words of `T`.
+    pub fn create<T: Word>(&mut self, name: &str, len: u64) -> Result<Buf<T>, MemoryError> {
+        if len > MAX_BUFFER_WORDS {
+            return Err(MemoryError::BufferTooLarge { name: name.into(), words: len });
+        }
+        let bytes = len * if T::WIDE { 8 } else { 4 };
+        if self.bytes + bytes > MAX_TOTAL_BYTES {
+            return Err(MemoryError::OutOfMemory { name: name.into(), bytes });
+        }
+        let words = if T::WIDE {
+            Words::W64((0..len).map(|_| AtomicU64::new(0)).collect())
+        } else {
+            Words::W32((0..len).map(|_| AtomicU32::new(0)).collect())
+        };
+        self.bytes += bytes;
+        let id = self.buffers.len() as u32;
+        self.buffers.push(Buffer { name: name.into(), ty: T::NAME, words });
+        Ok(Buf { id, len: len as u32, _t: PhantomData })
+    }
+
+    /// Total bytes of all buffers.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
+    /// Words in buffer `id` (0 if there is none).
+    pub fn buffer_len(&self, id: u32) -> u32 {
+        match self.buffers.get(id as usize).map(|b| &b.words) {
+            Some(Words::W32(w)) => w.len() as u32,
+            Some(Words::W64(w)) => w.len() as u32,
+            None => 0,
+        }
+    }
+
+    pub fn buffer_name(&self, id: u32) -> &str {
+        self.buffers.get(id as usize).map(|b| b.name.as_str()).unwrap_or("?")
+    }
+
+    /// Names and sizes (bytes) of all buffers.
+    pub fn buffer_sizes(&self) -> Vec<(String, u64)> {
+        self.buffers
+            .iter()
+            .map(|b| {
+                let bytes = match &b.words {
+                    Words::W32(w) => w.len() as u64 * 4,
+                    Words::W64(w) => w.len() as u64 * 8,
+                };
+                (b.name.clone(), bytes)
+            })
+            .collect()
+    }
+
+    fn check<T: Word>(&self, buf: Buf<T>) -> Result<&Buffer, MemoryError> {
+        let b = self.buffers.get(buf.id as usize).ok_or(MemoryError::NoSuchBuffer(buf.id))?;
+        if b.ty != T::NAME {
+            return Err(MemoryError::WrongType { name: b.name.clone(), actual: b.ty, expected: T::NAME });
+        }
+        Ok(b)
+    }
+
+    /// Copies the whole buffer out (host side; not a kernel access).
+    pub fn read<T: Word>(&self, buf: Buf<T>) -> Result<Vec<T>, MemoryError> {
+        let b = self.check(buf)?;
+        Ok(match &b.words {
+            Words::W32(w) => w.iter().map(|a| T::from_bits(a.load(Ordering::Relaxed) as u64)).collect(),
+            Words::W64(w) => w.iter().map(|a| T::from_bits(a.load(Ordering::Relaxed))).collect(),
+        })
+    }
+
+    /// Writes `data` at `offset` (host side).
+    pub fn write<T: Word>(&self, buf: Buf<T>, offset: u64, data: &[T]) -> Result<(), MemoryError> {
+        let b = self.check(buf)?;
+        if offset + data.len() as u64 > buf.len as u64 {
+            return Err(MemoryError::OutOfRange {
+                name: b.name.clone(),
+                offset,
+                len: data.len() as u64,
+                words: buf.len,
+            });
+        }
+        for (i, v) in data.iter().enumerate() {
+            self.word(buf.id, offset as u32 + i as u32).store(v.to_bits());
+        }
+        Ok(())
+    }
+
+    /// Fills the whole buffer with `value` (host side).
+    pub fn fill<T: Word>(&self, buf: Buf<T>, value: T) -> Result<(), MemoryError> {
+        self.check(buf)?;
+        for i in 0..buf.len {
+            self.word(buf.id, i).store(value.to_bits());
+        }
+        Ok(())
+    }
+
+    /// The word at (buffer, index); the caller has checked bounds.
+    #[inline]
+    pub(crate) fn word(&self, buffer: u32, index: u32) -> WordRef<'_> {
+        match &self.buffers[buffer as usize].words {
+            Words::W32(w) => WordRef::W32(&w[index as usize]),
+            Words::W64(w) => WordRef::W64(&w[index as usize]),
+        }
+    }
+
+    /// Performs one kernel operation on a checked address; returns the previous value (or
+    /// the loaded one) as raw bits. `ordering` is the memory order of the real atomic.
+    #[inline]
+    pub(crate) fn apply<T: Word>(&self, addr: Addr, op: MemOp, ordering: Ordering) -> u64 {
+        self.word(addr.buffer(), addr.index()).apply::<T>(op, ordering)
+    }
+}
+
+/// One operation with its operands (raw bits).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum MemOp {
+    Load,
+    Store(u64),
+    AtomicLoad,
+    AtomicStore(u64),
+    Add(u64),
+    Sub(u64),
+    Min(u64),
+    Max(u64),
+    And(u64),
+    Or(u64),
+    Xor(u64),
+    Exchange(u64),
+    /// (expected, new): returns the previous value; success iff it equals `expected`.
+    CompareExchange(u64, u64),
+}
+
+impl MemOp {
+    pub(crate) fn kind(self) -> OpKind {
+        match self {
+            MemOp::Load => OpKind::Load,
+            MemOp::Store(_) => OpKind::Store,
+            MemOp::AtomicLoad => OpKind::AtomicLoad,
+            MemOp::AtomicStore(_) => OpKind::AtomicStore,
+            MemOp::Add(_) => OpKind::Add,
+            MemOp::Sub(_) => OpKind::Sub,
+            MemOp::Min(_) => OpKind::Min,
+            MemOp::Max(_) => OpKind::Max,
+            MemOp::And(_) => OpKind::And,
+            MemOp::Or(_) => OpKind::Or,
+            MemOp::Xor(_) => OpKind::Xor,
+            MemOp::Exchange(_) => OpKind::Exchange,
+            MemOp::CompareExchange(..) => OpKind::CompareExchange,
+        }
+    }
+}
+
+pub(crate) enum WordRef<'a> {
+    W32(&'a AtomicU32),
+    W64(&'a AtomicU64),
+}
+
+impl WordRef<'_> {
+    fn store(&self, v: u64) {
+        match self {
+            WordRef::W32(a) => a.store(v as u32, Ordering::Relaxed),
+            WordRef::W64(a) => a.store(v, Ordering::Relaxed),
+        }
+    }
+
+    #[inline]
+    fn apply<T: Word>(&self, op: MemOp, ord: Ordering) -> u64 {
+        match self {
+            WordRef::W32(a) => apply32::<T>(a, op, ord) as u64,
+            WordRef::W64(a) => apply64(a, op, ord),
+        }
+    }
+}
+
+/// Load ordering matching a read-modify-write ordering (loads cannot be Release).
+fn load_order(ord: Ordering) -> Ordering {
+    match ord {
+        Ordering::Release => Ordering::Relaxed,
+        Ordering::AcqRel => Ordering::Acquire,
+        o => o,
+    }
+}
+
+fn store_order(ord: Ordering) -> Ordering {
+    match ord {
+        Ordering::Acquire => Ordering::Relaxed,
+        Ordering::AcqRel => Ordering::Release,
+        o => o,
+    }
+}
+
+#[inline]
+fn apply32<T: Word>(a: &AtomicU32, op: MemOp, ord: Ordering) -> u32 {
+    match op {
+        MemOp::Load => a.load(Ordering::Relaxed),
+        MemOp::Store(v) => {
+            a.store(v as u32, Ordering::Relaxed);
+            0
+        }
+        MemOp::AtomicLoad => a.load(load_order(ord)),
+        MemOp::AtomicStore(v) => {
+            a.store(v as u32, store_order(ord));
+            0
+        }
+        MemOp::Add(v) => match T::KIND {
+            WordKind::F32 => rmw32(a, ord, |old| (f32::from_bits(old) + f32::from_bits(v as u32)).to_bits()),
+            _ => a.fetch_add(v as u32, ord),
+        },
+        MemOp::Sub(v) => match T::KIND {
+            WordKind::F32 => rmw32(a, ord, |old| (f32::from_bits(old) - f32::from_bits(v as u32)).to_bits()),
+            _ => a.fetch_sub(v as u32, ord),
+        },
+        MemOp::Min(v) => match T::KIND {
+            WordKind::U32 => a.fetch_min(v as u32, ord),
+            _ => rmw32(a, ord, |old| if less::<T>(v, old as u64) { v as u32 } else { old }),
+        },
+        MemOp::Max(v) => match T::KIND {
+            WordKind::U32 => a.fetch_max(v as u32, ord),
+            _ => rmw32(a, ord, |old| if less::<T>(old as u64, v) { v as u32 } else { old }),
+        },
+        MemOp::And(v) => a.fetch_and(v as u32, ord),
+        MemOp::Or(v) => a.fetch_or(v as u32, ord),
+        MemOp::Xor(v) => a.fetch_xor(v as u32, ord),
+        MemOp::Exchange(v) => a.swap(v as u32, ord),
+        MemOp::CompareExchange(e, n) => {
+            match a.compare_exchange(e as u32, n as u32, ord, load_order(ord)) {
+                Ok(v) | Err(v) => v,
+            }
+        }
+    }
+}
+
+/// A read-modify-write through a compare-exchange loop (one atomic step for the kernel).
+#[inline]
+fn rmw32(a: &AtomicU32, ord: Ordering, f: impl Fn(u32) -> u32) -> u32 {
+    let mut old = a.load(Ordering::Relaxed);
+    loop {
+        match a.compare_exchange_weak(old, f(old), ord, Ordering::Relaxed) {
+            Ok(v) => return v,
+            Err(v) => old = v,
+        }
+    }
+}
+
+#[inline]
+fn apply64(a: &AtomicU64, op: MemOp, ord: Ordering) -> u64 {
+    match op {
+        MemOp::Load => a.load(Ordering::Relaxed),
+        MemOp::Store(v) => {
+            a.store(v, Ordering::Relaxed);
+            0
+        }
+        MemOp::AtomicLoad => a.load(load_order(ord)),
+        MemOp::AtomicStore(v) => {
+            a.store(v, store_order(ord));
+            0
+        }
+        MemOp::Add(v) => a.fetch_add(v, ord),
+        MemOp::Sub(v) => a.fetch_sub(v, ord),
+        MemOp::Min(v) => a.fetch_min(v, ord),
+        MemOp::Max(v) => a.fetch_max(v, ord),
+        MemOp::And(v) => a.fetch_and(v, ord),
+        MemOp::Or(v) => a.fetch_or(v, ord),
+        MemOp::Xor(v) => a.fetch_xor(v, ord),
+        MemOp::Exchange(v) => a.swap(v, ord),
+        MemOp::CompareExchange(e, n) => match a.compare_exchange(e, n, ord, load_order(ord)) {
+            Ok(v) | Err(v) => v,
+        },
+    }
+}

@@ -1,0 +1,536 @@
+//! The pipeline: a [`Device`] owns shared memory and runs passes. A geometry pass is
+//! vertex transform, binning, then, wave of tiles by wave of tiles: rasterization with
+//! early depth/stencil tests (API order, per tile), shading by the chosen executor, and
+//! late tests, blending and writes (API order, per tile). A full-screen pass runs one
+//! invocation per pixel.
+//!
+//! Fixed-function results are API-order results whatever order the shader invocations
+//! ran in: the early and late stages run per tile in rasterization order, as a GPU's ROP.
+//! This module knows nothing of any algorithm.
+
+use std::time::{Duration, Instant};
+
+use glam::Vec4;
+
+use crate::exec::{shade, ExecConfig, ExecMode, FragOut, ShadeOutcome};
+use crate::framebuffer::{Framebuffer, TileMemory};
+use crate::geometry::{Draw, MeshError};
+use crate::hazard::{Hazard, HazardCounts};
+use crate::interlock::Interlock;
+use crate::kernel::{FragInput, FragmentKernel, Mode, PassEnv};
+use crate::memory::{Buf, Memory, MemoryError, Word};
+use crate::raster::{bin_triangles, Binned, RasterState, Viewport};
+use crate::state::{EarlyTests, FragmentState};
+use crate::stats::{ContentionTable, Hotspot, Stats};
+use crate::sync::pool;
+
+pub use crate::exec::Fault;
+
+/// Why a pass could not run. (Faults of single invocations do not stop a pass: they are in
+/// its [`PassReport`].)
+#[derive(Debug, thiserror::Error)]
+pub enum PassError {
+    #[error("invalid mesh: {0}")]
+    Mesh(#[from] MeshError),
+    #[error("the framebuffer has {fb} samples per pixel but the pass rasterizes {pass}")]
+    SampleMismatch { fb: usize, pass: usize },
+    #[error("the pass writes {state} render targets but the framebuffer has {fb}")]
+    TargetMismatch { state: usize, fb: usize },
+    #[error("{0}")]
+    Memory(#[from] MemoryError),
+}
+
+/// Occlusion-query result of an earlier pass, for conditional rendering.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct OcclusionQuery {
+    pub samples_passed: u64,
+}
+
+/// Fixed-function configuration of a geometry pass.
+#[derive(Clone, Debug, Default)]
+pub struct PassState {
+    pub raster: RasterState,
+    pub fragment: FragmentState,
+    /// Conditional rendering: the pass is skipped when this query passed no sample.
+    pub condition: Option<OcclusionQuery>,
+}
+
+/// What a pass did.
+#[derive(Clone, Debug, Default)]
+pub struct PassReport {
+    pub stats: Stats,
+    pub hazards: HazardCounts,
+    /// The first hazards found, in detail (scheduled executor only).
+    pub hazard_list: Vec<Hazard>,
+    /// Hazards per pixel, row-major (scheduled executor only; empty otherwise).
+    pub hazard_heat: Vec<u32>,
+    /// Faults that ended invocations (the first ones; all are counted in `stats.faulted`).
+    pub faults: Vec<Fault>,
+    /// The schedule, one byte per step, when recording was asked for.
+    pub schedule: Option<Vec<u8>>,
+    /// True when conditional rendering skipped the pass.
+    pub skipped: bool,
+    pub wall: Duration,
+}
+
+impl PassReport {
+    /// The occlusion query of this pass.
+    pub fn query(&self) -> OcclusionQuery {
+        OcclusionQuery { samples_passed: self.stats.samples_passed }
+    }
+    /// Adds another pass (for multipass algorithms).
+    pub fn merge(&mut self, o: &PassReport) {
+        self.stats.merge(&o.stats);
+        self.hazards.add(&o.hazards);
+        self.hazard_list.extend(o.hazard_list.iter().cloned());
+        if self.hazard_heat.is_empty() {
+            self.hazard_heat = o.hazard_heat.clone();
+        } else if self.hazard_heat.len() == o.hazard_heat.len() {
+            for (a, b) in self.hazard_heat.iter_mut().zip(&o.hazard_heat) {
+                *a += b;
+            }
+        }
+        self.faults.extend(o.faults.iter().cloned());
+        if let Some(s) = &o.schedule {
+            self.schedule.get_or_insert_with(Vec::new).extend_from_slice(s);
+        }
+        self.wall += o.wall;
+    }
+}
+
+/// Tiles shaded together in one wave (bounds the memory of in-flight fragments).
+const TILES_PER_WAVE: usize = 256;
+
+/// A software GPU: shared memory plus the pass runner.
+#[derive(Default)]
+pub struct Device {
+    pub memory: Memory,
+}
+
+impl Device {
+    pub fn new() -> Device {
+        Device::default()
+    }
+
+    /// Creates a zero-filled storage buffer.
+    pub fn buffer<T: Word>(&mut self, name: &str, len: u64) -> Result<Buf<T>, MemoryError> {
+        self.memory.create(name, len)
+    }
+
+    /// Runs a geometry pass: `draw` through `state` into `fb`, shading with `kernel`.
+    pub fn draw<K: FragmentKernel>(
+        &self,
+        fb: &mut Framebuffer,
+        draw: &Draw<'_>,
+        state: &PassState,
+        kernel: &K,
+        exec: &ExecConfig,
+    ) -> Result<PassReport, PassError> {
+        let start = Instant::now();
+        draw.mesh.validate()?;
+        if fb.samples != state.raster.samples {
+            return Err(PassError::SampleMismatch { fb: fb.samples.count(), pass: state.raster.samples.count() });
+        }
+        if state.fragment.targets.len() > fb.formats.len() {
+            return Err(PassError::TargetMismatch { state: state.fragment.targets.len(), fb: fb.formats.len() });
+        }
+        let mut report = PassReport::default();
+        report.stats.geometry_passes = 1;
+        if state.condition.is_some_and(|q| q.samples_passed == 0) {
+            report.skipped = true;
+            report.wall = start.elapsed();
+            return Ok(report);
+        }
+        let raster = RasterState { tile_size: fb.tile_size, ..state.raster };
+        let viewport = Viewport { width: fb.width, height: fb.height };
+        let threads = exec.threads.max(1);
+        let mut clip = Vec::new();
+        let mut seq_base = 0u64;
+        for (instance, model) in draw.instances.iter().enumerate() {
+            transform(&draw.mesh.positions, draw.view_proj * *model, threads, &mut clip);
+            let binned = bin_triangles(&clip, &draw.mesh.indices, &raster, viewport, threads);
+            report.stats.rejected_triangles += binned.rejected;
+            let geo = Geometry::Binned { binned: &binned, instance: instance as u32 };
+            self.run_waves(fb, &geo, &state.fragment, kernel, exec, &mut seq_base, &mut report);
+        }
+        report.wall = start.elapsed();
+        Ok(report)
+    }
+
+    /// Runs a full-screen pass: one invocation per pixel (all samples covered, depth 0.5,
+    /// primitive 0), through `state`'s depth/stencil tests and target writes.
+    pub fn fullscreen<K: FragmentKernel>(
+        &self,
+        fb: &mut Framebuffer,
+        state: &FragmentState,
+        kernel: &K,
+        exec: &ExecConfig,
+    ) -> Result<PassReport, PassError> {
+        let start = Instant::now();
+        if state.targets.len() > fb.formats.len() {
+            return Err(PassError::TargetMismatch { state: state.targets.len(), fb: fb.formats.len() });
+        }
+        let mut report = PassReport::default();
+        report.stats.fullscreen_passes = 1;
+        let mut seq_base = 0;
+        self.run_waves(fb, &Geometry::FullScreen, state, kernel, exec, &mut seq_base, &mut report);
+        report.wall = start.elapsed();
+        Ok(report)
+    }
+
+    #[allow(clippy::too_many_arguments)] // private; the pieces of one pass
+    fn run_waves<K: FragmentKernel>(
+        &self,
+        fb: &mut Framebuffer,
+        geo: &Geometry<'_>,
+        state: &FragmentState,
+        kernel: &K,
+        exec: &ExecConfig,
+        seq_base: &mut u64,
+        report: &mut PassReport,
+    ) {
+        let info = kernel.info();
+        let early = match state.early {
+            EarlyTests::ForceEarly => true,
+            EarlyTests::ForceLate => false,
+            EarlyTests::Auto => !info.may_discard && !info.writes_depth,
+        };
+        let targets = state.targets.len();
+        let interlock = info.interlock.map(|_| Interlock::new(fb.width, fb.height));
+        let contention = (exec.contention && exec.mode == ExecMode::Parallel).then(|| {
+            let words: Vec<u32> = self
+                .memory
+                .buffer_sizes()
+                .iter()
+                .enumerate()
+                .map(|(id, _)| self.memory.buffer_len(id as u32))
+                .collect();
+            ContentionTable::new(&words)
+        });
+        let mode = match exec.mode {
+            ExecMode::Scheduled(_) => Mode::Scheduled,
+            ExecMode::Parallel if exec.lockstep => Mode::Direct { yield_every: 1 },
+            _ => Mode::Direct { yield_every: 0 },
+        };
+        let tris: &[crate::raster::SetupTriangle] = match geo {
+            Geometry::Binned { binned, .. } => &binned.tris,
+            Geometry::FullScreen => &[],
+        };
+        let env = PassEnv {
+            memory: &self.memory,
+            tris,
+            width: fb.width,
+            height: fb.height,
+            samples: fb.samples.count() as u32,
+            interlock: interlock.as_ref(),
+            interlock_mode: info.interlock,
+            mode,
+            max_steps: exec.max_steps,
+            max_waits: exec.max_waits,
+            contention: contention.as_ref(),
+        };
+        let tile_count = fb.tiles().len();
+        let mut wave_index = 0u64;
+        let mut lists: Vec<Vec<FragInput>> = Vec::new();
+        let mut first = 0;
+        while first < tile_count {
+            let last = (first + TILES_PER_WAVE).min(tile_count);
+            let tiles = &mut fb.tiles_mut()[first..last];
+            lists.resize_with(tiles.len(), Vec::new);
+            // 1. Rasterize and run early tests, per tile in parallel, in API order within a tile.
+            let front = RasterFront { geo, state, early, samples: env.samples };
+            let counts = for_each_tile(tiles, &mut lists, exec.threads, |tile_index, tile, list| {
+                front.tile(first + tile_index, tile, list)
+            });
+            for c in &counts {
+                report.stats.fragments_generated += c.0;
+                report.stats.early_culled += c.1;
+            }
+            // 2. Shade the wave with the executor.
+            let mut inputs: Vec<FragInput> = Vec::with_capacity(lists.iter().map(Vec::len).sum());
+            let mut ranges = Vec::with_capacity(lists.len());
+            for l in &lists {
+                ranges.push(inputs.len()..inputs.len() + l.len());
+                inputs.extend_from_slice(l);
+            }
+            for (i, f) in inputs.iter_mut().enumerate() {
+                f.seq = *seq_base + i as u64;
+            }
+            *seq_base += inputs.len() as u64;
+            let mut outs = vec![FragOut::default(); inputs.len()];
+            let mut colors = vec![[0u32; 4]; inputs.len() * targets];
+            let exec_wave = match &exec.mode {
+                ExecMode::Scheduled(sc) => {
+                    let mut sc = sc.clone();
+                    sc.seed = sc.seed.wrapping_add(wave_index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                    ExecConfig { mode: ExecMode::Scheduled(sc), ..exec.clone() }
+                }
+                _ => exec.clone(),
+            };
+            let outcome = shade(kernel, &env, &exec_wave, &inputs, &mut outs, &mut colors, targets);
+            absorb(report, outcome, &self.memory);
+            // 3. Late tests and writes, per tile in API order.
+            let tiles = &mut fb.tiles_mut()[first..last];
+            let back = RasterBack { geo, state, early, samples: env.samples, targets };
+            let mut ins_lists: Vec<(&[FragInput], &[FragOut], &[[u32; 4]])> = ranges
+                .iter()
+                .map(|r| (&inputs[r.clone()], &outs[r.clone()], &colors[r.start * targets..r.end * targets]))
+                .collect();
+            let counts = for_each_tile(tiles, &mut ins_lists, exec.threads, |_, tile, l| back.tile(tile, l));
+            for c in &counts {
+                report.stats.late_culled += c.0;
+                report.stats.samples_passed += c.1;
+            }
+            for l in &mut lists {
+                l.clear();
+            }
+            first = last;
+            wave_index += 1;
+        }
+        if let Some(table) = &contention {
+            let hot = table.hotspots(|b| self.memory.buffer_name(b).to_string());
+            let mut s = Stats { hotspots: hot, ..Default::default() };
+            s.hotspots.sort_by(|a, b| b.accesses.cmp(&a.accesses));
+            report.stats.merge(&s);
+        }
+    }
+}
+
+/// Folds one wave's shading outcome into the pass report.
+fn absorb(report: &mut PassReport, outcome: ShadeOutcome, memory: &Memory) {
+    report.stats.merge(&outcome.stats);
+    report.hazards.add(&outcome.hazard_counts);
+    report.hazard_list.extend(outcome.hazards);
+    report.hazard_list.truncate(256);
+    if !outcome.heat.is_empty() {
+        if report.hazard_heat.is_empty() {
+            report.hazard_heat = outcome.heat;
+        } else {
+            for (a, b) in report.hazard_heat.iter_mut().zip(&outcome.heat) {
+                *a += b;
+            }
+        }
+    }
+    report.faults.extend(outcome.faults);
+    report.faults.truncate(64);
+    if let Some(s) = outcome.schedule {
+        report.schedule.get_or_insert_with(Vec::new).extend(s);
+    }
+    if !outcome.scheduled_hotspots.is_empty() {
+        let hot = outcome
+            .scheduled_hotspots
+            .iter()
+            .map(|&(addr, accesses, peak)| Hotspot {
+                buffer: memory.buffer_name(addr.buffer()).to_string(),
+                index: addr.index(),
+                accesses,
+                peak_concurrent: peak,
+            })
+            .collect();
+        report.stats.merge(&Stats { hotspots: hot, ..Default::default() });
+    }
+}
+
+/// Where a pass's fragments come from.
+enum Geometry<'a> {
+    Binned { binned: &'a Binned, instance: u32 },
+    FullScreen,
+}
+
+/// Transforms positions to clip space (in parallel).
+fn transform(positions: &[glam::Vec3], m: glam::Mat4, threads: usize, out: &mut Vec<Vec4>) {
+    out.clear();
+    out.resize(positions.len(), Vec4::ZERO);
+    let chunk = positions.len().div_ceil(threads.max(1)).max(4096);
+    pool::scope(|s| {
+        for (src, dst) in positions.chunks(chunk).zip(out.chunks_mut(chunk)) {
+            s.spawn(move || {
+                for (p, o) in src.iter().zip(dst.iter_mut()) {
+                    *o = m * p.extend(1.0);
+                }
+            });
+        }
+    });
+}
+
+/// Runs `f` on every (tile, item) pair with up to `threads` threads; returns the results
+/// in tile order.
+fn for_each_tile<T: Send, R: Send + Default + Clone>(
+    tiles: &mut [TileMemory],
+    items: &mut [T],
+    threads: usize,
+    f: impl Fn(usize, &mut TileMemory, &mut T) -> R + Sync,
+) -> Vec<R> {
+    let n = tiles.len();
+    let mut results = vec![R::default(); n];
+    let threads = threads.max(1).min(n.max(1));
+    if threads == 1 {
+        for (i, ((t, it), r)) in tiles.iter_mut().zip(items.iter_mut()).zip(results.iter_mut()).enumerate() {
+            *r = f(i, t, it);
+        }
+        return results;
+    }
+    let work: Vec<(usize, &mut TileMemory, &mut T, &mut R)> = tiles
+        .iter_mut()
+        .zip(items.iter_mut())
+        .zip(results.iter_mut())
+        .enumerate()
+        .map(|(i, ((t, it), r))| (i, t, it, r))
+        .collect();
+    let queue = pool::Mutex::new(work.into_iter());
+    pool::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| loop {
+                let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
+                let Some((i, t, it, r)) = next else { break };
+                *r = f(i, t, it);
+            });
+        }
+    });
+    results
+}
+
+/// Rasterization and early tests of one tile.
+struct RasterFront<'a> {
+    geo: &'a Geometry<'a>,
+    state: &'a FragmentState,
+    early: bool,
+    samples: u32,
+}
+
+impl RasterFront<'_> {
+    /// Returns (fragments generated, early-culled).
+    fn tile(&self, tile_index: usize, tile: &mut TileMemory, list: &mut Vec<FragInput>) -> (u64, u64) {
+        let mut generated = 0u64;
+        let mut culled = 0u64;
+        let ts = tile.tile_size;
+        // Tickets: per-pixel rank among shaded fragments (ordered interlock).
+        let mut tickets = vec![0u32; (ts * ts) as usize];
+        let tests = self.early && (self.state.depth.test || self.state.stencil.enabled);
+        let all = if self.samples >= 8 { 0xff } else { (1u8 << self.samples) - 1 };
+        let sample_mask = self.state.sample_mask & all;
+        match self.geo {
+            Geometry::Binned { binned, instance } => {
+                let positions = crate::raster::SampleCount::from_count(self.samples)
+                    .map(|c| c.positions())
+                    .unwrap_or(&[(0.5, 0.5)]);
+                binned.raster_tile(tile_index, |f| {
+                    let cov = f.coverage & sample_mask;
+                    if cov == 0 {
+                        return;
+                    }
+                    generated += 1;
+                    let t = &binned.tris[f.tri as usize];
+                    let (fx, fy) = (f.x as f32, f.y as f32);
+                    let depth = t.depth_at(fx + 0.5, fy + 0.5);
+                    let (lx, ly) = (f.x - tile.x0, f.y - tile.y0);
+                    let mut cov = cov;
+                    if tests {
+                        let mut depths = [depth; 8];
+                        if self.samples > 1 {
+                            for (s, p) in positions.iter().enumerate() {
+                                depths[s] = t.depth_at(fx + p.0, fy + p.1);
+                            }
+                        }
+                        cov = tile.depth_stencil(self.state, lx, ly, cov, &depths, t.front_facing, true);
+                        if cov == 0 {
+                            culled += 1;
+                            return;
+                        }
+                    }
+                    let slot = &mut tickets[(ly * ts + lx) as usize];
+                    let ticket = *slot;
+                    *slot += 1;
+                    list.push(FragInput {
+                        seq: 0,
+                        x: f.x,
+                        y: f.y,
+                        tri: f.tri,
+                        primitive_id: t.source,
+                        instance_id: *instance,
+                        coverage: cov,
+                        front_facing: t.front_facing,
+                        depth,
+                        ticket,
+                    });
+                });
+            }
+            Geometry::FullScreen => {
+                for ly in 0..tile.h {
+                    for lx in 0..tile.w {
+                        generated += 1;
+                        let mut cov = sample_mask;
+                        if tests {
+                            cov = tile.depth_stencil(self.state, lx, ly, cov, &[0.5; 8], true, true);
+                            if cov == 0 {
+                                culled += 1;
+                                continue;
+                            }
+                        }
+                        list.push(FragInput {
+                            seq: 0,
+                            x: tile.x0 + lx,
+                            y: tile.y0 + ly,
+                            tri: u32::MAX,
+                            primitive_id: 0,
+                            instance_id: 0,
+                            coverage: cov,
+                            front_facing: true,
+                            depth: 0.5,
+                            ticket: 0,
+                        });
+                    }
+                }
+            }
+        }
+        (generated, culled)
+    }
+}
+
+/// Late tests and target writes of one tile.
+struct RasterBack<'a> {
+    geo: &'a Geometry<'a>,
+    state: &'a FragmentState,
+    early: bool,
+    samples: u32,
+    targets: usize,
+}
+
+impl RasterBack<'_> {
+    /// Returns (late-culled fragments, samples passed).
+    fn tile(&self, tile: &mut TileMemory, (ins, outs, colors): &mut (&[FragInput], &[FragOut], &[[u32; 4]])) -> (u64, u64) {
+        let mut culled = 0;
+        let mut passed_samples = 0u64;
+        let late_tests = !self.early && (self.state.depth.test || self.state.stencil.enabled);
+        let positions =
+            crate::raster::SampleCount::from_count(self.samples).map(|c| c.positions()).unwrap_or(&[(0.5, 0.5)]);
+        for (i, (f, o)) in ins.iter().zip(outs.iter()).enumerate() {
+            if o.faulted || o.discarded {
+                continue;
+            }
+            let (lx, ly) = (f.x - tile.x0, f.y - tile.y0);
+            let mut mask = f.coverage;
+            if late_tests {
+                let mut depths = [o.depth.unwrap_or(f.depth); 8];
+                if o.depth.is_none() && self.samples > 1 {
+                    if let Geometry::Binned { binned, .. } = self.geo {
+                        let t = &binned.tris[f.tri as usize];
+                        for (s, p) in positions.iter().enumerate() {
+                            depths[s] = t.depth_at(f.x as f32 + p.0, f.y as f32 + p.1);
+                        }
+                    }
+                }
+                mask = tile.depth_stencil(self.state, lx, ly, mask, &depths, f.front_facing, true);
+                if mask == 0 {
+                    culled += 1;
+                    continue;
+                }
+            }
+            passed_samples += mask.count_ones() as u64;
+            if self.targets > 0 {
+                tile.write_outputs(self.state, lx, ly, mask, &colors[i * self.targets..(i + 1) * self.targets]);
+            }
+        }
+        (culled, passed_samples)
+    }
+}

@@ -1,0 +1,179 @@
+//! Normalisation and the orbit camera, exactly as `oit.py` (the llvmpipe reference harness)
+//! computes them, so that fragrace and llvmpipe rasterize the same triangles at the same
+//! pixels and their fragment counts and timings compare.
+//!
+//! Everything is computed in f64 (as numpy does) and rounded to f32 once at the end.
+
+use glam::{DMat4, DVec3, Mat4, Vec3};
+use serde::{Deserialize, Serialize};
+
+/// Centres the bounding box at the origin and scales the largest extent to 1 (the unit
+/// cube), in place; returns the bounding-sphere radius about the origin (`oit.py`'s
+/// `normalise`). An empty slice returns 0; if every point coincides the points are only
+/// centred (there is no extent to scale) and 0 is returned.
+pub fn normalise(positions: &mut [Vec3]) -> f32 {
+    let Some(first) = positions.first() else {
+        return 0.0;
+    };
+    let (lo, hi) = positions
+        .iter()
+        .fold((first.as_dvec3(), first.as_dvec3()), |(lo, hi), p| (lo.min(p.as_dvec3()), hi.max(p.as_dvec3())));
+    let centre = (lo + hi) / 2.0;
+    let extent = (hi - lo).max_element();
+    let scale = if extent > 0.0 { extent } else { 1.0 };
+    let mut radius2 = 0.0f64;
+    for p in positions.iter_mut() {
+        let v = (p.as_dvec3() - centre) / scale;
+        radius2 = radius2.max(v.length_squared());
+        *p = v.as_vec3();
+    }
+    radius2.sqrt() as f32
+}
+
+/// An orbit camera around the origin, as `oit.py`'s `camera()`: the eye is on a sphere,
+/// `azimuth` (degrees) rotates about +Y (0 = on +Z, 90 = on +X), `elevation` (degrees) lifts
+/// towards +Y; the distance makes the scene's bounding sphere span `fill` of the smaller
+/// viewport dimension with a vertical field of view `fovy` (degrees). Stored in case files,
+/// so every field has a default and may be omitted.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Camera {
+    pub azimuth: f32,
+    pub elevation: f32,
+    pub fovy: f32,
+    pub fill: f32,
+}
+
+impl Default for Camera {
+    /// `oit.py`'s defaults: looking down -Z from +Z, 60 degree fov, 80 % fill.
+    fn default() -> Self {
+        Camera { azimuth: 0.0, elevation: 0.0, fovy: 60.0, fill: 0.8 }
+    }
+}
+
+impl Camera {
+    /// A camera at the given angles (degrees) with the default fov and fill.
+    pub fn new(azimuth: f32, elevation: f32) -> Self {
+        Camera { azimuth, elevation, ..Camera::default() }
+    }
+
+    /// The full camera set-up for a scene of bounding-sphere `radius` in a `width` x `height`
+    /// viewport.
+    ///
+    /// The f32 angles, fov and fill are widened through their shortest decimal form (0.8f32
+    /// becomes 0.8, not 0.800000011920929), so that a camera written `0.8` in a case file
+    /// gives the matrix `oit.py --fill 0.8` gives.
+    pub fn rig(&self, radius: f32, width: u32, height: u32) -> CameraRig {
+        camera_rig(
+            f64::from(radius),
+            decimal(self.azimuth),
+            decimal(self.elevation),
+            width,
+            height,
+            decimal(self.fovy),
+            decimal(self.fill),
+        )
+    }
+
+    /// The view-projection matrix (OpenGL clip space, z in [-w, w]) for a scene of
+    /// bounding-sphere `radius` in a `width` x `height` viewport.
+    pub fn view_proj(&self, radius: f32, width: u32, height: u32) -> Mat4 {
+        self.rig(radius, width, height).view_proj.as_mat4()
+    }
+}
+
+/// An f32 widened to the f64 with the same shortest decimal representation.
+fn decimal(x: f32) -> f64 {
+    // Display of a finite f32 round-trips and always parses; non-finite values widen as is.
+    x.to_string().parse().unwrap_or(f64::from(x))
+}
+
+/// A camera set-up in f64: what `oit.py`'s `camera()` returns, plus the matrices and the eye
+/// (tests and heatmaps need the eye to cast rays).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraRig {
+    pub view: DMat4,
+    pub proj: DMat4,
+    /// `proj * view`.
+    pub view_proj: DMat4,
+    pub eye: DVec3,
+    pub distance: f64,
+    pub near: f64,
+    pub far: f64,
+    pub fovy: f64,
+}
+
+/// `oit.py`'s `camera(radius, azimuth, elevation, width, height, fovy_deg, fill)`, term for
+/// term. The `up` vector switches to the horizontal azimuth direction within 0.1 degree of
+/// the poles (where +Y would be parallel to the view direction); near and far hug the
+/// bounding sphere (1 % margins) so depth precision is spent on the scene.
+pub fn camera_rig(
+    radius: f64,
+    azimuth_deg: f64,
+    elevation_deg: f64,
+    width: u32,
+    height: u32,
+    fovy_deg: f64,
+    fill: f64,
+) -> CameraRig {
+    let (az, el) = (azimuth_deg.to_radians(), elevation_deg.to_radians());
+    let aspect = f64::from(width) / f64::from(height);
+    let tan_half = (fovy_deg.to_radians() / 2.0).tan() * aspect.min(1.0); // narrower half-fov
+    let dist = radius / (fill * tan_half).atan().sin();
+    let eye = dist * DVec3::new(el.cos() * az.sin(), el.sin(), el.cos() * az.cos());
+    let up = if elevation_deg.abs() < 89.9 { DVec3::Y } else { DVec3::new(-az.sin(), 0.0, -az.cos()) };
+    let f = -eye / eye.length();
+    let s = f.cross(up);
+    let s = s / s.length();
+    let u = s.cross(f);
+    let rows = |r: [DVec3; 3]| -> [[f64; 4]; 4] {
+        let t = |v: DVec3| -v.dot(eye);
+        [
+            [r[0].x, r[0].y, r[0].z, t(r[0])],
+            [r[1].x, r[1].y, r[1].z, t(r[1])],
+            [r[2].x, r[2].y, r[2].z, t(r[2])],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    };
+    let view = rows([s, u, -f]);
+    let near = (dist - radius) * 0.99;
+    let far = (dist + radius) * 1.01;
+    let t = 1.0 / (fovy_deg.to_radians() / 2.0).tan();
+    let proj = [
+        [t / aspect, 0.0, 0.0, 0.0],
+        [0.0, t, 0.0, 0.0],
+        [0.0, 0.0, (far + near) / (near - far), 2.0 * far * near / (near - far)],
+        [0.0, 0.0, -1.0, 0.0],
+    ];
+    let mut vp = [[0.0f64; 4]; 4];
+    for (i, row) in vp.iter_mut().enumerate() {
+        for (j, out) in row.iter_mut().enumerate() {
+            *out = (0..4).fold(0.0, |acc, k| acc + proj[i][k] * view[k][j]);
+        }
+    }
+    // glam is column-major: the transpose of the row-major array is the matrix.
+    let from_rows = |m: [[f64; 4]; 4]| DMat4::from_cols_array_2d(&m).transpose();
+    CameraRig {
+        view: from_rows(view),
+        proj: from_rows(proj),
+        view_proj: from_rows(vp),
+        eye,
+        distance: dist,
+        near,
+        far,
+        fovy: fovy_deg,
+    }
+}
+
+/// `oit.py`'s `camera()` matrix as f32 (glam, column-major).
+pub fn camera(
+    radius: f64,
+    azimuth_deg: f64,
+    elevation_deg: f64,
+    width: u32,
+    height: u32,
+    fovy_deg: f64,
+    fill: f64,
+) -> Mat4 {
+    camera_rig(radius, azimuth_deg, elevation_deg, width, height, fovy_deg, fill).view_proj.as_mat4()
+}
