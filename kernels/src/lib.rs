@@ -1,1 +1,21 @@
+//! # fragrace-kernels: multi-fragment rendering algorithms as fragrace kernels
+//!
+//! Every algorithm of DESIGN.md section 3 is an [`Algorithm`]: its passes (geometry and
+//! full-screen kernels over `fragrace_emu`'s public kernel API), its resolve, its declared
+//! properties ([`AlgoInfo`]: passes, memory per pixel, hazard class, source), and its
+//! invariants, checked on every run ([`AlgoResult::checks`]).
+//!
+//! An algorithm's result is compared with [`truth`], the exact A-buffer (every fragment
+//! captured under the `ordered` executor, sorted by depth then primitive id), by one
+//! differential oracle ([`oracle`]).
 
+pub mod abuffer;
+pub mod algo;
+pub mod basic;
+pub mod common;
+pub mod kbuffer;
+pub mod oracle;
+pub mod registry;
+
+pub use algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, Check, Frame, HazardClass, Params};
+pub use registry::{algorithm, algorithms, names};

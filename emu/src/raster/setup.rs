@@ -475,6 +475,7 @@ pub fn bin_triangles(
         sy: viewport.height as f64 * (ONE / 2) as f64,
     };
 
+    let _t0 = std::time::Instant::now();
     // 1. Vertices.
     const VCHUNK: usize = 1 << 15;
     let vchunks = positions.len().div_ceil(VCHUNK);
@@ -495,6 +496,7 @@ pub fn bin_triangles(
     })
     .concat();
 
+    let _t1 = std::time::Instant::now();
     // 2. Triangles.
     let ctx = Ctx {
         positions,
@@ -532,6 +534,7 @@ pub fn bin_triangles(
         out
     });
 
+    let _t2 = std::time::Instant::now();
     // 3. Merge in chunk order.
     let total: usize = chunks.iter().map(|c| c.tris.len()).sum();
     let mut tris = Vec::with_capacity(total);
@@ -558,6 +561,7 @@ pub fn bin_triangles(
         }
         base += c.tris.len() as u32;
     }
+    if std::env::var_os("RT").is_some() { eprintln!("TIMING v {:?} t {:?} m {:?}", _t1-_t0, _t2-_t1, _t2.elapsed()); }
     Binned {
         tris,
         tiles_x,

@@ -1,0 +1,21 @@
+//! The A-buffers: every fragment per pixel, in unbounded (linked lists) or exactly sized
+//! (count, scan, store) memory.
+
+mod bun;
+mod dfb;
+mod fab;
+mod ll;
+mod sb;
+
+use crate::algo::Algorithm;
+
+/// The algorithms of this family.
+pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
+    let mut v = Vec::new();
+    v.extend(ll::algorithms());
+    v.extend(fab::algorithms());
+    v.extend(sb::algorithms());
+    v.extend(dfb::algorithms());
+    v.extend(bun::algorithms());
+    v
+}

@@ -1,0 +1,198 @@
+//! What an algorithm is, what it is given and what it returns.
+
+use fragrace_emu::{Device, ExecConfig, Mesh, PassError, PassReport};
+use glam::Mat4;
+
+/// The scene as an algorithm sees it: one mesh through one camera, at a resolution.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame<'m> {
+    pub mesh: &'m Mesh,
+    pub view_proj: Mat4,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Tunable parameters shared by the algorithms (each reads the ones it uses).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Params {
+    /// k of the k-buffers.
+    pub k: u32,
+    /// Constant opacity of every fragment in the OIT composite (as the llvmpipe peer).
+    pub alpha: f32,
+    /// Node pool of the linked lists, in nodes per pixel (`None`: sized exactly from a count
+    /// pass, as the llvmpipe peer does).
+    pub pool_per_pixel: Option<f32>,
+    /// Iteration cap of spinlocks (fragments that give up are dropped, and counted).
+    pub spin_cap: u32,
+    /// Buckets of the bucket schemes.
+    pub buckets: u32,
+    /// Fragments per pixel of the fixed-array A-buffer (FAB).
+    pub fab_capacity: u32,
+    /// Background colour of the composite.
+    pub background: [f32; 3],
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            k: 8,
+            alpha: 0.3,
+            pool_per_pixel: None,
+            spin_cap: 1024,
+            buckets: 5,
+            fab_capacity: 64,
+            background: [1.0, 1.0, 1.0],
+        }
+    }
+}
+
+/// Whether an algorithm races by design.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HazardClass {
+    /// Correct under every interleaving (atomics only where they matter).
+    HazardFree,
+    /// Races by design: results depend on the interleaving.
+    HazardProne,
+    /// Correct only with pixel interlock (which it uses).
+    NeedsInterlock,
+}
+
+impl HazardClass {
+    pub fn name(self) -> &'static str {
+        match self {
+            HazardClass::HazardFree => "hazard-free",
+            HazardClass::HazardProne => "hazard-prone",
+            HazardClass::NeedsInterlock => "needs-interlock",
+        }
+    }
+}
+
+/// What the algorithm keeps per pixel, for the oracle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Capacity {
+    /// Every fragment (A-buffers): compared with all of truth's.
+    All,
+    /// The k nearest (k-buffers): compared with truth's k nearest depths.
+    KNearest,
+    /// Per-pixel fragment counts only.
+    Count,
+    /// The nearest surface only.
+    Nearest,
+    /// Only an image (approximations such as weighted blended OIT): compared as images.
+    Image,
+}
+
+/// Declared properties of an algorithm.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct AlgoInfo {
+    pub name: &'static str,
+    pub family: &'static str,
+    pub summary: &'static str,
+    /// Paper and section it comes from.
+    pub source: &'static str,
+    /// Passes, as a formula (e.g. "1 geometry + 1 full-screen").
+    pub passes: &'static str,
+    /// Memory per pixel, as in Table 1 of the depth-fighting paper (e.g. "4 + 12 n bytes").
+    pub memory: &'static str,
+    pub hazard: HazardClass,
+    pub capacity: Capacity,
+}
+
+/// Fragments kept per pixel, compressed-row: pixel p's fragments are
+/// `frags[offsets[p] .. offsets[p + 1]]`, in the order the algorithm resolves them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Capture {
+    pub width: u32,
+    pub height: u32,
+    pub offsets: Vec<u32>,
+    pub frags: Vec<CapturedFrag>,
+}
+
+/// One captured fragment.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct CapturedFrag {
+    pub depth: f32,
+    /// Primitive id, or `u32::MAX` when the algorithm does not keep it.
+    pub prim: u32,
+}
+
+impl Capture {
+    /// Builds a capture from per-pixel lists.
+    pub fn from_lists(width: u32, height: u32, lists: impl IntoIterator<Item = Vec<CapturedFrag>>) -> Capture {
+        let mut offsets = vec![0u32];
+        let mut frags = Vec::new();
+        for l in lists {
+            frags.extend(l);
+            offsets.push(frags.len() as u32);
+        }
+        Capture { width, height, offsets, frags }
+    }
+    pub fn pixel(&self, p: usize) -> &[CapturedFrag] {
+        &self.frags[self.offsets[p] as usize..self.offsets[p + 1] as usize]
+    }
+    pub fn pixels(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+}
+
+/// One invariant checked on a run.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Check {
+    pub name: String,
+    pub passed: bool,
+    /// What was found (counts, the first offending pixel, ...).
+    pub detail: String,
+}
+
+impl Check {
+    pub fn new(name: impl Into<String>, passed: bool, detail: impl Into<String>) -> Check {
+        Check { name: name.into(), passed, detail: detail.into() }
+    }
+}
+
+/// What one run of an algorithm produced.
+#[derive(Clone, Debug, Default)]
+pub struct AlgoResult {
+    /// What was kept per pixel (for `Capacity::All`, `KNearest`, `Nearest`).
+    pub capture: Option<Capture>,
+    /// Per-pixel counts (for `Capacity::Count`), row-major, top row first.
+    pub counts: Option<Vec<u32>>,
+    /// The resolved image (RGBA, row-major, top row first), e.g. the OIT composite.
+    pub image: Option<Vec<[f32; 4]>>,
+    /// All passes' reports merged.
+    pub report: PassReport,
+    /// Invariants checked on this run.
+    pub checks: Vec<Check>,
+    /// Fragments generated that the algorithm could not keep (pool or array overflow,
+    /// spinlock give-ups, stencil routing beyond the samples), counted by the algorithm.
+    pub dropped: u64,
+    /// Storage the algorithm allocated (buffers and its render targets), in bytes.
+    pub storage_bytes: u64,
+}
+
+/// Why an algorithm could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum AlgoError {
+    #[error(transparent)]
+    Pass(#[from] PassError),
+    #[error(transparent)]
+    Memory(#[from] fragrace_emu::memory::MemoryError),
+    #[error(transparent)]
+    Framebuffer(#[from] fragrace_emu::framebuffer::FramebufferError),
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// A multi-fragment algorithm.
+pub trait Algorithm: Send + Sync {
+    fn info(&self) -> AlgoInfo;
+    /// Runs every pass of the algorithm on a fresh device, shading with `exec`, and resolves.
+    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError>;
+}
+
+/// Runs with a fresh device (helper for implementations).
+pub fn fresh_device() -> Device {
+    Device::new()
+}

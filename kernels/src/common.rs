@@ -1,0 +1,141 @@
+//! Pieces every algorithm uses: the fragment colour, front-to-back compositing, the pass
+//! state that captures every fragment, and depth-order sorting.
+
+use fragrace_emu::{
+    Device, Draw, ExecConfig, FragmentKernel, FragmentState, Framebuffer, PassReport, PassState, RasterState,
+    SampleCount,
+};
+
+use crate::algo::{AlgoError, CapturedFrag, Frame};
+
+/// Marks an empty list head / empty slot.
+pub const EMPTY: u32 = u32::MAX;
+
+/// The llvmpipe peer's `hash32` (a 32-bit integer hash).
+pub fn hash32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^= x >> 16;
+    x
+}
+
+/// Colour of a primitive, exactly as the llvmpipe peer's `prim_color` (hash of the
+/// primitive id, each channel `0.2 + 0.8 * c`), packed RGBA8 with alpha 255.
+pub fn prim_color_packed(prim: u32) -> u32 {
+    let h = hash32(prim);
+    let ch = |c: u32| -> u32 {
+        let v = 0.2 + 0.8 * (c & 255) as f32 / 255.0;
+        (v * 255.0).round() as u32
+    };
+    ch(h) | (ch(h >> 8) << 8) | (ch(h >> 16) << 16) | (255 << 24)
+}
+
+/// Unpacks an RGBA8 colour to floats.
+pub fn unpack_color(c: u32) -> [f32; 4] {
+    [
+        (c & 255) as f32 / 255.0,
+        ((c >> 8) & 255) as f32 / 255.0,
+        ((c >> 16) & 255) as f32 / 255.0,
+        (c >> 24) as f32 / 255.0,
+    ]
+}
+
+/// Front-to-back "over" of `colors` (nearest first), each with opacity `alpha`, onto
+/// `background`: `C = sum_i c_i a prod_{j<i} (1 - a) + bg prod (1 - a)`.
+pub fn composite(colors: impl IntoIterator<Item = [f32; 3]>, alpha: f32, background: [f32; 3]) -> [f32; 4] {
+    let mut acc = [0.0f32; 3];
+    let mut t = 1.0f32;
+    for c in colors {
+        for i in 0..3 {
+            acc[i] += c[i] * alpha * t;
+        }
+        t *= 1.0 - alpha;
+    }
+    [acc[0] + background[0] * t, acc[1] + background[1] * t, acc[2] + background[2] * t, 1.0 - t]
+}
+
+/// Composites captured fragments (already in front-to-back order) by primitive colour.
+pub fn composite_frags(frags: &[CapturedFrag], alpha: f32, background: [f32; 3]) -> [f32; 4] {
+    composite(
+        frags.iter().map(|f| {
+            let c = unpack_color(prim_color_packed(f.prim));
+            [c[0], c[1], c[2]]
+        }),
+        alpha,
+        background,
+    )
+}
+
+/// Depth order: depth, then primitive id (the ground truth's order).
+pub fn depth_order(a: &CapturedFrag, b: &CapturedFrag) -> std::cmp::Ordering {
+    a.depth.total_cmp(&b.depth).then(a.prim.cmp(&b.prim))
+}
+
+/// Sorts a pixel's fragments the way the DFB resolve does (seeds: z-thickness paper):
+/// insertion sort under 16 fragments, shell sort above.
+pub fn sort_fragments(v: &mut [CapturedFrag]) {
+    if v.len() < 16 {
+        for i in 1..v.len() {
+            let x = v[i];
+            let mut j = i;
+            while j > 0 && depth_order(&v[j - 1], &x) == std::cmp::Ordering::Greater {
+                v[j] = v[j - 1];
+                j -= 1;
+            }
+            v[j] = x;
+        }
+    } else {
+        let mut gap = 1;
+        while gap < v.len() / 3 {
+            gap = gap * 3 + 1;
+        }
+        while gap >= 1 {
+            for i in gap..v.len() {
+                let x = v[i];
+                let mut j = i;
+                while j >= gap && depth_order(&v[j - gap], &x) == std::cmp::Ordering::Greater {
+                    v[j] = v[j - gap];
+                    j -= gap;
+                }
+                v[j] = x;
+            }
+            gap /= 3;
+        }
+    }
+}
+
+/// Pass state that lets every fragment through: no culling, no depth test, no targets
+/// (the capture passes of the A-buffers, k-buffers and the peer's shaders).
+pub fn capture_state() -> PassState {
+    PassState { raster: RasterState::default(), fragment: FragmentState::new(), condition: None }
+}
+
+/// A framebuffer for a frame with the given targets and samples.
+pub fn framebuffer(frame: &Frame<'_>, samples: SampleCount, formats: &[fragrace_emu::Format]) -> Result<Framebuffer, AlgoError> {
+    Ok(Framebuffer::new(frame.width, frame.height, samples, 64, formats)?)
+}
+
+/// Runs one geometry pass of `frame` with `kernel`.
+pub fn geometry_pass<K: FragmentKernel>(
+    device: &Device,
+    fb: &mut Framebuffer,
+    frame: &Frame<'_>,
+    state: &PassState,
+    kernel: &K,
+    exec: &ExecConfig,
+) -> Result<PassReport, AlgoError> {
+    let draw = Draw::new(frame.mesh, frame.view_proj);
+    Ok(device.draw(fb, &draw, state, kernel, exec)?)
+}
+
+/// Number of pixels of a frame.
+pub fn pixels(frame: &Frame<'_>) -> usize {
+    frame.width as usize * frame.height as usize
+}
+
+/// A fresh device for one run.
+pub fn fresh() -> Device {
+    Device::new()
+}

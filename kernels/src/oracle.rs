@@ -1,0 +1,114 @@
+//! The differential oracle: one comparison of any algorithm's result with [`crate::basic::Truth`]'s
+//! on the same frame, and the seeds' metrics.
+//!
+//! - EPR (bucket-depth-peeling paper, section 5): covered pixels whose result differs from
+//!   the truth over covered pixels. "Differs" depends on what the algorithm keeps
+//!   ([`Capacity`]): counts must be equal; A-buffers must hold the same multiset of
+//!   (depth, primitive); k-buffers the same sorted multiset of depths as the k nearest true
+//!   fragments (which of two equal-depth fragments was kept is not an error); `Nearest` the
+//!   nearest depth; images any channel off by more than 1/255.
+//! - R_h, the robustness ratio (depth-fighting paper, section 3): fragments captured over
+//!   fragments the algorithm should have captured (all of them, or `min(k, n)` per pixel).
+//! - C_p, the coplanarity probability (depth-fighting paper, Fig. 13): covered pixels with at
+//!   least two fragments at exactly the same depth, over covered pixels.
+
+use crate::algo::{AlgoInfo, AlgoResult, Capacity, CapturedFrag, Params};
+use crate::common::depth_order;
+
+/// The metrics of one result against the truth.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Metrics {
+    pub covered_pixels: u64,
+    pub error_pixels: u64,
+    pub epr: f64,
+    /// Fragments the scene generated (truth's count).
+    pub generated: u64,
+    /// Fragments the algorithm kept.
+    pub captured: u64,
+    /// Fragments it should have kept.
+    pub expected: u64,
+    pub robustness: f64,
+    pub coplanarity: f64,
+    pub max_depth_complexity: u32,
+    /// First pixel (row-major) that differs.
+    pub first_error: Option<(u32, u32)>,
+    /// Per-pixel error flags, row-major (for heatmaps).
+    #[serde(skip)]
+    pub error_mask: Vec<bool>,
+}
+
+/// Tolerance of image comparisons (one 8-bit step).
+pub const IMAGE_TOLERANCE: f32 = 1.0 / 255.0;
+
+/// Compares `result` of the algorithm described by `info` with `truth` (from
+/// [`crate::basic::Truth::capture`] on the same frame).
+pub fn compare(info: &AlgoInfo, result: &AlgoResult, truth: &AlgoResult, params: &Params) -> Metrics {
+    let t = truth.capture.as_ref().expect("truth always captures");
+    let n = t.pixels();
+    let mut m = Metrics { error_mask: vec![false; n], ..Default::default() };
+    let k = params.k.max(1) as usize;
+    for p in 0..n {
+        let tp = t.pixel(p);
+        if tp.is_empty() {
+            continue;
+        }
+        m.covered_pixels += 1;
+        m.generated += tp.len() as u64;
+        m.max_depth_complexity = m.max_depth_complexity.max(tp.len() as u32);
+        if tp.windows(2).any(|w| w[0].depth == w[1].depth) {
+            m.coplanarity += 1.0;
+        }
+        let (wrong, captured, expected) = match info.capacity {
+            Capacity::Count => {
+                let c = result.counts.as_ref().map(|c| c[p]).unwrap_or(0);
+                (c as usize != tp.len(), (c as usize).min(tp.len()), tp.len())
+            }
+            Capacity::All => {
+                let mine = sorted(result, p);
+                (!same_frags(&mine, tp), mine.len(), tp.len())
+            }
+            Capacity::KNearest => {
+                let mine = sorted(result, p);
+                let want = k.min(tp.len());
+                let wrong = mine.len() != want || mine.iter().zip(tp).any(|(a, b)| a.depth != b.depth);
+                (wrong, mine.len().min(want), want)
+            }
+            Capacity::Nearest => {
+                let mine = sorted(result, p);
+                let wrong = mine.first().map(|f| f.depth) != Some(tp[0].depth);
+                (wrong, mine.len().min(1), 1)
+            }
+            Capacity::Image => {
+                let want = crate::common::composite_frags(tp, params.alpha, params.background);
+                let got = result.image.as_ref().map(|i| i[p]).unwrap_or([f32::NAN; 4]);
+                let wrong = (0..3).any(|c| !((got[c] - want[c]).abs() <= IMAGE_TOLERANCE));
+                (wrong, tp.len(), tp.len())
+            }
+        };
+        m.captured += captured as u64;
+        m.expected += expected as u64;
+        if wrong {
+            m.error_pixels += 1;
+            m.error_mask[p] = true;
+            if m.first_error.is_none() {
+                m.first_error = Some(((p as u32) % t.width, (p as u32) / t.width));
+            }
+        }
+    }
+    if m.covered_pixels > 0 {
+        m.epr = m.error_pixels as f64 / m.covered_pixels as f64;
+        m.coplanarity /= m.covered_pixels as f64;
+    }
+    m.robustness = if m.expected > 0 { m.captured as f64 / m.expected as f64 } else { 1.0 };
+    m
+}
+
+fn sorted(result: &AlgoResult, p: usize) -> Vec<CapturedFrag> {
+    let mut v = result.capture.as_ref().map(|c| c.pixel(p).to_vec()).unwrap_or_default();
+    v.sort_by(depth_order);
+    v
+}
+
+fn same_frags(a: &[CapturedFrag], b: &[CapturedFrag]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.depth == y.depth && x.prim == y.prim)
+}
