@@ -65,16 +65,21 @@ impl Planes {
     }
 
     /// Bit `i` set when `p` is outside plane `i`; [`NON_FINITE`] for NaN or infinite input.
+    /// Written out plane by plane (the same expressions as [`Planes::dist`], so a vertex is
+    /// classified identically here and by the clipper).
     #[inline]
     pub fn outcode(&self, p: &[f64; 4]) -> u32 {
-        if !p.iter().all(|c| c.is_finite()) {
+        let [x, y, z, w] = *p;
+        if !(x.is_finite() && y.is_finite() && z.is_finite() && w.is_finite()) {
             return NON_FINITE;
         }
-        let mut oc = 0;
-        for i in 0..PLANES {
-            oc |= u32::from(self.dist(i, p) < 0.0) << i;
-        }
-        oc
+        u32::from(w - W_EPSILON < 0.0)
+            | u32::from(w + z < 0.0) << 1
+            | u32::from(w - z < 0.0) << 2
+            | u32::from(x + self.kx_lo * w < 0.0) << 3
+            | u32::from(self.kx_hi * w - x < 0.0) << 4
+            | u32::from(self.ky_lo * w - y < 0.0) << 5
+            | u32::from(y + self.ky_hi * w < 0.0) << 6
     }
 }
 
@@ -211,6 +216,25 @@ mod tests {
         let mut b = [0.0; 3];
         b[k] = 1.0;
         ClipVert { p: [x, y, z, w], b }
+    }
+
+    #[test]
+    fn outcode_matches_dist() {
+        let pl = Planes::new(640, 480);
+        let mut seed = 12345u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0
+        };
+        for _ in 0..10000 {
+            let s = [1.0, 10.0, 1e4][(rnd().abs() * 2.99) as usize];
+            let p = [rnd() * s * 1e4, rnd() * s * 1e4, rnd() * s, rnd() * s];
+            let oc = pl.outcode(&p);
+            for i in 0..PLANES {
+                assert_eq!(oc & (1 << i) != 0, pl.dist(i, &p) < 0.0);
+            }
+        }
+        assert_eq!(pl.outcode(&[f64::NAN, 0.0, 0.0, 1.0]), NON_FINITE);
     }
 
     #[test]

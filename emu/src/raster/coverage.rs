@@ -213,19 +213,6 @@ impl Edges {
     }
 }
 
-/// True if any sample of the inclusive pixel rectangle `r` is covered.
-#[inline]
-pub(crate) fn any_covered(e: &Edges, si: &SampleInfo, r: [i32; 4]) -> bool {
-    for y in r[1]..=r[3] {
-        for x in r[0]..=r[2] {
-            if e.mask_at(si, (x as i64) << SUBPIXEL_BITS, (y as i64) << SUBPIXEL_BITS) != 0 {
-                return true;
-            }
-        }
-    }
-    false
-}
-
 /// Calls `f(x, y, mask)` for every pixel of the inclusive pixel rectangle `r` with at least
 /// one covered sample, in row-major order. Edge functions are stepped incrementally (exact
 /// integer additions, so stepping gives the same values as direct evaluation).

@@ -8,8 +8,9 @@
 //!    triangles of a dense mesh are sub-pixel and end here), then area, facing and culling, an
 //!    exact sample test for tiny ones, the depth and barycentric planes, and the tile bins.
 //!    Triangles with a vertex outside a plane go through homogeneous clipping ([`super::clip`]);
-//! 3. chunk results are concatenated in chunk order, so setup indices follow API order, and the
-//!    per-tile lists are a stable counting sort of the chunks' `(tile, triangle)` pairs.
+//! 3. chunk results are concatenated in chunk order, so setup indices follow API order; each
+//!    chunk keeps its own per-tile lists (a stable counting sort done by its worker), and
+//!    [`Binned::raster_tile`] walks the chunks in order.
 use super::clip::{self, ClipVert, Planes, MAX_POLY, NON_FINITE};
 use super::coverage::{self, area2, bbox, Edges, SampleInfo, ONE};
 use super::{CullMode, Fragment, FrontFace, RasterState, SampleCount, Viewport, SUBPIXEL_BITS};
@@ -114,9 +115,27 @@ pub struct Binned {
     pub viewport: Viewport,
     /// Samples per pixel the coverage masks refer to.
     pub samples: SampleCount,
-    /// `tile_tris[tile_start[t]..tile_start[t + 1]]` are tile `t`'s triangles in API order.
+    /// Per-tile lists, one set per chunk of input triangles, in chunk (= API) order.
+    chunks: Vec<ChunkBins>,
+}
+
+/// The tile lists of one chunk of input triangles: `entries[tile_start[t]..tile_start[t+1]]`
+/// are tile `t`'s entries, ascending. Built by the worker that set the chunk up, so no global
+/// scatter is needed; [`Binned::raster_tile`] walks the chunks in order.
+struct ChunkBins {
+    /// Setup index of the chunk's first triangle.
+    base: u32,
     tile_start: Vec<u32>,
-    tile_tris: Vec<u32>,
+    entries: Vec<BinEntry>,
+}
+
+/// One triangle in one tile: its setup index relative to the chunk, and for triangles whose
+/// coverage is a single pixel (most triangles of a dense mesh) that pixel and mask, already
+/// computed at setup: `mask << 16 | dy << 8 | dx` relative to the tile origin, or 0.
+#[derive(Clone, Copy, Debug, Default)]
+struct BinEntry {
+    tri: u32,
+    single: u32,
 }
 
 impl Binned {
@@ -129,19 +148,26 @@ impl Binned {
         let tx = (tile % self.tiles_x.max(1) as usize) as u32;
         let ty = (tile / self.tiles_x.max(1) as usize) as u32;
         let ts = self.tile_size;
-        let x0 = (tx * ts).min(self.viewport.width);
-        let y0 = (ty * ts).min(self.viewport.height);
-        let x1 = (x0 + ts).min(self.viewport.width);
-        let y1 = (y0 + ts).min(self.viewport.height);
+        let x0 = tx.saturating_mul(ts).min(self.viewport.width);
+        let y0 = ty.saturating_mul(ts).min(self.viewport.height);
+        let x1 = x0.saturating_add(ts).min(self.viewport.width);
+        let y1 = y0.saturating_add(ts).min(self.viewport.height);
         (x0, y0, x1, y1)
     }
 
     /// Setup indices (into [`Binned::tris`]) of the triangles binned to a tile, ascending.
-    pub fn tile_triangles(&self, tile: usize) -> &[u32] {
-        if tile >= self.tile_count() {
-            return &[];
-        }
-        &self.tile_tris[self.tile_start[tile] as usize..self.tile_start[tile + 1] as usize]
+    /// A triangle can be binned to a tile where it ends up covering no sample.
+    pub fn tile_triangles(&self, tile: usize) -> impl Iterator<Item = u32> + '_ {
+        let ok = tile < self.tile_count();
+        self.chunks.iter().filter(move |_| ok).flat_map(move |c| {
+            let list = &c.entries[c.tile_start[tile] as usize..c.tile_start[tile + 1] as usize];
+            list.iter().map(move |e| c.base + e.tri)
+        })
+    }
+
+    /// Total number of (triangle, tile) pairs binned.
+    pub fn bin_entries(&self) -> usize {
+        self.chunks.iter().map(|c| c.entries.len()).sum()
     }
 
     /// Emits the fragments of one tile in API order (by `tri`); within one triangle in
@@ -155,25 +181,43 @@ impl Binned {
             return;
         }
         let si = SampleInfo::new(self.samples);
-        let (x0, y0, x1, y1) = (x0 as i32, y0 as i32, x1 as i32, y1 as i32);
-        for &ti in self.tile_triangles(tile) {
-            let t = &self.tris[ti as usize];
-            let Some(r) = si.pixel_rect(bbox(&t.v), x1, y1) else { continue };
-            let r = [r[0].max(x0), r[1].max(y0), r[2], r[3]];
-            if r[0] > r[2] || r[1] > r[3] {
-                continue;
+        for c in &self.chunks {
+            let list = &c.entries[c.tile_start[tile] as usize..c.tile_start[tile + 1] as usize];
+            for e in list {
+                let tri = c.base + e.tri;
+                if e.single != 0 {
+                    emit(Fragment {
+                        x: x0 + (e.single & 0xff),
+                        y: y0 + ((e.single >> 8) & 0xff),
+                        tri,
+                        coverage: (e.single >> 16) as u8,
+                    });
+                    continue;
+                }
+                let t = &self.tris[tri as usize];
+                let (x0, y0, x1, y1) = (x0 as i32, y0 as i32, x1 as i32, y1 as i32);
+                let Some(r) = si.pixel_rect(bbox(&t.v), x1, y1) else { continue };
+                let r = [r[0].max(x0), r[1].max(y0), r[2], r[3]];
+                if r[0] > r[2] || r[1] > r[3] {
+                    continue;
+                }
+                let edges = Edges::new(&t.v);
+                coverage::raster(&edges, &si, r, |x, y, coverage| {
+                    emit(Fragment { x, y, tri, coverage })
+                });
             }
-            let e = Edges::new(&t.v);
-            coverage::raster(&e, &si, r, |x, y, coverage| emit(Fragment { x, y, tri: ti, coverage }));
         }
     }
 }
 
-/// Per-vertex result of step 1: snapped position, or `x == OUT` and `y` = outcode.
+/// Per-vertex result of step 1: snapped window position, window depth and `1/w`; or
+/// `x == OUT` and `y` = outcode when the vertex is outside a clip plane.
 #[derive(Clone, Copy, Debug, Default)]
 struct Snapped {
     x: i32,
     y: i32,
+    z: f32,
+    iw: f32,
 }
 
 const OUT: i32 = i32::MIN;
@@ -188,10 +232,17 @@ struct Xform {
 }
 
 impl Xform {
+    /// Window position (fixed point), window depth `(z/w + 1) / 2` and `1/w`.
     #[inline]
-    fn snap(&self, x: f64, y: f64, w: f64) -> [i32; 2] {
+    fn project(&self, p: &[f64; 4]) -> Snapped {
+        let [x, y, z, w] = *p;
         let iw = 1.0 / w;
-        [round_fixed((x * iw + 1.0) * self.sx), round_fixed((1.0 - y * iw) * self.sy)]
+        Snapped {
+            x: round_fixed((x * iw + 1.0) * self.sx),
+            y: round_fixed((1.0 - y * iw) * self.sy),
+            z: (z * iw * 0.5 + 0.5) as f32,
+            iw: iw as f32,
+        }
     }
 }
 
@@ -204,13 +255,6 @@ fn round_fixed(v: f64) -> i32 {
     ((c + (0.5 + BIAS)) as i64 - BIAS as i64) as i32
 }
 
-/// Window depth `(z/w + 1) / 2` and `1/w` of a clip-space vertex.
-#[inline]
-fn depth_w(z: f64, w: f64) -> (f32, f32) {
-    let iw = 1.0 / w;
-    ((z * iw * 0.5 + 0.5) as f32, iw as f32)
-}
-
 #[inline]
 fn vec4_f64(p: Vec4) -> [f64; 4] {
     [p.x as f64, p.y as f64, p.z as f64, p.w as f64]
@@ -218,6 +262,7 @@ fn vec4_f64(p: Vec4) -> [f64; 4] {
 
 /// Depth plane through the three vertices taken in canonical (sorted by y then x) order:
 /// returns the reference vertex index and `[z_ref, dz/dx, dz/dy]` per pixel.
+#[inline]
 fn depth_plane(v: &[[i32; 2]; 3], zw: &[f32; 3]) -> (u8, [f32; 3]) {
     let key = |i: usize| (v[i][1], v[i][0]);
     let mut o = [0usize, 1, 2];
@@ -237,9 +282,9 @@ fn depth_plane(v: &[[i32; 2]; 3], zw: &[f32; 3]) -> (u8, [f32; 3]) {
     let (x2, y2, z2) = p(o[2]);
     let (dx1, dy1, dz1) = (x1 - x0, y1 - y0, z1 - z0);
     let (dx2, dy2, dz2) = (x2 - x0, y2 - y0, z2 - z0);
-    let d = dx1 * dy2 - dx2 * dy1;
-    let zx = (dz1 * dy2 - dz2 * dy1) / d;
-    let zy = (dx1 * dz2 - dx2 * dz1) / d;
+    let inv_d = 1.0 / (dx1 * dy2 - dx2 * dy1);
+    let zx = (dz1 * dy2 - dz2 * dy1) * inv_d;
+    let zy = (dx1 * dz2 - dx2 * dz1) * inv_d;
     (o[0] as u8, [zw[o[0]], zx as f32, zy as f32])
 }
 
@@ -256,18 +301,25 @@ struct Ctx<'a> {
     h: i32,
     tile_size: i32,
     tiles_x: u32,
+    ntiles: usize,
     cull: CullMode,
     /// `FrontFace::Ccw`: front-facing when counter-clockwise on screen.
     ccw_front: bool,
 }
 
 /// What one chunk of triangles produced.
-#[derive(Default)]
 struct ChunkOut {
     tris: Vec<SetupTriangle>,
-    /// `(tile, index into tris)` in triangle order.
-    bins: Vec<[u32; 2]>,
+    /// `(tile, entry)` in triangle order.
+    bins: Vec<(u32, BinEntry)>,
     rejected: u64,
+}
+
+/// Coverage of a tiny triangle (pixel rectangle of at most 2x2).
+enum Tiny {
+    Empty,
+    Single(i32, i32, u8),
+    Several,
 }
 
 impl Ctx<'_> {
@@ -282,12 +334,25 @@ impl Ctx<'_> {
         }
     }
 
-    /// Exact sample test for triangles spanning at most 2x2 pixels: most triangles of a dense
-    /// mesh whose bounding box reaches a sample still miss it, and are dropped here instead of
-    /// costing a setup record, a bin entry and a rasterization.
+    /// Exact sample test for triangles whose pixel rectangle is at most 2x2: most triangles
+    /// of a dense mesh whose bounding box reaches a sample still miss it, and are dropped here
+    /// instead of costing a setup record, a bin entry and a rasterization; most others cover
+    /// one pixel, whose mask then goes straight into the bin entry.
     #[inline]
-    fn tiny_and_empty(&self, v: &[[i32; 2]; 3], r: [i32; 4]) -> bool {
-        r[2] - r[0] <= 1 && r[3] - r[1] <= 1 && !coverage::any_covered(&Edges::new(v), &self.si, r)
+    fn tiny(&self, e: &Edges, r: [i32; 4]) -> Tiny {
+        let mut found = Tiny::Empty;
+        for y in r[1]..=r[3] {
+            for x in r[0]..=r[2] {
+                let m = e.mask_at(&self.si, (x as i64) << SUBPIXEL_BITS, (y as i64) << SUBPIXEL_BITS);
+                if m != 0 {
+                    if let Tiny::Single(..) = found {
+                        return Tiny::Several;
+                    }
+                    found = Tiny::Single(x, y, m);
+                }
+            }
+        }
+        found
     }
 
     fn run(&self, range: std::ops::Range<usize>, out: &mut ChunkOut) {
@@ -311,19 +376,13 @@ impl Ctx<'_> {
                 continue;
             }
             let Some(front) = self.facing(a2 < 0) else { continue };
-            let (v, perm) = if a2 > 0 { (v, [0, 1, 2]) } else { ([v[0], v[2], v[1]], [0, 2, 1]) };
-            if self.tiny_and_empty(&v, r) {
-                continue;
-            }
-            let idx = [ia, ib, ic];
-            let mut zw = [0.0f32; 3];
+            let (v, s) = if a2 > 0 { (v, [a, b, c]) } else { ([v[0], v[2], v[1]], [a, c, b]) };
+            let perm = if a2 > 0 { [0, 1, 2] } else { [0, 2, 1] };
             let mut q = [[0.0f32; 3]; 3];
             for i in 0..3 {
-                let p = self.positions[idx[perm[i]] as usize];
-                let (z, iw) = depth_w(p.z as f64, p.w as f64);
-                zw[i] = z;
-                q[i][perm[i]] = iw;
+                q[i][perm[i]] = s[i].iw;
             }
+            let zw = [s[0].z, s[1].z, s[2].z];
             self.finish(out, t as u32, front, v, r, zw, q);
         }
     }
@@ -350,14 +409,10 @@ impl Ctx<'_> {
             return;
         }
         let mut pts = [[0i64; 2]; MAX_POLY + 1];
-        let mut fixed = [[0i32; 2]; MAX_POLY + 1];
-        let mut zw = [0.0f32; MAX_POLY + 1];
-        let mut iw = [0.0f32; MAX_POLY + 1];
+        let mut proj = [Snapped::default(); MAX_POLY + 1];
         for j in 0..n {
-            let [x, y, z, w] = poly.v[j].p;
-            fixed[j] = self.xf.snap(x, y, w);
-            pts[j] = [fixed[j][0] as i64, fixed[j][1] as i64];
-            (zw[j], iw[j]) = depth_w(z, w);
+            proj[j] = self.xf.project(&poly.v[j].p);
+            pts[j] = [proj[j].x as i64, proj[j].y as i64];
         }
         // Facing from the whole snapped polygon (shoelace), so all pieces agree.
         let mut a2: i128 = 0;
@@ -373,23 +428,24 @@ impl Ctx<'_> {
         let m = clip::convex_hull(&pts[..n], &mut hull);
         for i in 1..m.saturating_sub(1) {
             let h = [hull[0], hull[i], hull[i + 1]];
-            let v = h.map(|j| fixed[j]);
+            let v = h.map(|j| [proj[j].x, proj[j].y]);
             let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else { continue };
-            if area2(&v) <= 0 || self.tiny_and_empty(&v, r) {
+            if area2(&v) <= 0 {
                 continue;
             }
-            let z = h.map(|j| zw[j]);
+            let zw = h.map(|j| proj[j].z);
             let q = h.map(|j| {
                 let b = poly.v[j].b;
-                let iw = iw[j] as f64;
+                let iw = proj[j].iw as f64;
                 [(b[0] * iw) as f32, (b[1] * iw) as f32, (b[2] * iw) as f32]
             });
-            self.finish(out, source, front, v, r, z, q);
+            self.finish(out, source, front, v, r, zw, q);
         }
     }
 
-    /// Stores a setup triangle and bins it into the tiles its pixel rectangle `r` touches
-    /// (skipping, for large triangles, tiles that lie entirely outside one edge).
+    /// Tests tiny triangles exactly, stores the setup triangle and bins it into the tiles its
+    /// pixel rectangle `r` touches (skipping, for large triangles, tiles that lie entirely
+    /// outside one edge).
     #[allow(clippy::too_many_arguments)]
     #[inline]
     fn finish(
@@ -402,16 +458,26 @@ impl Ctx<'_> {
         zw: [f32; 3],
         q: [[f32; 3]; 3],
     ) {
-        let (zref, depth) = depth_plane(&v, &zw);
-        let idx = out.tris.len() as u32;
-        out.tris.push(SetupTriangle { source, front_facing, zref, v, depth, q });
+        let e = Edges::new(&v);
         let ts = self.tile_size;
+        let mut single = 0;
+        if r[2] - r[0] <= 1 && r[3] - r[1] <= 1 {
+            match self.tiny(&e, r) {
+                Tiny::Empty => return,
+                Tiny::Single(x, y, m) if ts <= 256 => {
+                    single = (m as u32) << 16 | ((y % ts) as u32) << 8 | (x % ts) as u32;
+                }
+                _ => {}
+            }
+        }
+        let (zref, depth) = depth_plane(&v, &zw);
+        let tri = out.tris.len() as u32;
+        out.tris.push(SetupTriangle { source, front_facing, zref, v, depth, q });
         let (tx0, ty0, tx1, ty1) = (r[0] / ts, r[1] / ts, r[2] / ts, r[3] / ts);
         if tx0 == tx1 && ty0 == ty1 {
-            out.bins.push([ty0 as u32 * self.tiles_x + tx0 as u32, idx]);
+            out.bins.push((ty0 as u32 * self.tiles_x + tx0 as u32, BinEntry { tri, single }));
             return;
         }
-        let e = Edges::new(&v);
         let one = ONE as i64;
         for ty in ty0..=ty1 {
             let y0 = (ty * ts) as i64 * one;
@@ -420,10 +486,35 @@ impl Ctx<'_> {
                 let x0 = (tx * ts) as i64 * one;
                 let x1 = ((tx + 1) * ts).min(self.w) as i64 * one;
                 if !e.rect_outside(x0, y0, x1, y1) {
-                    out.bins.push([ty as u32 * self.tiles_x + tx as u32, idx]);
+                    out.bins.push((ty as u32 * self.tiles_x + tx as u32, BinEntry { tri, single: 0 }));
                 }
             }
         }
+    }
+
+    /// Sets up one chunk of triangles and sorts its bin entries by tile (stable).
+    fn chunk(&self, range: std::ops::Range<usize>) -> (Vec<SetupTriangle>, ChunkBins, u64) {
+        let mut out = ChunkOut {
+            tris: Vec::with_capacity(range.len() / 4 + 16),
+            bins: Vec::with_capacity(range.len() / 4 + 16),
+            rejected: 0,
+        };
+        self.run(range, &mut out);
+        let mut tile_start = vec![0u32; self.ntiles + 1];
+        for &(tile, _) in &out.bins {
+            tile_start[tile as usize + 1] += 1;
+        }
+        for i in 0..self.ntiles {
+            tile_start[i + 1] += tile_start[i];
+        }
+        let mut cursor = tile_start.clone();
+        let mut entries = vec![BinEntry::default(); out.bins.len()];
+        for &(tile, e) in &out.bins {
+            let k = &mut cursor[tile as usize];
+            entries[*k as usize] = e;
+            *k += 1;
+        }
+        (out.tris, ChunkBins { base: 0, tile_start, entries }, out.rejected)
     }
 }
 
@@ -451,6 +542,15 @@ fn par_map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> 
     slots.into_iter().map(|t| t.expect("every item computed")).collect()
 }
 
+/// Step 1 for a slice of vertices.
+fn project_vertices(planes: &Planes, xf: &Xform, src: &[Vec4], dst: &mut [Snapped]) {
+    for (d, &p) in dst.iter_mut().zip(src) {
+        let p = vec4_f64(p);
+        let oc = planes.outcode(&p);
+        *d = if oc != 0 { Snapped { x: OUT, y: oc as i32, z: 0.0, iw: 0.0 } } else { xf.project(&p) };
+    }
+}
+
 /// Clips, culls, snaps and bins triangles. Uses up to `threads` threads.
 /// `positions` are clip-space vertex positions, `indices` the triangles in API order.
 /// Triangles with a NaN or infinite coordinate are dropped (and counted in [`Binned::rejected`]),
@@ -475,29 +575,26 @@ pub fn bin_triangles(
         sy: viewport.height as f64 * (ONE / 2) as f64,
     };
 
-    let _t0 = std::time::Instant::now();
-    // 1. Vertices.
-    const VCHUNK: usize = 1 << 15;
-    let vchunks = positions.len().div_ceil(VCHUNK);
-    let snapped: Vec<Snapped> = par_map(vchunks, threads, |c| {
-        let src = &positions[c * VCHUNK..((c + 1) * VCHUNK).min(positions.len())];
-        src.iter()
-            .map(|&p| {
-                let p = vec4_f64(p);
-                let oc = planes.outcode(&p);
-                if oc != 0 {
-                    Snapped { x: OUT, y: oc as i32 }
-                } else {
-                    let [x, y] = xf.snap(p[0], p[1], p[3]);
-                    Snapped { x, y }
-                }
-            })
-            .collect::<Vec<_>>()
-    })
-    .concat();
+    // 1. Vertices, in parallel slices of one array.
+    let mut snapped = vec![Snapped::default(); positions.len()];
+    let vthreads = threads.min(positions.len() / 8192).max(1);
+    if vthreads == 1 {
+        project_vertices(&planes, &xf, positions, &mut snapped);
+    } else {
+        let per = positions.len().div_ceil(vthreads);
+        std::thread::scope(|s| {
+            let mut parts = snapped.chunks_mut(per).zip(positions.chunks(per));
+            let first = parts.next();
+            for (dst, src) in parts {
+                s.spawn(|| project_vertices(&planes, &xf, src, dst));
+            }
+            if let Some((dst, src)) = first {
+                project_vertices(&planes, &xf, src, dst);
+            }
+        });
+    }
 
-    let _t1 = std::time::Instant::now();
-    // 2. Triangles.
+    // 2. Triangles, in chunks; each chunk sorts its own bins.
     let ctx = Ctx {
         positions,
         indices,
@@ -509,59 +606,37 @@ pub fn bin_triangles(
         h: h as i32,
         tile_size: tile_size.min(MAX_VIEWPORT) as i32,
         tiles_x,
+        ntiles,
         cull: state.cull,
         ccw_front: state.front_face == FrontFace::Ccw,
     };
     let n = indices.len();
-    let chunk = if threads == 1 { n.max(1) } else { (n / (threads * 8)).clamp(4096, 1 << 16) };
+    // A few chunks per thread balance the load; few enough that the per-chunk tile tables
+    // (ntiles + 1 words each) stay small even for many tiles.
+    let target = (threads * 4).min((1usize << 22) / (ntiles + 1)).max(threads).max(1);
+    let chunk = n.div_ceil(target).max(4096);
     let nchunks = n.div_ceil(chunk);
-    let chunks: Vec<ChunkOut> = par_map(nchunks, threads, |c| {
-        let range = c * chunk..((c + 1) * chunk).min(n);
-        let mut out = ChunkOut {
-            tris: Vec::with_capacity(range.len() / 4 + 16),
-            bins: Vec::with_capacity(range.len() / 4 + 16),
-            rejected: 0,
-        };
-        if ntiles > 0 {
-            ctx.run(range, &mut out);
-        } else {
-            // Empty viewport: nothing is drawn, but bad input is still counted.
-            for t in range {
-                let bad = indices[t].iter().any(|&i| !matches!(positions.get(i as usize), Some(p) if p.is_finite()));
-                out.rejected += u64::from(bad);
-            }
-        }
-        out
-    });
+    let mut parts: Vec<(Vec<SetupTriangle>, ChunkBins, u64)> = if ntiles == 0 {
+        // Empty viewport: nothing is drawn, but bad input is still counted.
+        let bad = indices
+            .iter()
+            .filter(|t| t.iter().any(|&i| !matches!(positions.get(i as usize), Some(p) if p.is_finite())))
+            .count();
+        vec![(Vec::new(), ChunkBins { base: 0, tile_start: vec![0], entries: Vec::new() }, bad as u64)]
+    } else {
+        par_map(nchunks, threads, |c| ctx.chunk(c * chunk..((c + 1) * chunk).min(n)))
+    };
 
-    let _t2 = std::time::Instant::now();
-    // 3. Merge in chunk order.
-    let total: usize = chunks.iter().map(|c| c.tris.len()).sum();
+    // 3. Concatenate in chunk order.
+    let total: usize = parts.iter().map(|p| p.0.len()).sum();
     let mut tris = Vec::with_capacity(total);
-    let mut tile_start = vec![0u32; ntiles + 1];
     let mut rejected = 0;
-    for c in &chunks {
-        tris.extend_from_slice(&c.tris);
-        rejected += c.rejected;
-        for &[tile, _] in &c.bins {
-            tile_start[tile as usize + 1] += 1;
-        }
+    for (t, bins, r) in &mut parts {
+        bins.base = tris.len() as u32;
+        tris.extend_from_slice(t);
+        *t = Vec::new();
+        rejected += *r;
     }
-    for i in 0..ntiles {
-        tile_start[i + 1] += tile_start[i];
-    }
-    let mut cursor = tile_start.clone();
-    let mut tile_tris = vec![0u32; tile_start[ntiles] as usize];
-    let mut base = 0u32;
-    for c in &chunks {
-        for &[tile, i] in &c.bins {
-            let k = &mut cursor[tile as usize];
-            tile_tris[*k as usize] = base + i;
-            *k += 1;
-        }
-        base += c.tris.len() as u32;
-    }
-    if std::env::var_os("RT").is_some() { eprintln!("TIMING v {:?} t {:?} m {:?}", _t1-_t0, _t2-_t1, _t2.elapsed()); }
     Binned {
         tris,
         tiles_x,
@@ -570,8 +645,7 @@ pub fn bin_triangles(
         rejected,
         viewport,
         samples: state.samples,
-        tile_start,
-        tile_tris,
+        chunks: parts.into_iter().map(|p| p.1).collect(),
     }
 }
 

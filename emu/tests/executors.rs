@@ -1,0 +1,357 @@
+//! Executors, faults and the hazard detector, on full-screen passes (one invocation per
+//! pixel, no rasterizer involved).
+
+use fragrace_emu::{
+    Buf, Device, ExecConfig, ExecMode, FaultKind, Format, Frag, FragmentKernel, FragmentState, Framebuffer,
+    KernelInfo, Policy, SampleCount, ScheduleConfig, TargetState,
+};
+
+fn fb(w: u32, h: u32) -> Framebuffer {
+    Framebuffer::new(w, h, SampleCount::X1, 8, &[]).unwrap()
+}
+
+/// Every invocation increments one global counter.
+struct GlobalCounter {
+    counter: Buf<u32>,
+    atomic: bool,
+}
+
+impl FragmentKernel for GlobalCounter {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("global-counter")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        if self.atomic {
+            f.atomic_add(self.counter, 0, 1).await;
+        } else {
+            let v = f.load(self.counter, 0).await;
+            f.store(self.counter, 0, v + 1).await;
+        }
+    }
+}
+
+fn run_counter(exec: &ExecConfig, atomic: bool) -> (u32, fragrace_emu::PassReport) {
+    let mut dev = Device::new();
+    let counter = dev.buffer::<u32>("counter", 1).unwrap();
+    let mut fb = fb(16, 16);
+    let r = dev.fullscreen(&mut fb, &FragmentState::new(), &GlobalCounter { counter, atomic }, exec).unwrap();
+    (dev.memory.read(counter).unwrap()[0], r)
+}
+
+fn scheduled(policy: Policy, seed: u64) -> ExecConfig {
+    ExecConfig {
+        mode: ExecMode::Scheduled(ScheduleConfig { policy, seed, window: 16, record: true }),
+        ..ExecConfig::default()
+    }
+}
+
+#[test]
+fn atomic_counter_is_exact_under_every_executor() {
+    let mut execs = vec![ExecConfig::ordered(), ExecConfig::parallel(2), ExecConfig::parallel(4)];
+    for p in Policy::all() {
+        for seed in 0..3 {
+            execs.push(scheduled(p.clone(), seed));
+        }
+    }
+    for e in &execs {
+        let (v, r) = run_counter(e, true);
+        assert_eq!(v, 256, "{e:?}");
+        assert_eq!(r.hazards.total(), 0, "{e:?}");
+        assert_eq!(r.stats.shaded, 256);
+        assert_eq!(r.stats.ops.get("add"), Some(&256));
+    }
+}
+
+#[test]
+fn plain_counter_loses_updates_and_the_detector_sees_them() {
+    let (v, _) = run_counter(&ExecConfig::ordered(), false);
+    assert_eq!(v, 256, "ordered is the reference: no loss");
+    for p in [Policy::Random, Policy::Pct { depth: 3 }, Policy::Warp { lanes: 4 }] {
+        let (v, r) = run_counter(&scheduled(p.clone(), 7), false);
+        assert!(v < 256, "{p}: {v}");
+        assert!(r.hazards.lost_updates > 0, "{p}: {:?}", r.hazards);
+        assert!(r.hazards.races > 0, "{p}");
+        let h = &r.hazard_list[0];
+        assert_eq!(h.buffer, "counter");
+        assert!(h.victim.seq != h.other.seq);
+    }
+}
+
+#[test]
+fn scheduled_runs_are_bit_identical_per_seed_and_differ_across_seeds() {
+    let a = run_counter(&scheduled(Policy::Random, 42), false);
+    let b = run_counter(&scheduled(Policy::Random, 42), false);
+    assert_eq!(a.0, b.0);
+    assert_eq!(a.1.schedule, b.1.schedule);
+    assert_eq!(a.1.hazards, b.1.hazards);
+    let schedules: std::collections::HashSet<_> =
+        (0..8).map(|s| run_counter(&scheduled(Policy::Random, s), false).1.schedule.unwrap()).collect();
+    assert!(schedules.len() > 1, "different seeds should give different schedules");
+}
+
+#[test]
+fn recorded_schedule_replays_exactly() {
+    let (v, r) = run_counter(&scheduled(Policy::Pct { depth: 3 }, 5), false);
+    let bytes = r.schedule.clone().unwrap();
+    let (v2, r2) = run_counter(&scheduled(Policy::Bytes(bytes.clone()), 99), false);
+    assert_eq!(v, v2);
+    assert_eq!(r2.schedule.unwrap(), bytes);
+    assert_eq!(r.hazards, r2.hazards);
+}
+
+#[test]
+fn any_byte_string_is_a_valid_schedule() {
+    for bytes in [vec![], vec![0xff; 3], (0..=255u8).collect::<Vec<_>>()] {
+        let (v, r) = run_counter(&scheduled(Policy::Bytes(bytes), 0), false);
+        assert!(v >= 1 && v <= 256);
+        assert_eq!(r.stats.shaded, 256);
+    }
+}
+
+#[test]
+fn policies_parse_and_print() {
+    for s in ["random", "pct:3", "warp:32", "reverse", "fifo", "far-first", "bytes:00ff10"] {
+        let p: Policy = s.parse().unwrap();
+        assert_eq!(p.to_string(), s);
+    }
+    assert!("pct:0".parse::<Policy>().is_err());
+    assert!("bytes:0".parse::<Policy>().is_err());
+    assert!("nope".parse::<Policy>().is_err());
+}
+
+struct OutOfBounds {
+    buf: Buf<u32>,
+}
+impl FragmentKernel for OutOfBounds {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("oob")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        f.store(self.buf, f.pixel_index() + 10, 1).await;
+        f.output(0, [1.0; 4]);
+    }
+}
+
+struct Panics;
+impl FragmentKernel for Panics {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("panics")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        if f.x() == 3 {
+            panic!("kernel bug at x=3");
+        }
+    }
+}
+
+struct SpinsForever {
+    lock: Buf<u32>,
+}
+impl FragmentKernel for SpinsForever {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("spins")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        // The lock is never released: every invocation but possibly one spins forever.
+        while f.atomic_compare_exchange(self.lock, 0, 7, 1).await.is_err() {}
+    }
+}
+
+fn all_execs() -> Vec<ExecConfig> {
+    let small = |mut e: ExecConfig| {
+        e.max_steps = 10_000;
+        e
+    };
+    vec![
+        small(ExecConfig::ordered()),
+        small(ExecConfig::parallel(2)),
+        small(scheduled(Policy::Random, 1)),
+        small(scheduled(Policy::Pct { depth: 2 }, 1)),
+    ]
+}
+
+#[test]
+fn out_of_bounds_access_is_a_reported_fault() {
+    for e in all_execs() {
+        let mut dev = Device::new();
+        let buf = dev.buffer::<u32>("small", 20).unwrap();
+        let mut fb = Framebuffer::new(4, 4, SampleCount::X1, 8, &[Format::RGBA32F]).unwrap();
+        let mut st = FragmentState::new();
+        st.targets = vec![TargetState::new(Format::RGBA32F)];
+        let r = dev.fullscreen(&mut fb, &st, &OutOfBounds { buf }, &e).unwrap();
+        assert_eq!(r.stats.faulted, 6, "{e:?}"); // pixel indices 10..16 + 10 >= 20
+        let f = &r.faults[0];
+        assert!(matches!(&f.kind, FaultKind::OutOfBounds { buffer, len: 20, .. } if buffer == "small"), "{f:?}");
+        // A faulted invocation writes nothing: its pixel keeps the clear colour.
+        let (x, y) = (f.invocation.x, f.invocation.y);
+        assert_eq!(fb.color(0, x, y, 0), [0; 4]);
+        assert_eq!(fb.color(0, 0, 0, 0), [1f32.to_bits(); 4]);
+    }
+}
+
+#[test]
+fn a_panicking_kernel_is_a_reported_fault() {
+    for e in all_execs() {
+        let dev = Device::new();
+        let mut fb = fb(8, 4);
+        let r = dev.fullscreen(&mut fb, &FragmentState::new(), &Panics, &e).unwrap();
+        assert_eq!(r.stats.faulted, 4, "{e:?}");
+        assert!(matches!(&r.faults[0].kind, FaultKind::Panic { message } if message.contains("x=3")));
+        assert_eq!(r.stats.shaded, 32);
+    }
+}
+
+#[test]
+fn a_kernel_that_spins_forever_is_stopped_by_the_watchdog() {
+    for e in all_execs() {
+        let mut dev = Device::new();
+        let lock = dev.buffer::<u32>("lock", 1).unwrap();
+        let mut fb = fb(4, 4);
+        let r = dev.fullscreen(&mut fb, &FragmentState::new(), &SpinsForever { lock }, &e).unwrap();
+        assert!(r.stats.faulted >= 15, "{e:?}: {}", r.stats.faulted);
+        assert!(r.faults.iter().all(|f| matches!(f.kind, FaultKind::Watchdog { .. })), "{:?}", r.faults);
+    }
+}
+
+struct UndeclaredInterlock;
+impl FragmentKernel for UndeclaredInterlock {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("undeclared")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        f.interlock_begin().await;
+    }
+}
+
+#[test]
+fn interlock_without_declaring_it_is_misuse() {
+    for e in all_execs() {
+        let dev = Device::new();
+        let mut fb = fb(2, 2);
+        let r = dev.fullscreen(&mut fb, &FragmentState::new(), &UndeclaredInterlock, &e).unwrap();
+        assert_eq!(r.stats.faulted, 4);
+        assert!(matches!(r.faults[0].kind, FaultKind::Misuse { .. }));
+    }
+}
+
+struct Record {
+    buf: Buf<u32>,
+    write: bool,
+}
+impl FragmentKernel for Record {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("record")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        if self.write && f.x() % 2 == 0 {
+            f.store_record(self.buf, 0, &[f.x(), f.x(), f.x()]).await;
+        } else {
+            let mut r = [0u32; 3];
+            f.load_record(self.buf, 0, &mut r).await;
+        }
+    }
+}
+
+#[test]
+fn torn_records_are_detected() {
+    let mut torn = 0;
+    for seed in 0..10 {
+        let mut dev = Device::new();
+        let buf = dev.buffer::<u32>("rec", 3).unwrap();
+        let mut fb = fb(8, 1);
+        let r = dev.fullscreen(&mut fb, &FragmentState::new(), &Record { buf, write: true }, &scheduled(Policy::Random, seed)).unwrap();
+        torn += r.hazards.torn;
+    }
+    assert!(torn > 0);
+    // Readers only: nothing to tear.
+    let mut dev = Device::new();
+    let buf = dev.buffer::<u32>("rec", 3).unwrap();
+    let mut fb = fb(8, 1);
+    let r = dev.fullscreen(&mut fb, &FragmentState::new(), &Record { buf, write: false }, &scheduled(Policy::Random, 3)).unwrap();
+    assert_eq!(r.hazards.total(), 0);
+}
+
+/// Every memory operation on every word type, checked against a host model.
+struct AllOps {
+    u: Buf<u32>,
+    i: Buf<i32>,
+    f: Buf<f32>,
+    w: Buf<u64>,
+}
+impl FragmentKernel for AllOps {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("all-ops")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        assert_eq!(f.atomic_add(self.u, 0, 5).await, 10);
+        assert_eq!(f.atomic_sub(self.u, 0, 3).await, 15);
+        assert_eq!(f.atomic_min(self.u, 0, 4).await, 12);
+        assert_eq!(f.atomic_max(self.u, 0, 9).await, 4);
+        assert_eq!(f.atomic_and(self.u, 0, 0b1100).await, 9);
+        assert_eq!(f.atomic_or(self.u, 0, 0b0011).await, 8);
+        assert_eq!(f.atomic_xor(self.u, 0, 0b1111).await, 11);
+        assert_eq!(f.atomic_exchange(self.u, 0, 100).await, 4);
+        assert_eq!(f.atomic_compare_exchange(self.u, 0, 1, 2).await, Err(100));
+        assert_eq!(f.atomic_compare_exchange(self.u, 0, 100, 2).await, Ok(100));
+        assert_eq!(f.atomic_load(self.u, 0).await, 2);
+        assert_eq!(f.atomic_min(self.i, 0, -7).await, 3);
+        assert_eq!(f.atomic_max(self.i, 0, -9).await, -7);
+        assert_eq!(f.load(self.i, 0).await, -7);
+        assert_eq!(f.atomic_min(self.f, 0, -0.5).await, 1.5);
+        assert_eq!(f.atomic_max(self.f, 0, 2.5).await, -0.5);
+        assert_eq!(f.atomic_add(self.f, 0, 0.25).await, 2.5);
+        assert_eq!(f.load(self.f, 0).await, 2.75);
+        assert_eq!(f.atomic_min(self.w, 0, 1 << 40).await, u64::MAX);
+        assert_eq!(f.atomic_add(self.w, 0, 1).await, 1 << 40);
+        assert_eq!(f.atomic_compare_exchange(self.w, 0, (1 << 40) + 1, 3).await, Ok((1 << 40) + 1));
+        f.atomic_store(self.w, 0, 9).await;
+        f.output(0, [1.0; 4]);
+    }
+}
+
+#[test]
+fn every_operation_on_every_word_type() {
+    for e in [ExecConfig::ordered(), scheduled(Policy::Random, 0)] {
+        let mut dev = Device::new();
+        let u = dev.buffer::<u32>("u", 1).unwrap();
+        let i = dev.buffer::<i32>("i", 1).unwrap();
+        let f = dev.buffer::<f32>("f", 1).unwrap();
+        let w = dev.buffer::<u64>("w", 1).unwrap();
+        dev.memory.write(u, 0, &[10]).unwrap();
+        dev.memory.write(i, 0, &[3]).unwrap();
+        dev.memory.write(f, 0, &[1.5]).unwrap();
+        dev.memory.write(w, 0, &[u64::MAX]).unwrap();
+        let mut fb = Framebuffer::new(1, 1, SampleCount::X1, 8, &[Format::R32F]).unwrap();
+        let mut st = FragmentState::new();
+        st.targets = vec![TargetState::new(Format::R32F)];
+        let r = dev.fullscreen(&mut fb, &st, &AllOps { u, i, f, w }, &e).unwrap();
+        assert_eq!(r.stats.faulted, 0, "{:?}", r.faults);
+        assert_eq!(dev.memory.read(w).unwrap(), vec![9]);
+        assert_eq!(fb.color(0, 0, 0, 0)[0], 1f32.to_bits());
+    }
+}
+
+#[test]
+fn buffers_reject_absurd_sizes_and_wrong_types() {
+    let mut dev = Device::new();
+    assert!(dev.buffer::<u32>("huge", 1 << 40).is_err());
+    let b = dev.buffer::<u32>("b", 4).unwrap();
+    assert!(dev.memory.write(b, 2, &[1, 2, 3]).is_err());
+    assert!(dev.memory.read(b).is_ok());
+}
+
+#[test]
+fn contention_names_the_hottest_address() {
+    let mut dev = Device::new();
+    let counter = dev.buffer::<u32>("counter", 1).unwrap();
+    let mut fb = fb(32, 32);
+    let e = ExecConfig { contention: true, ..ExecConfig::parallel(2) };
+    let r = dev.fullscreen(&mut fb, &FragmentState::new(), &GlobalCounter { counter, atomic: true }, &e).unwrap();
+    let h = &r.stats.hotspots[0];
+    assert_eq!((h.buffer.as_str(), h.index, h.accesses), ("counter", 0, 1024));
+    assert!(h.peak_concurrent >= 1);
+    // Scheduled runs report contention from the detector.
+    let (_, r) = run_counter(&scheduled(Policy::Random, 1), false);
+    assert_eq!(r.stats.hotspots[0].accesses, 512);
+    assert!(r.stats.hotspots[0].peak_concurrent > 1);
+}
