@@ -9,15 +9,19 @@
 //!   [`Policy`] that picks who takes the next step (one memory access, interlock entry or
 //!   exit). Same inputs and seed: bit-identical result. Every step goes through the
 //!   [`crate::hazard::Detector`].
+//! - [`run_on_threads`]: one thread per invocation; under `--cfg loom` these are loom
+//!   threads, and loom explores the interleavings (the `loom` executor).
 //!
 //! This module knows nothing of rasterization or algorithms: it is handed fragment inputs
 //! in API order and a kernel, and returns each fragment's outputs.
 
 mod policy;
 mod run;
+mod threads;
 
 pub use policy::{Policy, PolicyParseError};
 pub use run::Fault;
+pub use threads::{run_on_threads, ThreadOutcome};
 pub(crate) use run::{shade, FragOut, ShadeOutcome};
 
 /// Configuration of the `scheduled` executor.

@@ -67,3 +67,34 @@ fn time_dragon() {
         println!("threads {threads}: min bin {:.2} ms, min raster {:.2} ms", best.0, best.1);
     }
 }
+
+#[test]
+#[ignore]
+fn prof_dragon() {
+    let (v, f) = load_obj_gz("/work/shared/models/dragon.obj.gz");
+    let (mut lo, mut hi) = (v[0], v[0]);
+    for p in &v { lo = lo.min(*p); hi = hi.max(*p); }
+    let c = (lo + hi) * 0.5;
+    let r = (hi - lo).length() * 0.5;
+    let view = Mat4::look_at_rh(c + Vec3::new(0.0, 0.0, 2.2 * r), c, Vec3::Y);
+    let proj = Mat4::perspective_rh_gl(45f32.to_radians(), 1.0, 0.1 * r, 10.0 * r);
+    let vp = proj * view;
+    let clip: Vec<Vec4> = v.iter().map(|p| vp * p.extend(1.0)).collect();
+    let state = RasterState::default();
+    let viewport = Viewport { width: 512, height: 512 };
+    let cpu = || -> f64 { std::fs::read_to_string("/proc/thread-self/schedstat").unwrap().split_whitespace().next().unwrap().parse::<f64>().unwrap() / 1e6 };
+    let mut n = 0;
+    let (mut tb, mut tr) = (1e9f64, 1e9f64);
+    for _ in 0..30 {
+        let minflt = || -> u64 { let st = std::fs::read_to_string("/proc/self/stat").unwrap(); let after = &st[st.rfind(')').unwrap()+2..]; after.split_whitespace().nth(7).unwrap().parse().unwrap() };
+        let f0 = minflt();
+        let c0 = cpu();
+        let b = bin_triangles(&clip, &f, &state, viewport, 1);
+        let c1 = cpu();
+        eprintln!("faults {}", minflt() - f0);
+        for t in 0..b.tile_count() { b.raster_tile(t, |fr| n += fr.coverage as usize); }
+        let c2 = cpu();
+        tb = tb.min(c1 - c0); tr = tr.min(c2 - c1);
+    }
+    println!("{n} cpu: bin {tb:.2} ms raster {tr:.2} ms");
+}

@@ -575,6 +575,8 @@ pub fn bin_triangles(
         sy: viewport.height as f64 * (ONE / 2) as f64,
     };
 
+    let cpu = || -> f64 { std::fs::read_to_string("/proc/thread-self/schedstat").unwrap().split_whitespace().next().unwrap().parse::<f64>().unwrap() / 1e6 };
+    let _t0 = cpu();
     // 1. Vertices, in parallel slices of one array.
     let mut snapped = vec![Snapped::default(); positions.len()];
     let vthreads = threads.min(positions.len() / 8192).max(1);
@@ -594,6 +596,7 @@ pub fn bin_triangles(
         });
     }
 
+    let _t1 = cpu();
     // 2. Triangles, in chunks; each chunk sorts its own bins.
     let ctx = Ctx {
         positions,
@@ -627,6 +630,7 @@ pub fn bin_triangles(
         par_map(nchunks, threads, |c| ctx.chunk(c * chunk..((c + 1) * chunk).min(n)))
     };
 
+    let _t2 = cpu();
     // 3. Concatenate in chunk order.
     let total: usize = parts.iter().map(|p| p.0.len()).sum();
     let mut tris = Vec::with_capacity(total);
@@ -637,6 +641,7 @@ pub fn bin_triangles(
         *t = Vec::new();
         rejected += *r;
     }
+    if std::env::var_os("RT").is_some() { eprintln!("TIMING v {:.2} t {:.2} m {:.2}", _t1-_t0, _t2-_t1, cpu()-_t2); }
     Binned {
         tris,
         tiles_x,
