@@ -1,3 +1,13 @@
-//! fragrace: a software GPU that makes the race hazards of multi-fragment rendering visible.
+//! # fragrace
+//!
+//! A software GPU that makes the race hazards of multi-fragment rendering visible,
+//! reproducible and measurable. This crate is the product: scenes ([`scene`]), runs and
+//! checks ([`run`]), images and heatmaps ([`output`]), case files, fuzzing and the CLI.
+//! The GPU itself is [`fragrace_emu`]; the algorithms are [`fragrace_kernels`].
 
+pub mod output;
+pub mod run;
 pub mod scene;
+
+pub use fragrace_emu as emu;
+pub use fragrace_kernels as kernels;

@@ -1,1 +1,355 @@
-fn main() {}
+//! The `fragrace` command line.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+use fragrace::run::{self, RunSpec, SceneSpec};
+use fragrace::scene::Camera;
+use fragrace_kernels::Params;
+
+#[derive(Parser)]
+#[command(name = "fragrace", version, about = "A software GPU that makes the race hazards of multi-fragment rendering visible, reproducible and measurable")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene with one algorithm (an OIT image, or a heatmap for `count`).
+    Render(RunArgs),
+    /// Run an algorithm (over N schedules) and compare it with the exact ground truth.
+    Check(CheckArgs),
+    /// List the algorithms (with --json: their declared properties) and built-in scenes.
+    List {
+        #[arg(long)]
+        json: bool,
+    },
+    /// Measure throughput: fragments and triangles per second, scheduled steps per second.
+    Bench(BenchArgs),
+}
+
+#[derive(Args, Clone)]
+struct RunArgs {
+    /// A built-in scene (see `fragrace list`).
+    #[arg(long, default_value = "cubes", conflicts_with = "obj")]
+    scene: String,
+    /// An OBJ file (plain or .gz) instead of a built-in scene.
+    #[arg(long)]
+    obj: Option<PathBuf>,
+    #[arg(long, default_value = "truth")]
+    algo: String,
+    #[arg(long, default_value_t = 512)]
+    width: u32,
+    #[arg(long, default_value_t = 512)]
+    height: u32,
+    /// Degrees about +Y (0: eye on +Z, 90: on +X).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    azimuth: f32,
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    elevation: f32,
+    /// ordered | parallel | scheduled
+    #[arg(long, default_value = "parallel")]
+    exec: String,
+    /// Scheduling policy: random, pct:D, warp:N, reverse, fifo, far-first, bytes:HEX.
+    #[arg(long, default_value = "random")]
+    policy: String,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Invocations in flight under the scheduled executor.
+    #[arg(long, default_value_t = 64)]
+    window: usize,
+    /// k of the k-buffers.
+    #[arg(long, default_value_t = 8)]
+    k: u32,
+    /// Opacity of every fragment in the OIT composite.
+    #[arg(long, default_value_t = 0.3)]
+    alpha: f32,
+    /// Output PNG.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// For `count`: per-pixel counts as little-endian u32, row-major, top row first.
+    #[arg(long)]
+    raw_out: Option<PathBuf>,
+    /// Directory for heatmaps (depth complexity, errors, hazards).
+    #[arg(long)]
+    heatmap: Option<PathBuf>,
+    /// Print one JSON object on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+struct CheckArgs {
+    #[command(flatten)]
+    run: RunArgs,
+    /// Schedules (seeds seed, seed+1, ...) to run under the scheduled executor.
+    #[arg(long, default_value_t = 1)]
+    schedules: u64,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    #[command(flatten)]
+    run: RunArgs,
+    /// Frames to time (the median is reported).
+    #[arg(long, default_value_t = 10)]
+    frames: usize,
+    #[arg(long, default_value_t = 2)]
+    warmup: usize,
+}
+
+fn spec_of(a: &RunArgs) -> Result<RunSpec> {
+    let scene = match &a.obj {
+        Some(p) => {
+            let bytes = std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))?;
+            SceneSpec::Obj { path: p.clone(), sha256: Some(fragrace::scene::obj::content_hash(&bytes)) }
+        }
+        None => SceneSpec::Builtin(a.scene.clone()),
+    };
+    let exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window).map_err(anyhow::Error::msg)?;
+    if fragrace_kernels::algorithm(&a.algo).is_none() {
+        bail!("unknown algorithm `{}`; known: {}", a.algo, fragrace_kernels::names().join(", "));
+    }
+    Ok(RunSpec {
+        scene,
+        camera: Camera::new(a.azimuth, a.elevation),
+        width: a.width,
+        height: a.height,
+        algo: a.algo.clone(),
+        params: Params { k: a.k.max(1), alpha: a.alpha, ..Params::default() },
+        exec,
+    })
+}
+
+fn main() {
+    if let Err(e) = real_main() {
+        eprintln!("error: {e:#}");
+        std::process::exit(2);
+    }
+}
+
+fn real_main() -> Result<()> {
+    let cli = Cli::parse();
+    // A kernel panic is a reported fault, not a crash: keep the default hook's noise out.
+    std::panic::set_hook(Box::new(|_| {}));
+    match cli.command {
+        Command::Render(a) => cmd_render(&a),
+        Command::Check(a) => cmd_check(&a),
+        Command::List { json } => cmd_list(json),
+        Command::Bench(a) => cmd_bench(&a),
+    }
+}
+
+fn cmd_render(a: &RunArgs) -> Result<()> {
+    let spec = spec_of(a)?;
+    let loaded = run::load(&spec)?;
+    let rendered = run::render(&spec, &loaded)?;
+    write_outputs(a, &spec, &rendered, None)?;
+    let summary = run::summary_json(&spec, &loaded, None, &rendered);
+    if a.json {
+        println!("{summary}");
+    } else {
+        print_summary(&summary);
+    }
+    Ok(())
+}
+
+fn write_outputs(a: &RunArgs, spec: &RunSpec, r: &run::Rendered, checked: Option<&run::Checked>) -> Result<()> {
+    let res = &r.result;
+    if let Some(path) = &a.out {
+        if let Some(img) = &res.image {
+            fragrace::output::write_rgba(path, spec.width, spec.height, img)?;
+        } else if let Some(c) = &res.counts {
+            fragrace::output::write_heatmap(path, spec.width, spec.height, c)?;
+        } else {
+            bail!("algorithm `{}` produces no image", spec.algo);
+        }
+    }
+    if let Some(path) = &a.raw_out {
+        let Some(c) = &res.counts else { bail!("--raw-out needs a counting algorithm (count, count-plain)") };
+        let bytes: Vec<u8> = c.iter().flat_map(|v| v.to_le_bytes()).collect();
+        fragrace::output::write_atomic(path, &bytes)?;
+    }
+    if let Some(dir) = &a.heatmap {
+        std::fs::create_dir_all(dir)?;
+        if let Some(c) = &res.counts {
+            fragrace::output::write_heatmap(&dir.join("depth-complexity.png"), spec.width, spec.height, c)?;
+        }
+        if !res.report.hazard_heat.is_empty() {
+            fragrace::output::write_heatmap(&dir.join("hazards.png"), spec.width, spec.height, &res.report.hazard_heat)?;
+        }
+        if let Some(c) = checked {
+            let errs: Vec<u32> = c.metrics.error_mask.iter().map(|&e| e as u32).collect();
+            fragrace::output::write_heatmap(&dir.join("errors.png"), spec.width, spec.height, &errs)?;
+        }
+    }
+    Ok(())
+}
+
+fn print_summary(v: &serde_json::Value) {
+    println!(
+        "{} on {} ({} triangles) at {}x{}, {} executor{}",
+        v["algo"].as_str().unwrap_or("?"),
+        v["scene"].as_str().unwrap_or("?"),
+        v["triangles"],
+        v["width"],
+        v["height"],
+        v["exec"].as_str().unwrap_or("?"),
+        match v["policy"].as_str() {
+            Some(p) => format!(" (policy {p}, seed {})", v["seed"]),
+            None => format!(" ({} threads)", v["threads"]),
+        }
+    );
+    println!("  fragments {}   covered pixels {}   max depth complexity {}", v["fragments"], v["covered_pixels"], v["max_depth_complexity"]);
+    println!("  hazards: lost updates {}, races {}, torn {}   faults {}   dropped {}", v["hazards"]["lost_updates"], v["hazards"]["races"], v["hazards"]["torn"], v["faults"], v["dropped"]);
+    if !v["epr"].is_null() {
+        println!("  EPR {:.6}  ({} error pixels)   R_h {:.6}   C_p {:.4}", v["epr"].as_f64().unwrap_or(0.0), v["error_pixels"], v["robustness"].as_f64().unwrap_or(0.0), v["coplanarity"].as_f64().unwrap_or(0.0));
+    }
+    println!("  storage {:.1} bytes/pixel   {:.1} ms", v["bytes_per_pixel"].as_f64().unwrap_or(0.0), v["wall_ms"].as_f64().unwrap_or(0.0));
+    if let Some(checks) = v["checks"].as_array() {
+        for c in checks {
+            let ok = c["passed"].as_bool().unwrap_or(false);
+            println!("  [{}] {}: {}", if ok { "ok" } else { "FAIL" }, c["name"].as_str().unwrap_or(""), c["detail"].as_str().unwrap_or(""));
+        }
+    }
+}
+
+fn cmd_check(a: &CheckArgs) -> Result<()> {
+    let spec = spec_of(&a.run)?;
+    let loaded = run::load(&spec)?;
+    let truth = run::truth(&spec, &loaded)?;
+    let n = if spec.schedule().is_some() { a.schedules.max(1) } else { 1 };
+    let base_seed = spec.schedule().map(|s| s.seed).unwrap_or(0);
+    let mut worst: Option<(RunSpec, run::Checked)> = None;
+    let mut totals = fragrace_emu::HazardCounts::default();
+    let mut anomalous_runs = 0u64;
+    let mut eprs = Vec::new();
+    for i in 0..n {
+        let s = spec.with_seed(base_seed + i);
+        let c = run::check_with(&s, &loaded, &truth)?;
+        totals.add(&c.hazards());
+        eprs.push(c.metrics.epr);
+        if c.anomalous() {
+            anomalous_runs += 1;
+        }
+        let score = |c: &run::Checked| (c.metrics.error_pixels, c.hazards().total());
+        if worst.as_ref().is_none_or(|(_, w)| score(&c) > score(w)) {
+            worst = Some((s, c));
+        }
+    }
+    let (wspec, w) = worst.expect("at least one run");
+    write_outputs(&a.run, &wspec, &w.rendered, Some(&w))?;
+    let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
+    summary["schedules"] = serde_json::json!(n);
+    summary["anomalous_runs"] = serde_json::json!(anomalous_runs);
+    summary["hazards_total"] = serde_json::json!({"lost_updates": totals.lost_updates, "races": totals.races, "torn": totals.torn});
+    summary["epr_max"] = serde_json::json!(eprs.iter().cloned().fold(0.0, f64::max));
+    summary["epr_mean"] = serde_json::json!(eprs.iter().sum::<f64>() / eprs.len() as f64);
+    summary["hazard_list"] = serde_json::json!(w.rendered.result.report.hazard_list.iter().take(8).collect::<Vec<_>>());
+    summary["faults_list"] = serde_json::json!(w.rendered.result.report.faults.iter().take(8).collect::<Vec<_>>());
+    let replay = wspec.command("check");
+    summary["replay"] = serde_json::json!(replay);
+    if a.run.json {
+        println!("{summary}");
+    } else {
+        print_summary(&summary);
+        if n > 1 {
+            println!(
+                "  over {n} schedules: {anomalous_runs} anomalous, EPR max {:.6} mean {:.6}, hazards {} lost updates, {} races, {} torn",
+                summary["epr_max"].as_f64().unwrap_or(0.0),
+                summary["epr_mean"].as_f64().unwrap_or(0.0),
+                totals.lost_updates,
+                totals.races,
+                totals.torn
+            );
+        }
+        for h in w.rendered.result.report.hazard_list.iter().take(3) {
+            println!(
+                "  {} on {}[{}] at step {}: pixel ({}, {}) primitive {} vs primitive {}",
+                h.kind.name(), h.buffer, h.index, h.step, h.victim.x, h.victim.y, h.victim.primitive, h.other.primitive
+            );
+        }
+        for f in w.rendered.result.report.faults.iter().take(3) {
+            println!("  fault at pixel ({}, {}) primitive {}: {}", f.invocation.x, f.invocation.y, f.invocation.primitive, f.kind);
+        }
+        if w.anomalous() {
+            println!("  worst case replays with:\n    {replay}");
+        }
+    }
+    Ok(())
+}
+
+fn cmd_list(json: bool) -> Result<()> {
+    let infos: Vec<_> = fragrace_kernels::algorithms().iter().map(|a| a.info()).collect();
+    if json {
+        println!("{}", serde_json::json!({"algorithms": infos, "scenes": fragrace::scene::builtin_names(), "policies": ["random", "pct:D", "warp:N", "reverse", "fifo", "far-first", "bytes:HEX"]}));
+        return Ok(());
+    }
+    println!("{:<24} {:<12} {:<16} {:<26} {}", "algorithm", "family", "hazard class", "passes", "memory per pixel");
+    for i in &infos {
+        println!("{:<24} {:<12} {:<16} {:<26} {}", i.name, i.family, i.hazard.name(), i.passes, i.memory);
+    }
+    println!("\nscenes: {}", fragrace::scene::builtin_names().join(", "));
+    println!("policies: random, pct:D, warp:N, reverse, fifo, far-first, bytes:HEX");
+    Ok(())
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn cmd_bench(a: &BenchArgs) -> Result<()> {
+    let spec = spec_of(&a.run)?;
+    let loaded = run::load(&spec)?;
+    for _ in 0..a.warmup {
+        run::render(&spec, &loaded)?;
+    }
+    let mut times = Vec::new();
+    let mut last = None;
+    for _ in 0..a.frames.max(1) {
+        let t = Instant::now();
+        let r = run::render(&spec, &loaded)?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+        last = Some(r);
+    }
+    let r = last.expect("one frame");
+    let ms = median(&mut times);
+    let stats = &r.result.report.stats;
+    let tris = loaded.scene.mesh.triangle_count() as f64 * stats.geometry_passes.max(1) as f64;
+    let v = serde_json::json!({
+        "algo": spec.algo,
+        "scene": spec.scene.name(),
+        "triangles": loaded.scene.mesh.triangle_count(),
+        "width": spec.width, "height": spec.height,
+        "exec": spec.exec.mode.name(),
+        "threads": spec.exec.threads,
+        "frames": times.len(),
+        "median_ms": ms,
+        "min_ms": times.first(),
+        "max_ms": times.last(),
+        "fragments": stats.fragments_generated,
+        "fragments_per_s": stats.fragments_generated as f64 / (ms / 1e3),
+        "triangles_per_s": tris / (ms / 1e3),
+        "steps": stats.steps,
+        "steps_per_s": stats.steps as f64 / (ms / 1e3),
+    });
+    if a.run.json {
+        println!("{v}");
+    } else {
+        println!(
+            "{} on {} ({} triangles) {}x{}, {} with {} threads: median {:.2} ms over {} frames (min {:.2}, max {:.2})\n  {:.1} M fragments/s, {:.1} M triangles/s, {:.2} M steps/s",
+            spec.algo, spec.scene.name(), loaded.scene.mesh.triangle_count(), spec.width, spec.height, spec.exec.mode.name(), spec.exec.threads,
+            ms, times.len(), times[0], times[times.len() - 1],
+            stats.fragments_generated as f64 / (ms / 1e3) / 1e6, tris / (ms / 1e3) / 1e6, stats.steps as f64 / (ms / 1e3) / 1e6
+        );
+    }
+    let _ = Path::new("");
+    Ok(())
+}

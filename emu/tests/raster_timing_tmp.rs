@@ -82,19 +82,16 @@ fn prof_dragon() {
     let clip: Vec<Vec4> = v.iter().map(|p| vp * p.extend(1.0)).collect();
     let state = RasterState::default();
     let viewport = Viewport { width: 512, height: 512 };
-    let cpu = || -> f64 { std::fs::read_to_string("/proc/thread-self/schedstat").unwrap().split_whitespace().next().unwrap().parse::<f64>().unwrap() / 1e6 };
+    let ticks = || -> f64 { let st = std::fs::read_to_string("/proc/self/stat").unwrap(); let after = &st[st.rfind(')').unwrap()+2..]; let v: Vec<&str> = after.split_whitespace().collect(); (v[11].parse::<f64>().unwrap() + v[12].parse::<f64>().unwrap()) * 10.0 };
     let mut n = 0;
-    let (mut tb, mut tr) = (1e9f64, 1e9f64);
-    for _ in 0..30 {
-        let minflt = || -> u64 { let st = std::fs::read_to_string("/proc/self/stat").unwrap(); let after = &st[st.rfind(')').unwrap()+2..]; after.split_whitespace().nth(7).unwrap().parse().unwrap() };
-        let f0 = minflt();
-        let c0 = cpu();
-        let b = bin_triangles(&clip, &f, &state, viewport, 1);
-        let c1 = cpu();
-        eprintln!("faults {}", minflt() - f0);
-        for t in 0..b.tile_count() { b.raster_tile(t, |fr| n += fr.coverage as usize); }
-        let c2 = cpu();
-        tb = tb.min(c1 - c0); tr = tr.min(c2 - c1);
-    }
+    let iters = 60;
+    let c0 = ticks();
+    for _ in 0..iters { let b = bin_triangles(&clip, &f, &state, viewport, 1); n += b.tris.len(); }
+    let c1 = ticks();
+    let b = bin_triangles(&clip, &f, &state, viewport, 1);
+    let c2 = ticks();
+    for _ in 0..iters { for t in 0..b.tile_count() { b.raster_tile(t, |fr| n += fr.coverage as usize); } }
+    let c3 = ticks();
+    let (tb, tr) = ((c1 - c0) / iters as f64, (c3 - c2) / iters as f64);
     println!("{n} cpu: bin {tb:.2} ms raster {tr:.2} ms");
 }

@@ -15,7 +15,15 @@ use super::obj::parse_obj_bytes;
 use super::SceneError;
 
 /// The names of the built-in scenes.
-pub const NAMES: &[&str] = &["cubes", "coplanar-stack", "spheres", "hairball", "bunny", "teapot", "random-triangles"];
+pub const NAMES: &[&str] = &[
+    "cubes",
+    "coplanar-stack",
+    "spheres",
+    "hairball",
+    "bunny",
+    "teapot",
+    "random-triangles",
+];
 
 /// How parameters are written: `name:param:param`.
 pub const USAGE: &str = "cubes | coplanar-stack[:N] | spheres | hairball | bunny | teapot | random-triangles[:SEED[:N]]";
@@ -25,9 +33,12 @@ pub const COPLANAR_STACK_DEFAULT: usize = 8;
 /// Seed and triangle count of `random-triangles` without parameters.
 pub const RANDOM_TRIANGLES_DEFAULT: (u64, usize) = (0, 1000);
 /// Number of closed tubes in `hairball`.
-pub const HAIRBALL_CURVES: usize = 300;
+pub const HAIRBALL_CURVES: usize = 400;
 /// Segments per hairball tube (each segment is 6 triangles).
-pub const HAIRBALL_SEGMENTS: usize = 64;
+pub const HAIRBALL_SEGMENTS: usize = 48;
+/// Hairball tube radius, before normalisation (the ball is about 1.2 across): a tube is
+/// a few pixels wide in a 512x512 view, thin but not sub-pixel.
+pub const HAIRBALL_TUBE_RADIUS: f64 = 0.01;
 
 /// The Stanford bunny (3,674 triangles), as shipped in `assets/`.
 pub const BUNNY_OBJ_GZ: &[u8] = include_bytes!("../../assets/bunny.obj.gz");
@@ -43,8 +54,17 @@ pub fn mesh(name: &str) -> Result<Mesh, SceneError> {
     let mut parts = name.split(':');
     let base = parts.next().unwrap_or_default();
     let params: Vec<&str> = parts.collect();
-    let bad = |usage| SceneError::BuiltinParams { name: name.to_owned(), usage };
-    let no_params = |mesh: fn() -> Mesh| if params.is_empty() { Ok(mesh()) } else { Err(bad(USAGE)) };
+    let bad = |usage| SceneError::BuiltinParams {
+        name: name.to_owned(),
+        usage,
+    };
+    let no_params = |mesh: fn() -> Mesh| {
+        if params.is_empty() {
+            Ok(mesh())
+        } else {
+            Err(bad(USAGE))
+        }
+    };
     match base {
         "cubes" => no_params(cubes),
         "spheres" => no_params(spheres),
@@ -80,7 +100,9 @@ pub fn mesh(name: &str) -> Result<Mesh, SceneError> {
             }
             Ok(random_triangles(seed, n))
         }
-        _ => Err(SceneError::UnknownBuiltin { name: name.to_owned() }),
+        _ => Err(SceneError::UnknownBuiltin {
+            name: name.to_owned(),
+        }),
     }
 }
 
@@ -90,11 +112,21 @@ fn push_box(mesh: &mut Mesh, lo: Vec3, hi: Vec3) {
     let base = mesh.positions.len() as u32;
     for i in 0..8 {
         let pick = |bit: u32, l: f32, h: f32| if i & bit != 0 { h } else { l };
-        mesh.positions.push(Vec3::new(pick(1, lo.x, hi.x), pick(2, lo.y, hi.y), pick(4, lo.z, hi.z)));
+        mesh.positions.push(Vec3::new(
+            pick(1, lo.x, hi.x),
+            pick(2, lo.y, hi.y),
+            pick(4, lo.z, hi.z),
+        ));
     }
     // Corner i has x = bit 0, y = bit 1, z = bit 2; quads are CCW from outside.
-    const QUADS: [[u32; 4]; 6] =
-        [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
+    const QUADS: [[u32; 4]; 6] = [
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+    ];
     for [a, b, c, d] in QUADS {
         mesh.indices.push([a, b, c].map(|i| i + base));
         mesh.indices.push([a, c, d].map(|i| i + base));
@@ -102,17 +134,29 @@ fn push_box(mesh: &mut Mesh, lo: Vec3, hi: Vec3) {
 }
 
 /// `cubes`: three overlapping unit cubes whose faces are *exactly* coplanar in places:
-/// A = [-1,0]x[-0.5,0.5]^2 and B = [-0.5,0.5]^3 share their four y and z face planes,
-/// C = [0,1]x[0,1]x[-0.5,0.5] shares the z planes and its x = 0 face lies in A's x = +0 face
-/// plane. Coplanar overlapping faces produce fragments of equal depth at the same pixel:
-/// the case where sorting needs a tie-break and races are hardest to see. All coordinates
-/// are dyadic and the normalisation scale is 1/2, so the planes stay exactly equal after
-/// normalisation.
+/// A = `[-1,0]x[-0.5,0.5]x[-0.5,0.5]` and B = `[-0.5,0.5]^3` share their four y and z face
+/// planes; C = `[0,1]x[0,1]x[-0.5,0.5]` shares the z planes, and its x = 0 face lies in
+/// the plane of A's x = 0 face. Coplanar overlapping faces produce fragments of equal depth
+/// at the same pixel: the case where sorting needs a tie-break and races are hardest to
+/// see. All coordinates are dyadic and the normalisation scale is 1/2, so the planes stay
+/// exactly equal after normalisation.
 pub fn cubes() -> Mesh {
     let mut mesh = Mesh::default();
-    push_box(&mut mesh, Vec3::new(-1.0, -0.5, -0.5), Vec3::new(0.0, 0.5, 0.5));
-    push_box(&mut mesh, Vec3::new(-0.5, -0.5, -0.5), Vec3::new(0.5, 0.5, 0.5));
-    push_box(&mut mesh, Vec3::new(0.0, 0.0, -0.5), Vec3::new(1.0, 1.0, 0.5));
+    push_box(
+        &mut mesh,
+        Vec3::new(-1.0, -0.5, -0.5),
+        Vec3::new(0.0, 0.5, 0.5),
+    );
+    push_box(
+        &mut mesh,
+        Vec3::new(-0.5, -0.5, -0.5),
+        Vec3::new(0.5, 0.5, 0.5),
+    );
+    push_box(
+        &mut mesh,
+        Vec3::new(0.0, 0.0, -0.5),
+        Vec3::new(1.0, 1.0, 0.5),
+    );
     mesh
 }
 
@@ -161,13 +205,22 @@ fn uv_sphere(centre: Vec3, radius: f32, stacks: u32, slices: u32) -> Mesh {
     for j in 0..slices {
         indices.push([0, ring(1, j), ring(1, j + 1)]);
         for i in 1..stacks - 1 {
-            let (a, b, c, d) = (ring(i, j), ring(i + 1, j), ring(i + 1, j + 1), ring(i, j + 1));
+            let (a, b, c, d) = (
+                ring(i, j),
+                ring(i + 1, j),
+                ring(i + 1, j + 1),
+                ring(i, j + 1),
+            );
             indices.push([a, b, c]);
             indices.push([a, c, d]);
         }
         indices.push([south, ring(stacks - 1, j + 1), ring(stacks - 1, j)]);
     }
-    Mesh { positions, normals: Some(normals), indices }
+    Mesh {
+        positions,
+        normals: Some(normals),
+        indices,
+    }
 }
 
 /// `spheres`: three nested closed spheres (radii 1, 0.65, 0.3, centres slightly offset but
@@ -180,8 +233,8 @@ pub fn spheres() -> Mesh {
     mesh
 }
 
-/// `hairball`: [`HAIRBALL_CURVES`] closed thin tubes (triangular prisms, radius 0.008,
-/// [`HAIRBALL_SEGMENTS`] segments each, 115,200 triangles) along random smooth loops that
+/// `hairball`: [`HAIRBALL_CURVES`] closed thin tubes (triangular prisms, radius
+/// [`HAIRBALL_TUBE_RADIUS`], [`HAIRBALL_SEGMENTS`] segments each, 115,200 triangles) along random smooth loops that
 /// concentrate towards the centre of a ball: the depth complexity at the centre of the
 /// default view is over 50 (tested), the regime where per-pixel lists overflow and
 /// k-buffers must drop fragments. Each tube is a closed, consistently oriented surface.
@@ -190,12 +243,12 @@ pub fn hairball() -> Mesh {
     let mut mesh = Mesh::default();
     for _ in 0..HAIRBALL_CURVES {
         let curve = LoopCurve::random(&mut rng);
-        push_tube(&mut mesh, &curve, HAIRBALL_SEGMENTS, 0.008);
+        push_tube(&mut mesh, &curve, HAIRBALL_SEGMENTS, HAIRBALL_TUBE_RADIUS);
     }
     mesh
 }
 
-/// A closed curve `p(t)`, `t` in [0, 2 pi): per axis a sum of sines of frequencies 1, 2, 3
+/// A closed curve `p(t)`, `t` in `[0, 2 pi)`: per axis a sum of sines of frequencies 1, 2, 3
 /// with random amplitudes and phases. Sums of random-phase sines pile up near 0, so the
 /// loops are densest at the centre, which is what makes the depth complexity high there.
 struct LoopCurve {
@@ -236,7 +289,11 @@ impl LoopCurve {
 /// the loop closes, the last ring joins the first with the cyclic vertex offset that twists
 /// least (a transported frame does not come back to itself around a loop).
 fn push_tube(mesh: &mut Mesh, curve: &LoopCurve, segments: usize, radius: f64) {
-    const RING: [(f64, f64); 3] = [(1.0, 0.0), (-0.5, 0.866_025_403_784_438_6), (-0.5, -0.866_025_403_784_438_6)];
+    const RING: [(f64, f64); 3] = [
+        (1.0, 0.0),
+        (-0.5, 0.866_025_403_784_438_6),
+        (-0.5, -0.866_025_403_784_438_6),
+    ];
     let base = mesh.positions.len() as u32;
     let mut normal = DVec3::ZERO;
     let mut tangent = DVec3::X;
@@ -248,7 +305,11 @@ fn push_tube(mesh: &mut Mesh, curve: &LoopCurve, segments: usize, radius: f64) {
         }
         if i == 0 {
             // Any unit vector perpendicular to the tangent.
-            let helper = if tangent.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+            let helper = if tangent.x.abs() < 0.9 {
+                DVec3::X
+            } else {
+                DVec3::Y
+            };
             normal = tangent.cross(helper).normalize();
         } else {
             let projected = normal - tangent * tangent.dot(normal);
@@ -261,7 +322,8 @@ fn push_tube(mesh: &mut Mesh, curve: &LoopCurve, segments: usize, radius: f64) {
             first_frame = (tangent, normal, binormal);
         }
         for (c, s) in RING {
-            mesh.positions.push((p + radius * (c * normal + s * binormal)).as_vec3());
+            mesh.positions
+                .push((p + radius * (c * normal + s * binormal)).as_vec3());
         }
     }
     // Closing offset: the first ring's vertex that best matches the transported normal.
@@ -274,19 +336,28 @@ fn push_tube(mesh: &mut Mesh, curve: &LoopCurve, segments: usize, radius: f64) {
         })
         .unwrap_or(0);
     let vertex = |ring: usize, k: usize| {
-        let (ring, k) = if ring == segments { (0, k + offset) } else { (ring, k) };
+        let (ring, k) = if ring == segments {
+            (0, k + offset)
+        } else {
+            (ring, k)
+        };
         base + (3 * ring + k % 3) as u32
     };
     for i in 0..segments {
         for k in 0..3 {
-            let (a, b, c, d) = (vertex(i, k), vertex(i, k + 1), vertex(i + 1, k + 1), vertex(i + 1, k));
+            let (a, b, c, d) = (
+                vertex(i, k),
+                vertex(i, k + 1),
+                vertex(i + 1, k + 1),
+                vertex(i + 1, k),
+            );
             mesh.indices.push([a, b, c]);
             mesh.indices.push([a, c, d]);
         }
     }
 }
 
-/// Random triangles for fuzzing the rasterizer and the kernels: `n` triangles in [-2, 2]^3
+/// Random triangles for fuzzing the rasterizer and the kernels: `n` triangles in `[-2, 2]^3`
 /// of sizes from 1/128 to 1 (roughly log-uniform), deterministic in `seed`. To exercise the hard
 /// cases on purpose, about 1 in 10 exactly repeats an earlier triangle's vertices (an exact
 /// depth tie) and about 1 in 6 shares an edge with an earlier triangle (watertightness: a
@@ -295,24 +366,36 @@ pub fn random_triangles(seed: u64, n: usize) -> Mesh {
     let mut rng = SplitMix64::new(seed);
     let mut mesh = Mesh::default();
     let point = |rng: &mut SplitMix64, centre: DVec3, size: f64| {
-        let offset = DVec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+        let offset = DVec3::new(
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+        );
         (centre + size * offset).as_vec3()
     };
     for i in 0..n {
         let kind = rng.unit();
-        let earlier = mesh.indices.get(rng.below(i.max(1) as u64) as usize).copied();
+        let earlier = mesh
+            .indices
+            .get(rng.below(i.max(1) as u64) as usize)
+            .copied();
         let size = rng.range(0.5, 1.0) / f64::from(1u32 << rng.below(7));
         match earlier {
             Some(t) if kind < 0.1 => mesh.indices.push(t),
             Some([a, b, _]) if kind < 0.27 => {
                 // Share edge (b, a), in the opposite direction as a neighbour would.
-                let centre = (mesh.positions[a as usize] + mesh.positions[b as usize]).as_dvec3() / 2.0;
+                let centre =
+                    (mesh.positions[a as usize] + mesh.positions[b as usize]).as_dvec3() / 2.0;
                 let p = point(&mut rng, centre, size);
                 mesh.positions.push(p);
                 mesh.indices.push([b, a, mesh.positions.len() as u32 - 1]);
             }
             _ => {
-                let centre = DVec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+                let centre = DVec3::new(
+                    rng.range(-1.0, 1.0),
+                    rng.range(-1.0, 1.0),
+                    rng.range(-1.0, 1.0),
+                );
                 let base = mesh.positions.len() as u32;
                 for _ in 0..3 {
                     let p = point(&mut rng, centre, size);
@@ -342,17 +425,17 @@ impl SplitMix64 {
         z ^ (z >> 31)
     }
 
-    /// Uniform in [0, 1), exactly representable (53 random bits).
+    /// Uniform in `[0, 1)`, exactly representable (53 random bits).
     pub fn unit(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
 
-    /// Uniform in [lo, hi).
+    /// Uniform in `[lo, hi)`.
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.unit()
     }
 
-    /// Uniform in [0, n) for n > 0 (the tiny modulo bias is irrelevant here).
+    /// Uniform in `[0, n)` for n > 0 (the tiny modulo bias is irrelevant here).
     pub fn below(&mut self, n: u64) -> u64 {
         self.next_u64() % n.max(1)
     }
@@ -360,7 +443,7 @@ impl SplitMix64 {
 
 /// `(sin x, cos x)` from additions, multiplications and divisions only (each correctly
 /// rounded by IEEE 754, unlike libm's `sin`), so the result is the same on every platform.
-/// Reduced to [-pi, pi], then Taylor series to 1e-16 or so.
+/// Reduced to `[-pi, pi]`, then Taylor series to 1e-16 or so.
 pub fn sin_cos(x: f64) -> (f64, f64) {
     use std::f64::consts::TAU;
     let r = x - (x / TAU).round() * TAU;

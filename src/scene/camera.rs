@@ -7,6 +7,8 @@
 use glam::{DMat4, DVec3, Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
+use super::SceneError;
+
 /// Centres the bounding box at the origin and scales the largest extent to 1 (the unit
 /// cube), in place; returns the bounding-sphere radius about the origin (`oit.py`'s
 /// `normalise`). An empty slice returns 0; if every point coincides the points are only
@@ -17,7 +19,9 @@ pub fn normalise(positions: &mut [Vec3]) -> f32 {
     };
     let (lo, hi) = positions
         .iter()
-        .fold((first.as_dvec3(), first.as_dvec3()), |(lo, hi), p| (lo.min(p.as_dvec3()), hi.max(p.as_dvec3())));
+        .fold((first.as_dvec3(), first.as_dvec3()), |(lo, hi), p| {
+            (lo.min(p.as_dvec3()), hi.max(p.as_dvec3()))
+        });
     let centre = (lo + hi) / 2.0;
     let extent = (hi - lo).max_element();
     let scale = if extent > 0.0 { extent } else { 1.0 };
@@ -47,14 +51,46 @@ pub struct Camera {
 impl Default for Camera {
     /// `oit.py`'s defaults: looking down -Z from +Z, 60 degree fov, 80 % fill.
     fn default() -> Self {
-        Camera { azimuth: 0.0, elevation: 0.0, fovy: 60.0, fill: 0.8 }
+        Camera {
+            azimuth: 0.0,
+            elevation: 0.0,
+            fovy: 60.0,
+            fill: 0.8,
+        }
     }
 }
 
 impl Camera {
     /// A camera at the given angles (degrees) with the default fov and fill.
     pub fn new(azimuth: f32, elevation: f32) -> Self {
-        Camera { azimuth, elevation, ..Camera::default() }
+        Camera {
+            azimuth,
+            elevation,
+            ..Camera::default()
+        }
+    }
+
+    /// Refuses a camera that cannot frame anything (the matrix would hold NaN or infinity):
+    /// non-finite angles, `fovy` outside (0, 180) degrees, `fill` not positive and finite
+    /// (above 1 is allowed: it zooms into the scene), or an empty viewport. Case files are checked with this before a run.
+    pub fn validate(&self, width: u32, height: u32) -> Result<(), SceneError> {
+        let bad = |reason: String| Err(SceneError::BadCamera { reason });
+        if !(self.azimuth.is_finite() && self.elevation.is_finite()) {
+            return bad(format!(
+                "angles must be finite: azimuth {}, elevation {}",
+                self.azimuth, self.elevation
+            ));
+        }
+        if !(self.fovy > 0.0 && self.fovy < 180.0) {
+            return bad(format!("fovy {} is not in (0, 180) degrees", self.fovy));
+        }
+        if !(self.fill > 0.0 && self.fill.is_finite()) {
+            return bad(format!("fill {} is not positive and finite", self.fill));
+        }
+        if width == 0 || height == 0 {
+            return bad(format!("empty viewport {width}x{height}"));
+        }
+        Ok(())
     }
 
     /// The full camera set-up for a scene of bounding-sphere `radius` in a `width` x `height`
@@ -75,7 +111,7 @@ impl Camera {
         )
     }
 
-    /// The view-projection matrix (OpenGL clip space, z in [-w, w]) for a scene of
+    /// The view-projection matrix (OpenGL clip space, z in `[-w, w]`) for a scene of
     /// bounding-sphere `radius` in a `width` x `height` viewport.
     pub fn view_proj(&self, radius: f32, width: u32, height: u32) -> Mat4 {
         self.rig(radius, width, height).view_proj.as_mat4()
@@ -121,7 +157,11 @@ pub fn camera_rig(
     let tan_half = (fovy_deg.to_radians() / 2.0).tan() * aspect.min(1.0); // narrower half-fov
     let dist = radius / (fill * tan_half).atan().sin();
     let eye = dist * DVec3::new(el.cos() * az.sin(), el.sin(), el.cos() * az.cos());
-    let up = if elevation_deg.abs() < 89.9 { DVec3::Y } else { DVec3::new(-az.sin(), 0.0, -az.cos()) };
+    let up = if elevation_deg.abs() < 89.9 {
+        DVec3::Y
+    } else {
+        DVec3::new(-az.sin(), 0.0, -az.cos())
+    };
     let f = -eye / eye.length();
     let s = f.cross(up);
     let s = s / s.length();
@@ -142,7 +182,12 @@ pub fn camera_rig(
     let proj = [
         [t / aspect, 0.0, 0.0, 0.0],
         [0.0, t, 0.0, 0.0],
-        [0.0, 0.0, (far + near) / (near - far), 2.0 * far * near / (near - far)],
+        [
+            0.0,
+            0.0,
+            (far + near) / (near - far),
+            2.0 * far * near / (near - far),
+        ],
         [0.0, 0.0, -1.0, 0.0],
     ];
     let mut vp = [[0.0f64; 4]; 4];
@@ -175,5 +220,15 @@ pub fn camera(
     fovy_deg: f64,
     fill: f64,
 ) -> Mat4 {
-    camera_rig(radius, azimuth_deg, elevation_deg, width, height, fovy_deg, fill).view_proj.as_mat4()
+    camera_rig(
+        radius,
+        azimuth_deg,
+        elevation_deg,
+        width,
+        height,
+        fovy_deg,
+        fill,
+    )
+    .view_proj
+    .as_mat4()
 }

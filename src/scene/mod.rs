@@ -31,28 +31,53 @@ pub enum SceneError {
     #[error("{}: file not found", path.display())]
     NotFound { path: PathBuf },
     #[error("{}: cannot read: {source}", path.display())]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{}: the name ends in .gz but the data is not gzip (no 1f 8b magic bytes)", path.display())]
     NotGzip { path: PathBuf },
     #[error("{}: corrupt or truncated gzip data: {source}", path.display())]
-    CorruptGzip { path: PathBuf, source: std::io::Error },
+    CorruptGzip {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{}:{line}: malformed OBJ: {reason}", path.display())]
-    MalformedObj { path: PathBuf, line: usize, reason: String },
+    MalformedObj {
+        path: PathBuf,
+        line: usize,
+        reason: String,
+    },
     /// An error reported by `tobj` itself (the pre-pass in [`obj`] catches the known ones
     /// first, with a line number; this is the safety net).
     #[error("{}: malformed OBJ: {source}", path.display())]
-    Obj { path: PathBuf, source: tobj::LoadError },
+    Obj {
+        path: PathBuf,
+        source: tobj::LoadError,
+    },
     #[error("{}:{line}: face index {index} is out of range ({vertices} vertices are defined{})",
         path.display(), if *index < 0 { " before this line" } else { "" })]
-    FaceIndexOutOfRange { path: PathBuf, line: usize, index: i64, vertices: usize },
+    FaceIndexOutOfRange {
+        path: PathBuf,
+        line: usize,
+        index: i64,
+        vertices: usize,
+    },
     #[error("{}:{line}: vertex {vertex} has a non-finite coordinate {value:?}", path.display())]
-    NonFiniteVertex { path: PathBuf, line: usize, vertex: usize, value: [f32; 3] },
+    NonFiniteVertex {
+        path: PathBuf,
+        line: usize,
+        vertex: usize,
+        value: [f32; 3],
+    },
     #[error("{name}: the mesh has no triangles")]
     EmptyMesh { name: String },
     #[error("{name}: all vertices coincide, so the mesh has no extent to frame with a camera")]
     DegenerateMesh { name: String },
     #[error("{name}: invalid mesh: {source}")]
     InvalidMesh { name: String, source: MeshError },
+    #[error("bad camera: {reason}")]
+    BadCamera { reason: String },
     #[error("unknown built-in scene {name:?}; the built-in scenes are: {}", builtin_names().join(", "))]
     UnknownBuiltin { name: String },
     #[error("built-in scene {name:?}: bad parameters; usage: {usage}")]
@@ -98,7 +123,10 @@ impl Scene {
     /// be NaN), so it is refused here rather than producing an empty or garbage image later.
     pub fn from_mesh(name: impl Into<String>, mut mesh: Mesh) -> Result<Scene, SceneError> {
         let name = name.into();
-        mesh.validate().map_err(|source| SceneError::InvalidMesh { name: name.clone(), source })?;
+        mesh.validate().map_err(|source| SceneError::InvalidMesh {
+            name: name.clone(),
+            source,
+        })?;
         if mesh.indices.is_empty() {
             return Err(SceneError::EmptyMesh { name });
         }

@@ -42,10 +42,12 @@ pub fn is_gzip(bytes: &[u8]) -> bool {
 /// SHA-256 (lowercase hex) of a file's raw bytes, as stored in case files next to the mesh
 /// path so that a replay can tell it is looking at the same model.
 pub fn content_hash(bytes: &[u8]) -> String {
-    Sha256::digest(bytes).iter().fold(String::with_capacity(64), |mut s, b| {
-        let _ = write!(s, "{b:02x}");
-        s
-    })
+    Sha256::digest(bytes)
+        .iter()
+        .fold(String::with_capacity(64), |mut s, b| {
+            let _ = write!(s, "{b:02x}");
+            s
+        })
 }
 
 /// Loads an OBJ file, plain or gzip (detected by its magic bytes). A name ending in `.gz`
@@ -58,12 +60,21 @@ pub fn load_obj(path: impl AsRef<Path>) -> Result<Mesh, SceneError> {
 pub fn load_obj_with_hash(path: impl AsRef<Path>) -> Result<(Mesh, String), SceneError> {
     let path = path.as_ref();
     let bytes = std::fs::read(path).map_err(|source| match source.kind() {
-        std::io::ErrorKind::NotFound => SceneError::NotFound { path: path.to_owned() },
-        _ => SceneError::Io { path: path.to_owned(), source },
+        std::io::ErrorKind::NotFound => SceneError::NotFound {
+            path: path.to_owned(),
+        },
+        _ => SceneError::Io {
+            path: path.to_owned(),
+            source,
+        },
     })?;
-    let named_gz = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("gz"));
+    let named_gz = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gz"));
     if named_gz && !is_gzip(&bytes) {
-        return Err(SceneError::NotGzip { path: path.to_owned() });
+        return Err(SceneError::NotGzip {
+            path: path.to_owned(),
+        });
     }
     let mesh = parse(&bytes, path)?;
     Ok((mesh, content_hash(&bytes)))
@@ -80,7 +91,10 @@ fn parse(bytes: &[u8], path: &Path) -> Result<Mesh, SceneError> {
         let mut out = Vec::new();
         flate2::read::MultiGzDecoder::new(bytes)
             .read_to_end(&mut out)
-            .map_err(|source| SceneError::CorruptGzip { path: path.to_owned(), source })?;
+            .map_err(|source| SceneError::CorruptGzip {
+                path: path.to_owned(),
+                source,
+            })?;
         Cow::Owned(out)
     } else {
         Cow::Borrowed(bytes)
@@ -91,23 +105,37 @@ fn parse(bytes: &[u8], path: &Path) -> Result<Mesh, SceneError> {
     // A UTF-8 byte order mark would hide the first line's keyword.
     let pre = prepass(text.strip_prefix('\u{feff}').unwrap_or(&text), path)?;
     if pre.faces == 0 {
-        return Err(SceneError::EmptyMesh { name: path.display().to_string() });
+        return Err(SceneError::EmptyMesh {
+            name: path.display().to_string(),
+        });
     }
-    let (models, _materials) = tobj::load_obj_buf(&mut pre.text.as_bytes(), &tobj::GPU_LOAD_OPTIONS, |_| {
-        Err(tobj::LoadError::OpenFileFailed)
-    })
-    .map_err(|source| SceneError::Obj { path: path.to_owned(), source })?;
+    let (models, _materials) =
+        tobj::load_obj_buf(&mut pre.text.as_bytes(), &tobj::GPU_LOAD_OPTIONS, |_| {
+            Err(tobj::LoadError::OpenFileFailed)
+        })
+        .map_err(|source| SceneError::Obj {
+            path: path.to_owned(),
+            source,
+        })?;
     let mesh = assemble(&models, pre.vertices, path)?;
     mesh.validate().map_err(|e| match e {
         // Unreachable after the pre-pass (which checks every coordinate with its line), kept
         // so that a disagreement with tobj is an error, not a NaN on screen.
-        MeshError::NonFinite { index, value } => {
-            SceneError::NonFiniteVertex { path: path.to_owned(), line: 0, vertex: index + 1, value }
-        }
-        source => SceneError::InvalidMesh { name: path.display().to_string(), source },
+        MeshError::NonFinite { index, value } => SceneError::NonFiniteVertex {
+            path: path.to_owned(),
+            line: 0,
+            vertex: index + 1,
+            value,
+        },
+        source => SceneError::InvalidMesh {
+            name: path.display().to_string(),
+            source,
+        },
     })?;
     if mesh.indices.is_empty() {
-        return Err(SceneError::EmptyMesh { name: path.display().to_string() });
+        return Err(SceneError::EmptyMesh {
+            name: path.display().to_string(),
+        });
     }
     Ok(mesh)
 }
@@ -124,12 +152,15 @@ struct Prepass {
 
 /// The identity polygon's vertices: `1..=n`, padded to three by repeating the last one.
 fn identity_polygon(vertices: usize) -> impl Iterator<Item = usize> {
-    (1..=vertices).chain(std::iter::repeat(vertices).take(3usize.saturating_sub(vertices)))
+    (1..=vertices.max(3)).map(move |i| i.min(vertices))
 }
 
 fn prepass(text: &str, path: &Path) -> Result<Prepass, SceneError> {
-    let malformed =
-        |line: usize, reason: String| SceneError::MalformedObj { path: path.to_owned(), line, reason };
+    let malformed = |line: usize, reason: String| SceneError::MalformedObj {
+        path: path.to_owned(),
+        line,
+        reason,
+    };
     let mut vlines = String::new();
     let mut flines = String::new();
     let mut vertices = 0usize;
@@ -154,10 +185,15 @@ fn prepass(text: &str, path: &Path) -> Result<Prepass, SceneError> {
                 }
                 let words = &words_buf[..count.min(words_buf.len())];
                 let coord = |i: usize| -> Result<f32, SceneError> {
-                    words[i].parse::<f32>().map_err(|_| malformed(lineno, format!("bad vertex coordinate {:?}", words[i])))
+                    words[i].parse::<f32>().map_err(|_| {
+                        malformed(lineno, format!("bad vertex coordinate {:?}", words[i]))
+                    })
                 };
                 if count < 3 {
-                    return Err(malformed(lineno, format!("a vertex needs 3 coordinates, found {count}")));
+                    return Err(malformed(
+                        lineno,
+                        format!("a vertex needs 3 coordinates, found {count}"),
+                    ));
                 }
                 let mut p = [coord(0)?, coord(1)?, coord(2)?];
                 let kept = match count {
@@ -173,7 +209,12 @@ fn prepass(text: &str, path: &Path) -> Result<Prepass, SceneError> {
                     }
                     // x y z r g b: a vertex colour, not used.
                     6 => 3,
-                    k => return Err(malformed(lineno, format!("a vertex has 3, 4 (w) or 6 (rgb) values, found {k}"))),
+                    k => {
+                        return Err(malformed(
+                            lineno,
+                            format!("a vertex has 3, 4 (w) or 6 (rgb) values, found {k}"),
+                        ))
+                    }
                 };
                 if !p.iter().all(|c| c.is_finite()) {
                     return Err(SceneError::NonFiniteVertex {
@@ -194,7 +235,8 @@ fn prepass(text: &str, path: &Path) -> Result<Prepass, SceneError> {
             Some("f") => {
                 face.clear();
                 for token in words {
-                    let index = face_index(token).ok_or_else(|| malformed(lineno, format!("bad face vertex {token:?}")))?;
+                    let index = face_index(token)
+                        .ok_or_else(|| malformed(lineno, format!("bad face vertex {token:?}")))?;
                     let out_of_range = || SceneError::FaceIndexOutOfRange {
                         path: path.to_owned(),
                         line: lineno,
@@ -205,7 +247,8 @@ fn prepass(text: &str, path: &Path) -> Result<Prepass, SceneError> {
                         0 => return Err(out_of_range()),
                         // Relative: -1 is the last vertex defined so far.
                         i if i < 0 => {
-                            let back = usize::try_from(i.unsigned_abs()).map_err(|_| out_of_range())?;
+                            let back =
+                                usize::try_from(i.unsigned_abs()).map_err(|_| out_of_range())?;
                             vertices.checked_sub(back).ok_or_else(out_of_range)? + 1
                         }
                         i => {
@@ -250,7 +293,11 @@ fn prepass(text: &str, path: &Path) -> Result<Prepass, SceneError> {
         text.push('\n');
     }
     text.push_str(&flines);
-    Ok(Prepass { text, vertices, faces })
+    Ok(Prepass {
+        text,
+        vertices,
+        faces,
+    })
 }
 
 /// The position index of one face vertex `v`, `v/vt`, `v//vn` or `v/vt/vn`; texture and
@@ -297,6 +344,9 @@ fn assemble(models: &[tobj::Model], vertices: usize, path: &Path) -> Result<Mesh
     Ok(Mesh {
         positions: m.positions.chunks_exact(3).map(Vec3::from_slice).collect(),
         normals: None,
-        indices: m.indices[3 * skip..].chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+        indices: m.indices[3 * skip..]
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]])
+            .collect(),
     })
 }

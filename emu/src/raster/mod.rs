@@ -16,6 +16,7 @@
 
 mod clip;
 mod coverage;
+mod pool;
 mod setup;
 
 pub use setup::{bin_triangles, Binned, SetupTriangle};

@@ -12,6 +12,7 @@
 //!    chunk keeps its own per-tile lists (a stable counting sort done by its worker), and
 //!    [`Binned::raster_tile`] walks the chunks in order.
 use super::clip::{self, ClipVert, Planes, MAX_POLY, NON_FINITE};
+use super::pool::Pool;
 use super::coverage::{self, area2, bbox, Edges, SampleInfo, ONE};
 use super::{CullMode, Fragment, FrontFace, RasterState, SampleCount, Viewport, SUBPIXEL_BITS};
 use glam::Vec4;
@@ -210,6 +211,24 @@ impl Binned {
     }
 }
 
+// Recycled buffers (see [`super::pool`]).
+static SNAPPED: Pool<Snapped> = Pool::new();
+static TRIS: Pool<SetupTriangle> = Pool::new();
+static PAIRS: Pool<(u32, BinEntry)> = Pool::new();
+static ENTRIES: Pool<BinEntry> = Pool::new();
+static STARTS: Pool<u32> = Pool::new();
+
+impl Drop for Binned {
+    /// Hands the big buffers back to the pool for the next frame.
+    fn drop(&mut self) {
+        TRIS.give(std::mem::take(&mut self.tris));
+        for c in self.chunks.drain(..) {
+            ENTRIES.give(c.entries);
+            STARTS.give(c.tile_start);
+        }
+    }
+}
+
 /// Per-vertex result of step 1: snapped window position, window depth and `1/w`; or
 /// `x == OUT` and `y` = outcode when the vertex is outside a clip plane.
 #[derive(Clone, Copy, Debug, Default)]
@@ -370,6 +389,7 @@ impl Ctx<'_> {
                 continue;
             }
             let v = [[a.x, a.y], [b.x, b.y], [c.x, c.y]];
+            CNT[3].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else { continue };
             let a2 = area2(&v);
             if a2 == 0 {
@@ -458,13 +478,16 @@ impl Ctx<'_> {
         zw: [f32; 3],
         q: [[f32; 3]; 3],
     ) {
+        CNT[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if NOFIN.load(std::sync::atomic::Ordering::Relaxed) { return; }
         let e = Edges::new(&v);
         let ts = self.tile_size;
         let mut single = 0;
         if r[2] - r[0] <= 1 && r[3] - r[1] <= 1 {
             match self.tiny(&e, r) {
-                Tiny::Empty => return,
+                Tiny::Empty => { CNT[1].fetch_add(1, std::sync::atomic::Ordering::Relaxed); return },
                 Tiny::Single(x, y, m) if ts <= 256 => {
+                    CNT[2].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     single = (m as u32) << 16 | ((y % ts) as u32) << 8 | (x % ts) as u32;
                 }
                 _ => {}
@@ -494,13 +517,10 @@ impl Ctx<'_> {
 
     /// Sets up one chunk of triangles and sorts its bin entries by tile (stable).
     fn chunk(&self, range: std::ops::Range<usize>) -> (Vec<SetupTriangle>, ChunkBins, u64) {
-        let mut out = ChunkOut {
-            tris: Vec::with_capacity(range.len() / 4 + 16),
-            bins: Vec::with_capacity(range.len() / 4 + 16),
-            rejected: 0,
-        };
+        let mut out = ChunkOut { tris: TRIS.take(), bins: PAIRS.take(), rejected: 0 };
         self.run(range, &mut out);
-        let mut tile_start = vec![0u32; self.ntiles + 1];
+        let mut tile_start = STARTS.take();
+        tile_start.resize(self.ntiles + 1, 0);
         for &(tile, _) in &out.bins {
             tile_start[tile as usize + 1] += 1;
         }
@@ -508,12 +528,14 @@ impl Ctx<'_> {
             tile_start[i + 1] += tile_start[i];
         }
         let mut cursor = tile_start.clone();
-        let mut entries = vec![BinEntry::default(); out.bins.len()];
+        let mut entries = ENTRIES.take();
+        entries.resize(out.bins.len(), BinEntry::default());
         for &(tile, e) in &out.bins {
             let k = &mut cursor[tile as usize];
             entries[*k as usize] = e;
             *k += 1;
         }
+        PAIRS.give(out.bins);
         (out.tris, ChunkBins { base: 0, tile_start, entries }, out.rejected)
     }
 }
@@ -562,6 +584,7 @@ pub fn bin_triangles(
     viewport: Viewport,
     threads: usize,
 ) -> Binned {
+    NOFIN.store(std::env::var_os("NOFIN").is_some(), std::sync::atomic::Ordering::Relaxed);
     let threads = threads.max(1);
     let tile_size = state.tile_size.max(1);
     let tiles_x = viewport.width.div_ceil(tile_size);
@@ -575,10 +598,11 @@ pub fn bin_triangles(
         sy: viewport.height as f64 * (ONE / 2) as f64,
     };
 
-    let cpu = || -> f64 { std::fs::read_to_string("/proc/thread-self/schedstat").unwrap().split_whitespace().next().unwrap().parse::<f64>().unwrap() / 1e6 };
+    let _ts = std::time::Instant::now(); let cpu = || _ts.elapsed().as_secs_f64() * 1e3;
     let _t0 = cpu();
     // 1. Vertices, in parallel slices of one array.
-    let mut snapped = vec![Snapped::default(); positions.len()];
+    let mut snapped = SNAPPED.take();
+    snapped.resize(positions.len(), Snapped::default());
     let vthreads = threads.min(positions.len() / 8192).max(1);
     if vthreads == 1 {
         project_vertices(&planes, &xf, positions, &mut snapped);
@@ -631,16 +655,26 @@ pub fn bin_triangles(
     };
 
     let _t2 = cpu();
-    // 3. Concatenate in chunk order.
+    SNAPPED.give(snapped);
+
+    // 3. Concatenate in chunk order (a single chunk is moved, not copied).
     let total: usize = parts.iter().map(|p| p.0.len()).sum();
-    let mut tris = Vec::with_capacity(total);
     let mut rejected = 0;
-    for (t, bins, r) in &mut parts {
-        bins.base = tris.len() as u32;
-        tris.extend_from_slice(t);
-        *t = Vec::new();
-        rejected += *r;
-    }
+    let tris = if parts.len() == 1 {
+        rejected = parts[0].2;
+        std::mem::take(&mut parts[0].0)
+    } else {
+        let mut tris = TRIS.take();
+        tris.reserve(total);
+        for (t, bins, r) in &mut parts {
+            rejected += *r;
+            bins.base = tris.len() as u32;
+            tris.extend_from_slice(t);
+            TRIS.give(std::mem::take(t));
+        }
+        tris
+    };
+    if std::env::var_os("RT").is_some() { eprintln!("CNT {:?}", CNT); }
     if std::env::var_os("RT").is_some() { eprintln!("TIMING v {:.2} t {:.2} m {:.2}", _t1-_t0, _t2-_t1, cpu()-_t2); }
     Binned {
         tris,
@@ -687,3 +721,7 @@ mod tests {
         assert!(std::mem::size_of::<SetupTriangle>() <= 80);
     }
 }
+
+pub static CNT: [std::sync::atomic::AtomicU64; 4] = [const { std::sync::atomic::AtomicU64::new(0) }; 4];
+
+pub static NOFIN: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);

@@ -1,7 +1,252 @@
-//! (being written)
+//! `bun-ll`: uniform buckets combined with linked lists (depth-fighting paper, section 3.1.4
+//! "Combining BUN with LL"; BUN is Liu et al.'s uniform bucket peeling, its ref [14]).
+//!
+//! "We uniformly split the depth range ... and assign each subdivision to one bucket. Then,
+//! we concurrently store all fragment information in each bucket using linked lists. ... A
+//! node buffer is used to store all linked-list fragment data from all buckets. We explore a
+//! non-adaptive scheme where all buckets can handle the same number of rasterized fragments.
+//! The location of the next available space in the node buffer is managed through five
+//! global unsigned int address counters. Each pixel contains five head pointers ... one for
+//! each bucket. ... After the complete storage of all fragments, a post-sorting mechanism is
+//! carried out in each bucket" (3.1.4). Here:
+//! - the depth range is per pixel, from a first geometry pass of atomic min/max on the f32
+//!   depths (BUN approximates it with a bounding-box pass; the exact range cannot leave a
+//!   fragment outside every bucket);
+//! - `params.buckets` buckets (the paper's five by default) of equal depth width; the node
+//!   buffer is cut into as many equal regions, each with its own counter; a fragment whose
+//!   bucket's region is full is dropped and counted per bucket;
+//! - region size: `pool_per_pixel x pixels / buckets` nodes, or, when the pool is sized
+//!   exactly (`None`), the largest bucket's count from a count pass (every region that size,
+//!   as the paper's uniform scheme: no overflow, and the unused memory of the emptier buckets
+//!   the paper's discussion points out is visible in `storage_bytes`);
+//! - the resolve sorts each bucket's list and concatenates the buckets front to back (the
+//!   bucket of a depth is monotonic in the depth, so the concatenation is in depth order).
 
-use crate::algo::Algorithm;
+use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
+
+use super::dfb::{duplicate_check, fault_check, image_check, read_image, resolve_framebuffer, resolve_state, sorted_check, storage};
+use super::ll::{insert, pool_from_params, ListPool, ListResolve, Walk, MAX_POOL_NODES};
+use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params};
+use crate::common::{self, capture_state, geometry_pass, pixels};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    Vec::new()
+    vec![Box::new(BunLl)]
+}
+
+/// Bucket of depth `d` in `[zmin, zmax]` cut into `buckets` equal intervals. Every step is a
+/// monotonic float operation, so the bucket never decreases with the depth (fragments of one
+/// depth share a bucket, and the concatenation of sorted buckets is sorted). The kernels and
+/// the host checks call this same function.
+pub(super) fn bucket_of(d: f32, zmin: f32, zmax: f32, buckets: u32) -> u32 {
+    let range = zmax - zmin;
+    if !(range > 0.0) {
+        return 0;
+    }
+    let t = ((d - zmin) / range * buckets as f32).floor();
+    if t >= 0.0 {
+        (t as u32).min(buckets - 1)
+    } else {
+        0
+    }
+}
+
+/// Pass 1: the depth range of every pixel (atomic min and max on f32 depths).
+struct RangeKernel {
+    zmin: Buf<f32>,
+    zmax: Buf<f32>,
+}
+
+impl FragmentKernel for RangeKernel {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("bun-ll-range")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        let p = f.pixel_index();
+        f.atomic_min(self.zmin, p, f.depth()).await;
+        f.atomic_max(self.zmax, p, f.depth()).await;
+    }
+}
+
+/// The bucket of the invoking fragment, from its pixel's range.
+async fn bucket(f: &Frag<'_>, zmin: Buf<f32>, zmax: Buf<f32>, buckets: u32) -> u32 {
+    let p = f.pixel_index();
+    let lo = f.load(zmin, p).await;
+    let hi = f.load(zmax, p).await;
+    bucket_of(f.depth(), lo, hi, buckets)
+}
+
+/// Pass 2 (exact sizing only): fragments per bucket, on one global counter per bucket.
+struct BucketCount {
+    zmin: Buf<f32>,
+    zmax: Buf<f32>,
+    counts: Buf<u32>,
+    buckets: u32,
+}
+
+impl FragmentKernel for BucketCount {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("bun-ll-count")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        let b = bucket(&f, self.zmin, self.zmax, self.buckets).await;
+        f.atomic_add(self.counts, b, 1).await;
+    }
+}
+
+/// Pass 3: insert into the list of the fragment's bucket, with a node of that bucket's region.
+struct BunInsert {
+    zmin: Buf<f32>,
+    zmax: Buf<f32>,
+    pool: ListPool,
+    buckets: u32,
+    region: u32,
+}
+
+impl FragmentKernel for BunInsert {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("bun-ll-insert")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        let b = bucket(&f, self.zmin, self.zmax, self.buckets).await;
+        let head = f.pixel_index() * self.buckets + b;
+        insert(&f, &self.pool, head, b, b * self.region, self.region, false).await;
+    }
+}
+
+/// `bun-ll`: uniform depth buckets, each a set of per-pixel linked lists.
+pub struct BunLl;
+
+impl Algorithm for BunLl {
+    fn info(&self) -> AlgoInfo {
+        AlgoInfo {
+            name: "bun-ll",
+            family: "a-buffer",
+            summary: "uniform buckets + linked lists: per-pixel depth range (atomic min/max), `buckets` equal \
+                      intervals each with its own node region, counter and per-pixel head; post-sort per bucket; \
+                      buckets concatenated front to back",
+            source: "depth-fighting paper, section 3.1.4 (BUN [14] combined with LL [24]), Table 1 (BUN-LL)",
+            passes: "2 geometry (range, store; +1 bucket count pass when the pool is sized exactly) + 1 full-screen",
+            memory: "8 + 4 B + 12 n bytes (depth range; B heads; depth, primitive, next per node, n = B equal regions)",
+            hazard: HazardClass::HazardFree,
+            capacity: Capacity::All,
+        }
+    }
+
+    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+        let n = pixels(frame);
+        let buckets = params.buckets.max(1);
+        let mut device = common::fresh();
+        let mut fb = resolve_framebuffer(frame)?;
+        let zmin = device.buffer::<f32>("bun-ll-zmin", n as u64)?;
+        let zmax = device.buffer::<f32>("bun-ll-zmax", n as u64)?;
+        device.memory.fill(zmin, f32::INFINITY)?;
+        device.memory.fill(zmax, f32::NEG_INFINITY)?;
+        let mut report = geometry_pass(&device, &mut fb, frame, &capture_state(), &RangeKernel { zmin, zmax }, exec)?;
+
+        let mut counted = None;
+        let region = match params.pool_per_pixel {
+            Some(per_pixel) => pool_from_params(per_pixel, n) / buckets as u64,
+            None => {
+                let counts = device.buffer::<u32>("bun-ll-bucket-counts", buckets as u64)?;
+                let k = BucketCount { zmin, zmax, counts, buckets };
+                report.merge(&geometry_pass(&device, &mut fb, frame, &capture_state(), &k, exec)?);
+                let c = device.memory.read(counts)?;
+                let max = c.iter().copied().max().unwrap_or(0) as u64;
+                counted = Some(c);
+                max
+            }
+        };
+        let pool_nodes = region * buckets as u64;
+        if pool_nodes > MAX_POOL_NODES {
+            return Err(AlgoError::Invalid(format!("bun-ll: a pool of {pool_nodes} nodes is larger than a buffer can hold")));
+        }
+        let region = region as u32;
+        let pool = ListPool::new(&mut device, "bun-ll", n as u64 * buckets as u64, pool_nodes, buckets as u64)?;
+        let faults = device.buffer::<u32>("bun-ll-resolve-faults", 2)?;
+
+        let store = BunInsert { zmin, zmax, pool, buckets, region };
+        let store_report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
+        let generated = store_report.stats.fragments_generated;
+        report.merge(&store_report);
+        let resolve = ListResolve {
+            pool,
+            lists: buckets,
+            pool_nodes: pool_nodes as u32,
+            faults,
+            alpha: params.alpha,
+            background: params.background,
+        };
+        report.merge(&device.fullscreen(&mut fb, &resolve_state(), &resolve, exec)?);
+
+        let counters = device.memory.read(pool.counters)?;
+        let dropped_counters = device.memory.read(pool.dropped)?;
+        let regions: Vec<(u32, u32)> = (0..buckets).map(|b| (b * region, b * region + counters[b as usize].min(region))).collect();
+        let walk = Walk::new(&device.memory.read(pool.heads)?, &device.memory.read(pool.nodes)?, buckets, &regions);
+        let capture = walk.capture(frame, buckets);
+        let image = read_image(&fb);
+        let zmin_v = device.memory.read(zmin)?;
+        let zmax_v = device.memory.read(zmax)?;
+
+        let per_bucket_stored: Vec<u64> =
+            (0..buckets as usize).map(|b| walk.lists.iter().skip(b).step_by(buckets as usize).map(|l| l.len() as u64).sum()).collect();
+        let overflow: Vec<u64> = counters.iter().map(|&c| c.saturating_sub(region) as u64).collect();
+        let dropped: u64 = overflow.iter().sum();
+        let all_linked = (0..buckets as usize).all(|b| per_bucket_stored[b] == counters[b].min(region) as u64);
+        let mut misplaced = 0usize;
+        let mut first_misplaced = None;
+        for (i, list) in walk.lists.iter().enumerate() {
+            let (p, b) = (i / buckets as usize, (i % buckets as usize) as u32);
+            for fr in list {
+                let inside = zmin_v[p] <= fr.depth && fr.depth <= zmax_v[p];
+                if !inside || bucket_of(fr.depth, zmin_v[p], zmax_v[p], buckets) != b {
+                    misplaced += 1;
+                    first_misplaced.get_or_insert((p, b, fr.depth));
+                }
+            }
+        }
+        let mut checks = vec![
+            Check::new(
+                "every generated fragment stored exactly once unless its bucket overflowed",
+                walk.stored + dropped == generated && all_linked && walk.revisits == 0,
+                format!(
+                    "stored {} per bucket {per_bucket_stored:?}, dropped {dropped}, generated {generated}; region {region} nodes",
+                    walk.stored
+                ),
+            ),
+            Check::new(
+                "overflow counted exactly (per bucket)",
+                dropped_counters.iter().zip(&overflow).all(|(&d, &o)| d as u64 == o),
+                format!("dropped counters {dropped_counters:?}, max(counter - region, 0) {overflow:?}"),
+            ),
+            walk.integrity_check(&device.memory.read(faults)?),
+            Check::new(
+                "every fragment in its pixel's depth range and in the bucket of its depth",
+                misplaced == 0,
+                format!(
+                    "{misplaced} misplaced{}",
+                    first_misplaced.map(|(p, b, d)| format!("; first: pixel {p}, bucket {b}, depth {d}")).unwrap_or_default()
+                ),
+            ),
+            duplicate_check(&capture),
+            sorted_check(&capture),
+            image_check(&image, &capture, params),
+            fault_check(&report),
+        ];
+        if let Some(c) = &counted {
+            checks.push(Check::new(
+                "count pass equals store pass (per bucket)",
+                c == &counters,
+                format!("counted {c:?}, stored {counters:?}"),
+            ));
+        }
+        Ok(AlgoResult {
+            capture: Some(capture),
+            image: Some(image),
+            storage_bytes: storage(&device, frame),
+            report,
+            checks,
+            dropped,
+            ..Default::default()
+        })
+    }
 }

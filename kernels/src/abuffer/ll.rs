@@ -1,7 +1,438 @@
-//! (being written)
+//! `ll`: per-pixel linked lists (Yang et al. 2010, [24] of the depth-fighting paper; section
+//! 3.1.3 "Overview" and Fig. 3(b) there; the llvmpipe peer's `--algo ll`), and the list pieces
+//! `bun-ll` shares (insertion, resolve walk, host walk).
+//!
+//! "One buffer to store all linked-list node data and another buffer to store head offsets
+//! that point the start of the linked lists in the first buffer. A single shared counter
+//! (next) is atomically incremented to compute the mapping of an incoming fragment, followed
+//! by an update of the head pointer" (depth-fighting paper 3.1.3). Here:
+//! - the head image is a `u32` per pixel (`EMPTY` = end of list), updated with an atomic
+//!   exchange, as the peer's `imageAtomicExchange`;
+//! - a node is three words `[depth bits, primitive, next]` (the peer's std430
+//!   `Node { float depth; uint color; uint next; }`, with the primitive in place of the
+//!   colour so the oracle can compare (depth, primitive));
+//! - the pool holds `capacity` nodes: `params.pool_per_pixel x pixels`, or, when that is
+//!   `None`, exactly the fragment count of a count pass (as the peer sizes its pool). A
+//!   fragment whose counter value is `>= capacity` is dropped and counted, so
+//!   `dropped = max(counter - capacity, 0)` exactly.
+//!
+//! **Publication order.** A node's payload (depth, primitive) is written *before* the head
+//! exchange publishes it; its `next` link is the exchange's result, so it is written after
+//! (as in every exchange-based list, the peer's included). The planted bug
+//! ([`LinkedList::publish_before_write`]) exchanges first and writes the whole node after:
+//! a reader that follows the head in between sees a half-written node. Across a pass
+//! boundary nobody can (the resolve runs after the capture pass), so the bug is invisible
+//! to the oracle; it shows only to a reader inside the capture pass
+//! ([`LinkedList::concurrent_reader`]), where the hazard detector reports the reader's
+//! payload record as torn and the reader itself counts half-written nodes.
 
-use crate::algo::Algorithm;
+use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
+
+use super::dfb::{
+    duplicate_check, fault_check, image_check, read_image, resolve_framebuffer, resolve_state, sorted_check, storage, CountKernel,
+};
+use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame, HazardClass, Params};
+use crate::common::{self, capture_state, composite_frags, geometry_pass, pixels, sort_fragments, EMPTY};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    Vec::new()
+    vec![Box::new(LinkedList::default())]
+}
+
+/// Words per node: `[depth bits, primitive, next]`.
+pub(super) const NODE_WORDS: u32 = 3;
+/// Words of a node's payload (depth, primitive): the record a reader loads at once.
+const PAYLOAD_WORDS: u32 = 2;
+const NEXT: u32 = 2;
+
+/// Most nodes a pool may hold (the node buffer must stay addressable by `u32` word indices).
+pub(super) const MAX_POOL_NODES: u64 = fragrace_emu::memory::MAX_BUFFER_WORDS / NODE_WORDS as u64;
+
+/// The buffers of a node pool split into `regions` (1 for `ll`, one per bucket for `bun-ll`),
+/// each with its own allocation counter and dropped counter.
+#[derive(Clone, Copy)]
+pub(super) struct ListPool {
+    /// List heads, `EMPTY` when empty.
+    pub heads: Buf<u32>,
+    /// Nodes, `NODE_WORDS` words each.
+    pub nodes: Buf<u32>,
+    /// Allocation counter of each region.
+    pub counters: Buf<u32>,
+    /// Fragments dropped by each region for lack of nodes.
+    pub dropped: Buf<u32>,
+}
+
+impl ListPool {
+    /// Allocates the pool: `lists` heads and `nodes` nodes (filled with `EMPTY`, so an
+    /// unwritten word is recognisable), `regions` counters.
+    pub fn new(device: &mut fragrace_emu::Device, prefix: &str, lists: u64, nodes: u64, regions: u64) -> Result<ListPool, AlgoError> {
+        if nodes > MAX_POOL_NODES {
+            return Err(AlgoError::Invalid(format!("{prefix}: a pool of {nodes} nodes is larger than a buffer can hold")));
+        }
+        let heads = device.buffer::<u32>(&format!("{prefix}-heads"), lists)?;
+        device.memory.fill(heads, EMPTY)?;
+        let nodes = device.buffer::<u32>(&format!("{prefix}-nodes"), nodes.max(1) * NODE_WORDS as u64)?;
+        device.memory.fill(nodes, EMPTY)?;
+        let counters = device.buffer::<u32>(&format!("{prefix}-counters"), regions)?;
+        let dropped = device.buffer::<u32>(&format!("{prefix}-dropped"), regions)?;
+        Ok(ListPool { heads, nodes, counters, dropped })
+    }
+}
+
+/// Inserts the fragment into list `head` with a node of `region` (nodes
+/// `[base, base + cap)`): takes `i = atomicAdd(counter[region], 1)`; if `i >= cap` the
+/// fragment is dropped and counted; otherwise node `base + i` is written and published.
+/// Returns the node, if any.
+pub(super) async fn insert(
+    f: &Frag<'_>,
+    pool: &ListPool,
+    head: u32,
+    region: u32,
+    base: u32,
+    cap: u32,
+    publish_before_write: bool,
+) -> Option<u32> {
+    let i = f.atomic_add(pool.counters, region, 1).await;
+    if i >= cap {
+        f.atomic_add(pool.dropped, region, 1).await;
+        return None;
+    }
+    let node = base + i;
+    let at = node * NODE_WORDS;
+    let (depth, prim) = (f.depth().to_bits(), f.primitive_id());
+    if publish_before_write {
+        // The planted bug: the node is reachable from the head before it holds anything.
+        let next = f.atomic_exchange(pool.heads, head, node).await;
+        f.store_record(pool.nodes, at, &[depth, prim, next]).await;
+    } else {
+        // Payload first; the exchange publishes a node whose payload is complete. `next` is
+        // the exchange's result, so it can only be written after it.
+        f.store_record(pool.nodes, at, &[depth, prim]).await;
+        let next = f.atomic_exchange(pool.heads, head, node).await;
+        f.store(pool.nodes, at + NEXT, next).await;
+    }
+    Some(node)
+}
+
+/// The resolve of list A-buffers: one invocation per pixel walks each of its `lists` lists
+/// (bounded by the pool size, so a cycle cannot hang it; a link out of the pool ends the walk;
+/// both are counted in `faults[0]` and `faults[1]`), loading every node as one record, sorts
+/// each list (`sort_fragments`), writes the sorted payloads back along the list (so the
+/// readback is in resolve order), and composites the lists' concatenation front to back.
+pub(super) struct ListResolve {
+    pub pool: ListPool,
+    /// Lists per pixel (the heads of pixel `p` are `p * lists ..`).
+    pub lists: u32,
+    /// Nodes in the pool.
+    pub pool_nodes: u32,
+    /// `[links out of the pool, walks cut at the pool size]`.
+    pub faults: Buf<u32>,
+    pub alpha: f32,
+    pub background: [f32; 3],
+}
+
+impl FragmentKernel for ListResolve {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("list-resolve")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        let p = f.pixel_index();
+        let mut all = Vec::new();
+        for b in 0..self.lists {
+            let mut cur = f.load(self.pool.heads, p * self.lists + b).await;
+            let mut nodes = Vec::new();
+            let mut frags = Vec::new();
+            while cur != EMPTY {
+                if cur >= self.pool_nodes {
+                    f.atomic_add(self.faults, 0, 1).await;
+                    break;
+                }
+                if nodes.len() as u32 >= self.pool_nodes {
+                    f.atomic_add(self.faults, 1, 1).await;
+                    break;
+                }
+                let mut rec = [0u32; NODE_WORDS as usize];
+                f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec).await;
+                nodes.push(cur);
+                frags.push(CapturedFrag { depth: f32::from_bits(rec[0]), prim: rec[1] });
+                cur = rec[NEXT as usize];
+            }
+            sort_fragments(&mut frags);
+            for (&node, fr) in nodes.iter().zip(&frags) {
+                f.store_record(self.pool.nodes, node * NODE_WORDS, &[fr.depth.to_bits(), fr.prim]).await;
+            }
+            all.extend(frags);
+        }
+        f.output(0, composite_frags(&all, self.alpha, self.background));
+    }
+}
+
+/// The lists as the host finds them after the resolve.
+pub(super) struct Walk {
+    /// Fragments of list `p * lists + b`, in list order.
+    pub lists: Vec<Vec<CapturedFrag>>,
+    /// Nodes reached from some head.
+    pub stored: u64,
+    /// Links to a node outside the list's region of allocated nodes.
+    pub bad_links: u64,
+    /// Nodes reached twice (a cycle, or two lists sharing a tail).
+    pub revisits: u64,
+    /// The first problem, described.
+    pub first_problem: Option<String>,
+}
+
+impl Walk {
+    /// Walks every list. List `i` (pixel `i / lists`, bucket `i % lists`) may only link
+    /// nodes of `regions[i % lists]` (`[start, end)`: the allocated nodes of its region).
+    pub fn new(heads: &[u32], nodes: &[u32], lists: u32, regions: &[(u32, u32)]) -> Walk {
+        let pool = nodes.len() / NODE_WORDS as usize;
+        let mut visited = vec![false; pool];
+        let mut w = Walk { lists: Vec::with_capacity(heads.len()), stored: 0, bad_links: 0, revisits: 0, first_problem: None };
+        for (i, &h) in heads.iter().enumerate() {
+            let (lo, hi) = regions[i % lists as usize];
+            let mut list = Vec::new();
+            let mut cur = h;
+            while cur != EMPTY {
+                if cur < lo || cur >= hi {
+                    w.bad_links += 1;
+                    w.first_problem.get_or_insert(format!("list {i} links node {cur} outside [{lo}, {hi})"));
+                    break;
+                }
+                if visited[cur as usize] {
+                    w.revisits += 1;
+                    w.first_problem.get_or_insert(format!("list {i} reaches node {cur} a second time"));
+                    break;
+                }
+                visited[cur as usize] = true;
+                let at = (cur * NODE_WORDS) as usize;
+                list.push(CapturedFrag { depth: f32::from_bits(nodes[at]), prim: nodes[at + 1] });
+                w.stored += 1;
+                cur = nodes[at + NEXT as usize];
+            }
+            w.lists.push(list);
+        }
+        w
+    }
+
+    /// Per pixel, its lists concatenated in bucket order, as a capture.
+    pub fn capture(&self, frame: &Frame<'_>, lists: u32) -> Capture {
+        let per = lists.max(1) as usize;
+        Capture::from_lists(frame.width, frame.height, self.lists.chunks(per).map(|c| c.concat()))
+    }
+
+    /// "Lists acyclic and every next index in range", from this walk and the resolve's
+    /// own counts (`faults` of [`ListResolve`]).
+    pub fn integrity_check(&self, resolve_faults: &[u32]) -> Check {
+        let ok = self.bad_links == 0 && self.revisits == 0 && resolve_faults.iter().all(|&c| c == 0);
+        Check::new(
+            "lists acyclic, disjoint, and every next index in range",
+            ok,
+            format!(
+                "{} bad links, {} nodes reached twice; resolve: {} links out of the pool, {} walks cut{}",
+                self.bad_links,
+                self.revisits,
+                resolve_faults.first().copied().unwrap_or(0),
+                resolve_faults.get(1).copied().unwrap_or(0),
+                self.first_problem.as_ref().map(|s| format!("; first: {s}")).unwrap_or_default()
+            ),
+        )
+    }
+}
+
+/// Pool size in nodes for `params.pool_per_pixel` nodes per pixel.
+pub(super) fn pool_from_params(per_pixel: f32, pixels: usize) -> u64 {
+    let v = per_pixel as f64 * pixels as f64;
+    if v.is_finite() && v > 0.0 {
+        v.floor() as u64
+    } else {
+        0
+    }
+}
+
+/// A linked-list capture kernel. In reader mode, after inserting, each fragment walks its
+/// pixel's list as it stands (an in-pass consumer, the situation in which the publication
+/// order matters), loading each node's payload as one record and counting the half-written
+/// payloads it sees (`EMPTY` words: the pool is filled with `EMPTY` before the pass).
+struct LlInsert {
+    pool: ListPool,
+    cap: u32,
+    publish_before_write: bool,
+    /// `[half-written payloads seen]`, in reader mode.
+    reader: Option<Buf<u32>>,
+}
+
+impl FragmentKernel for LlInsert {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new(if self.publish_before_write { "ll-insert-publish-first" } else { "ll-insert" })
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        let p = f.pixel_index();
+        insert(&f, &self.pool, p, 0, 0, self.cap, self.publish_before_write).await;
+        let Some(seen) = self.reader else { return };
+        let mut cur = f.atomic_load(self.pool.heads, p).await;
+        let mut steps = 0;
+        while cur != EMPTY && cur < self.cap && steps < self.cap {
+            let mut payload = [0u32; PAYLOAD_WORDS as usize];
+            f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut payload).await;
+            if payload.contains(&EMPTY) {
+                f.atomic_add(seen, 0, 1).await;
+            }
+            cur = f.load(self.pool.nodes, cur * NODE_WORDS + NEXT).await;
+            steps += 1;
+        }
+    }
+}
+
+/// `ll`: per-pixel linked lists. The registered algorithm is `LinkedList::default()`; the
+/// other settings exist for verifying the hazard detector and the invariants on a known
+/// bug (`ll-publish-first`, `ll-reader`, `ll-publish-first-reader`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LinkedList {
+    /// The planted bug: exchange the head (publish the node) before writing the node.
+    pub publish_before_write: bool,
+    /// Every fragment also walks its pixel's list inside the capture pass (the reader that
+    /// can see a half-written node). With it the detector also reports data races on the
+    /// node words in the correct order: it judges by overlapping lifetimes and does not
+    /// model the release/acquire edge of the head exchange; torn records and half-written
+    /// nodes, though, appear only with the planted bug.
+    pub concurrent_reader: bool,
+}
+
+impl LinkedList {
+    /// The correct lists (the registered `ll`).
+    pub const fn correct() -> LinkedList {
+        LinkedList { publish_before_write: false, concurrent_reader: false }
+    }
+    /// The planted bug with the in-pass reader that exposes it.
+    pub const fn planted_bug() -> LinkedList {
+        LinkedList { publish_before_write: true, concurrent_reader: true }
+    }
+    /// The correct order with the in-pass reader (the control for [`LinkedList::planted_bug`]).
+    pub const fn correct_with_reader() -> LinkedList {
+        LinkedList { publish_before_write: false, concurrent_reader: true }
+    }
+
+    fn name(&self) -> &'static str {
+        match (self.publish_before_write, self.concurrent_reader) {
+            (false, false) => "ll",
+            (true, false) => "ll-publish-first",
+            (false, true) => "ll-reader",
+            (true, true) => "ll-publish-first-reader",
+        }
+    }
+}
+
+impl Algorithm for LinkedList {
+    fn info(&self) -> AlgoInfo {
+        AlgoInfo {
+            name: self.name(),
+            family: "a-buffer",
+            summary: if self.publish_before_write {
+                "per-pixel linked lists with the planted bug: the head exchange publishes a node before it is \
+                 written (a concurrent reader may follow a half-written node)"
+            } else {
+                "per-pixel linked lists: global atomic node counter, head exchange after the node's payload \
+                 is written, pool sized by a count pass or pool_per_pixel; resolve walks, sorts, composites"
+            },
+            source: "Yang et al. 2010, ref [24] of the depth-fighting paper, section 3.1.3 and Fig. 3(b); \
+                     the llvmpipe peer's `--algo ll`",
+            passes: "1 geometry (+1 count pass when the pool is sized exactly) + 1 full-screen",
+            memory: "4 + 12 n bytes (head; depth, primitive, next per node; +4 for the sizing count pass); \
+                     Table 1: 3 C(Zall) + 3 words",
+            hazard: if self.publish_before_write { HazardClass::HazardProne } else { HazardClass::HazardFree },
+            capacity: Capacity::All,
+        }
+    }
+
+    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+        let n = pixels(frame);
+        let mut device = common::fresh();
+        let mut fb = resolve_framebuffer(frame)?;
+        let mut report = fragrace_emu::PassReport::default();
+
+        // Pool size: nodes per pixel x pixels, or exactly the count pass's total.
+        let mut counted = None;
+        let capacity = match params.pool_per_pixel {
+            Some(per_pixel) => pool_from_params(per_pixel, n),
+            None => {
+                let counts = device.buffer::<u32>("ll-counts", n as u64)?;
+                report.merge(&geometry_pass(&device, &mut fb, frame, &capture_state(), &CountKernel { counts }, exec)?);
+                let c = device.memory.read(counts)?;
+                let total = c.iter().map(|&x| x as u64).sum();
+                counted = Some(c);
+                total
+            }
+        };
+        let pool = ListPool::new(&mut device, "ll", n as u64, capacity, 1)?;
+        let cap = capacity as u32;
+        let reader = if self.concurrent_reader { Some(device.buffer::<u32>("ll-reader-half-written", 1)?) } else { None };
+        let faults = device.buffer::<u32>("ll-resolve-faults", 2)?;
+
+        let insert = LlInsert { pool, cap, publish_before_write: self.publish_before_write, reader };
+        let capture_report = geometry_pass(&device, &mut fb, frame, &capture_state(), &insert, exec)?;
+        let generated = capture_report.stats.fragments_generated;
+        report.merge(&capture_report);
+        let resolve = ListResolve {
+            pool,
+            lists: 1,
+            pool_nodes: cap,
+            faults,
+            alpha: params.alpha,
+            background: params.background,
+        };
+        report.merge(&device.fullscreen(&mut fb, &resolve_state(), &resolve, exec)?);
+
+        let counter = device.memory.read(pool.counters)?[0];
+        let dropped_counter = device.memory.read(pool.dropped)?[0] as u64;
+        let allocated = counter.min(cap);
+        let walk = Walk::new(&device.memory.read(pool.heads)?, &device.memory.read(pool.nodes)?, 1, &[(0, allocated)]);
+        let capture = walk.capture(frame, 1);
+        let image = read_image(&fb);
+        let dropped = counter.saturating_sub(cap) as u64;
+
+        let mut checks = vec![
+            Check::new(
+                "every generated fragment stored exactly once unless the pool overflowed",
+                walk.stored + dropped == generated && walk.stored == allocated as u64 && walk.revisits == 0,
+                format!(
+                    "stored {} (allocated {allocated}), dropped {dropped}, generated {generated}; pool {cap} nodes",
+                    walk.stored
+                ),
+            ),
+            Check::new(
+                "overflow counted exactly",
+                dropped_counter == dropped,
+                format!("dropped counter {dropped_counter}, max(node counter {counter} - capacity {cap}, 0) = {dropped}"),
+            ),
+            walk.integrity_check(&device.memory.read(faults)?),
+            duplicate_check(&capture),
+            sorted_check(&capture),
+            image_check(&image, &capture, params),
+            fault_check(&report),
+        ];
+        if let Some(c) = &counted {
+            let bad = (0..n).filter(|&p| walk.lists[p].len() as u32 != c[p]).count();
+            checks.push(Check::new(
+                "list lengths equal the count pass (per pixel)",
+                bad == 0,
+                format!("{bad} pixels differ"),
+            ));
+        }
+        if let Some(r) = reader {
+            let half = device.memory.read(r)?[0];
+            checks.push(Check::new(
+                "the in-pass reader never saw a half-written node",
+                half == 0,
+                format!("{half} half-written node payloads seen"),
+            ));
+        }
+        Ok(AlgoResult {
+            capture: Some(capture),
+            image: Some(image),
+            storage_bytes: storage(&device, frame),
+            report,
+            checks,
+            dropped,
+            ..Default::default()
+        })
+    }
 }

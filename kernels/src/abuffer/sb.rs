@@ -1,7 +1,214 @@
-//! (being written)
+//! `sb`: the S-buffer, a sparsity-aware A-buffer (Vasilakis and Fudos 2012, [25] of the
+//! depth-fighting paper; section 2 and Fig. 3(c) there).
+//!
+//! The S-buffer "organizes linearly memory into variable contiguous regions for each pixel"
+//! and computes "the memory offset lookup table ... in a parallel fashion exploiting sparsity
+//! in the pixel space" (depth-fighting paper, section 2). Passes:
+//! 1. **count** (geometry): `atomicAdd(count[p], 1)`;
+//! 2. **allocate** (full-screen, sparsity-aware): only a *covered* pixel reserves a range,
+//!    with one `atomicAdd(group_total[p % G], count[p])` on the counter of its pixel group;
+//!    uncovered pixels do nothing and get no range. The returned value is the pixel's offset
+//!    inside its group;
+//! 3. **group scan** (full-screen, one invocation): the exclusive prefix sum of the `G`
+//!    group totals gives every group its base and the grand total (the host reads the total
+//!    back to allocate the fragment arrays);
+//! 4. **store** (geometry): `slot = group_base[p % G] + offset[p] + atomicAdd(fill[p], 1)`;
+//! 5. **resolve** (full-screen): sort each range, composite.
+//!
+//! Ranges are not in pixel order (their order within a group is the order in which the
+//! allocate invocations ran), but they are disjoint and cover `[0, total)` exactly, which is
+//! checked on every run together with "the count pass equals the store pass".
 
-use crate::algo::Algorithm;
+use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, FragmentState, KernelInfo};
+
+use super::dfb::{
+    capture_ranges, count_store_check, duplicate_check, fault_check, image_check, ranges_check, read_image, resolve_framebuffer,
+    resolve_state, sorted_check, storage, ArrayResolve, CountKernel, Layout,
+};
+use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params};
+use crate::common::{self, capture_state, geometry_pass, pixels, EMPTY};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    Vec::new()
+    vec![Box::new(SBuffer)]
+}
+
+/// Pixel groups sharing one allocation counter: enough to spread the contention of the
+/// allocate pass, few enough that their scan is one short serial loop.
+const GROUPS: u32 = 64;
+
+/// Allocate pass: a covered pixel reserves `count[p]` words on its group's counter.
+struct SparseAllocate {
+    counts: Buf<u32>,
+    offsets: Buf<u32>,
+    group_total: Buf<u32>,
+    groups: u32,
+}
+
+impl FragmentKernel for SparseAllocate {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("sb-allocate")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        let p = f.pixel_index();
+        let c = f.load(self.counts, p).await;
+        if c == 0 {
+            return;
+        }
+        let local = f.atomic_add(self.group_total, p % self.groups, c).await;
+        f.store(self.offsets, p, local).await;
+    }
+}
+
+/// Group scan: pixel 0 turns the group totals into exclusive group bases and writes the total.
+struct GroupScan {
+    group_total: Buf<u32>,
+    group_base: Buf<u32>,
+    total: Buf<u32>,
+    groups: u32,
+}
+
+impl FragmentKernel for GroupScan {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("sb-group-scan")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        if f.pixel_index() != 0 {
+            return;
+        }
+        let mut sum = 0u32;
+        for g in 0..self.groups {
+            f.store(self.group_base, g, sum).await;
+            sum = sum.wrapping_add(f.load(self.group_total, g).await);
+        }
+        f.store(self.total, 0, sum).await;
+    }
+}
+
+/// Store pass: `slot = group_base[g] + offset[p] + atomicAdd(fill[p], 1)`; a fragment past its
+/// pixel's counted range (the passes disagree) is dropped and counted, never written into
+/// another pixel's range.
+struct SbStore {
+    counts: Buf<u32>,
+    offsets: Buf<u32>,
+    group_base: Buf<u32>,
+    fill: Buf<u32>,
+    depth: Buf<f32>,
+    prim: Buf<u32>,
+    overflow: Buf<u32>,
+    groups: u32,
+}
+
+impl FragmentKernel for SbStore {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("sb-store")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        let p = f.pixel_index();
+        let i = f.atomic_add(self.fill, p, 1).await;
+        if i >= f.load(self.counts, p).await {
+            f.atomic_add(self.overflow, 0, 1).await;
+            return;
+        }
+        let base = f.load(self.group_base, p % self.groups).await.wrapping_add(f.load(self.offsets, p).await);
+        f.store(self.depth, base.wrapping_add(i), f.depth()).await;
+        f.store(self.prim, base.wrapping_add(i), f.primitive_id()).await;
+    }
+}
+
+/// `sb`: the S-buffer.
+pub struct SBuffer;
+
+impl Algorithm for SBuffer {
+    fn info(&self) -> AlgoInfo {
+        AlgoInfo {
+            name: "sb",
+            family: "a-buffer",
+            summary: "S-buffer: count pass, sparsity-aware allocation (covered pixels reserve ranges on per-group \
+                      atomic counters, then a scan of the group totals), store pass, sort-and-composite resolve",
+            source: "S-buffer (Vasilakis and Fudos 2012), ref [25] of the depth-fighting paper, section 2, Fig. 3(c), Table 1",
+            passes: "2 geometry (count, store) + 3 full-screen (allocate, group scan, resolve)",
+            memory: "12 + 8 n bytes (count, offset, fill; depth + primitive per fragment); Table 1: 2 C(Zall) + 3 words",
+            hazard: HazardClass::HazardFree,
+            capacity: Capacity::All,
+        }
+    }
+
+    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+        let n = pixels(frame);
+        let groups = GROUPS.min(n.max(1) as u32);
+        let mut device = common::fresh();
+        let mut fb = resolve_framebuffer(frame)?;
+        let counts = device.buffer::<u32>("sb-counts", n as u64)?;
+        let offsets = device.buffer::<u32>("sb-offsets", n as u64)?;
+        device.memory.fill(offsets, EMPTY)?;
+        let fill = device.buffer::<u32>("sb-fill", n as u64)?;
+        let group_total = device.buffer::<u32>("sb-group-totals", groups as u64)?;
+        let group_base = device.buffer::<u32>("sb-group-bases", groups as u64)?;
+        let total_buf = device.buffer::<u32>("sb-total", 1)?;
+        let overflow = device.buffer::<u32>("sb-overflow", 1)?;
+
+        let mut report = geometry_pass(&device, &mut fb, frame, &capture_state(), &CountKernel { counts }, exec)?;
+        let none = FragmentState::new();
+        report.merge(&device.fullscreen(&mut fb, &none, &SparseAllocate { counts, offsets, group_total, groups }, exec)?);
+        report.merge(&device.fullscreen(&mut fb, &none, &GroupScan { group_total, group_base, total: total_buf, groups }, exec)?);
+        let total = device.memory.read(total_buf)?[0];
+
+        let depth = device.buffer::<f32>("sb-depth", total.max(1) as u64)?;
+        let prim = device.buffer::<u32>("sb-prim", total.max(1) as u64)?;
+        let store = SbStore { counts, offsets, group_base, fill, depth, prim, overflow, groups };
+        let store_report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
+        let generated = store_report.stats.fragments_generated;
+        report.merge(&store_report);
+        let resolve = ArrayResolve {
+            layout: Layout::Grouped { offsets, group_base, groups },
+            lens: fill,
+            limit: Some(counts),
+            depth,
+            prim,
+            alpha: params.alpha,
+            background: params.background,
+        };
+        report.merge(&device.fullscreen(&mut fb, &resolve_state(), &resolve, exec)?);
+
+        let counts_v = device.memory.read(counts)?;
+        let offsets_v = device.memory.read(offsets)?;
+        let bases_v = device.memory.read(group_base)?;
+        let fill_v = device.memory.read(fill)?;
+        let dropped = device.memory.read(overflow)?[0] as u64;
+        let start = |p: usize| bases_v[p % groups as usize].wrapping_add(offsets_v[p]);
+        let uncovered_with_range = (0..n).filter(|&p| counts_v[p] == 0 && offsets_v[p] != EMPTY).count();
+        let covered: Vec<(u32, u32)> = (0..n).filter(|&p| counts_v[p] > 0).map(|p| (start(p), counts_v[p])).collect();
+        let ranges: Vec<(u32, u32)> =
+            (0..n).map(|p| if counts_v[p] == 0 { (0, 0) } else { (start(p), fill_v[p].min(counts_v[p])) }).collect();
+        let capture = capture_ranges(frame, &ranges, &device.memory.read(depth)?, &device.memory.read(prim)?);
+        let image = read_image(&fb);
+        let stored = capture.frags.len() as u64;
+        let checks = vec![
+            count_store_check(&counts_v, &fill_v),
+            ranges_check(&covered, total),
+            Check::new(
+                "only covered pixels get ranges",
+                uncovered_with_range == 0,
+                format!("{uncovered_with_range} uncovered pixels with an offset; {} covered", covered.len()),
+            ),
+            Check::new(
+                "every generated fragment stored exactly once",
+                stored + dropped == generated && dropped == 0,
+                format!("stored {stored}, dropped {dropped}, generated {generated}"),
+            ),
+            duplicate_check(&capture),
+            sorted_check(&capture),
+            image_check(&image, &capture, params),
+            fault_check(&report),
+        ];
+        Ok(AlgoResult {
+            capture: Some(capture),
+            image: Some(image),
+            storage_bytes: storage(&device, frame),
+            report,
+            checks,
+            dropped,
+            ..Default::default()
+        })
+    }
 }

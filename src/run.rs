@@ -1,0 +1,286 @@
+//! One run of one algorithm on one scene, and its check against the truth: what `render`,
+//! `check`, `replay`, `fuzz` and the tests all call.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use fragrace_emu::{ExecConfig, ExecMode, HazardCounts, Policy, ScheduleConfig};
+use fragrace_kernels::oracle::{compare, Metrics};
+use fragrace_kernels::{basic::Truth, AlgoInfo, AlgoResult, Frame, Params};
+use serde::{Deserialize, Serialize};
+
+use crate::scene::{Camera, Scene, SceneError};
+
+/// Where the scene comes from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SceneSpec {
+    /// A built-in scene by name (with parameters, e.g. `coplanar-stack:16`).
+    Builtin(String),
+    /// An OBJ file (plain or gzip); `sha256` of its bytes, checked on replay when present.
+    Obj { path: PathBuf, sha256: Option<String> },
+    /// Triangles inline (fuzz cases): positions and indices.
+    Inline { positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]> },
+}
+
+impl SceneSpec {
+    /// Loads the scene (checking an OBJ's hash if one is given).
+    pub fn load(&self) -> Result<Scene, RunError> {
+        Ok(match self {
+            SceneSpec::Builtin(name) => Scene::builtin(name).map_err(Box::new)?,
+            SceneSpec::Obj { path, sha256 } => {
+                if let Some(want) = sha256 {
+                    let bytes = std::fs::read(path).map_err(|source| RunError::Io { path: path.clone(), source })?;
+                    let got = crate::scene::obj::content_hash(&bytes);
+                    if &got != want {
+                        return Err(RunError::HashMismatch { path: path.clone(), want: want.clone(), got });
+                    }
+                }
+                Scene::from_obj(path).map_err(Box::new)?
+            }
+            SceneSpec::Inline { positions, indices } => {
+                let mesh = fragrace_emu::Mesh {
+                    positions: positions.iter().map(|p| glam::Vec3::from_array(*p)).collect(),
+                    normals: None,
+                    indices: indices.clone(),
+                };
+                Scene::from_mesh("inline", mesh).map_err(Box::new)?
+            }
+        })
+    }
+
+    /// A short name for reports.
+    pub fn name(&self) -> String {
+        match self {
+            SceneSpec::Builtin(n) => n.clone(),
+            SceneSpec::Obj { path, .. } => path.display().to_string(),
+            SceneSpec::Inline { indices, .. } => format!("inline({} triangles)", indices.len()),
+        }
+    }
+}
+
+/// Everything that defines a run; serialisable, so a case file holds one.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunSpec {
+    pub scene: SceneSpec,
+    #[serde(default)]
+    pub camera: Camera,
+    pub width: u32,
+    pub height: u32,
+    pub algo: String,
+    #[serde(default)]
+    pub params: Params,
+    pub exec: ExecConfig,
+}
+
+impl RunSpec {
+    /// A run of `algo` on a built-in scene at 512x512 from the default camera, ordered.
+    pub fn new(scene: SceneSpec, algo: &str) -> RunSpec {
+        RunSpec {
+            scene,
+            camera: Camera::default(),
+            width: 512,
+            height: 512,
+            algo: algo.to_string(),
+            params: Params::default(),
+            exec: ExecConfig::default(),
+        }
+    }
+
+    /// The policy and seed, when scheduled.
+    pub fn schedule(&self) -> Option<&ScheduleConfig> {
+        match &self.exec.mode {
+            ExecMode::Scheduled(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// The same run with another seed.
+    pub fn with_seed(&self, seed: u64) -> RunSpec {
+        let mut s = self.clone();
+        if let ExecMode::Scheduled(sc) = &mut s.exec.mode {
+            sc.seed = seed;
+        }
+        s
+    }
+
+    /// A command line that reproduces this run (for built-in and OBJ scenes).
+    pub fn command(&self, verb: &str) -> String {
+        let scene = match &self.scene {
+            SceneSpec::Builtin(n) => format!("--scene {n}"),
+            SceneSpec::Obj { path, .. } => format!("--obj {}", path.display()),
+            SceneSpec::Inline { .. } => "--case CASE.json".into(),
+        };
+        let mut c = format!(
+            "fragrace {verb} {scene} --algo {} --width {} --height {} --azimuth {} --elevation {} --k {} --exec {}",
+            self.algo, self.width, self.height, self.camera.azimuth, self.camera.elevation, self.params.k,
+            self.exec.mode.name()
+        );
+        if let Some(s) = self.schedule() {
+            c += &format!(" --policy {} --seed {} --window {}", s.policy, s.seed, s.window);
+        } else if self.exec.mode == ExecMode::Parallel {
+            c += &format!(" --threads {}", self.exec.threads);
+        }
+        c
+    }
+}
+
+/// Why a run could not happen.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Scene(#[from] Box<SceneError>),
+    #[error("unknown algorithm `{0}`; `fragrace list` shows them all")]
+    UnknownAlgo(String),
+    #[error(transparent)]
+    Algo(#[from] fragrace_kernels::AlgoError),
+    #[error("{}: {source}", path.display())]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{}: sha256 is {got}, but the case was recorded with {want}", path.display())]
+    HashMismatch { path: PathBuf, want: String, got: String },
+    #[error("viewport {0}x{1}: width and height must be between 1 and {max}", max = fragrace_emu::framebuffer::MAX_DIMENSION)]
+    Viewport(u32, u32),
+}
+
+/// A loaded scene plus its frame.
+pub struct Loaded {
+    pub scene: Scene,
+    pub view_proj: glam::Mat4,
+}
+
+impl Loaded {
+    pub fn frame(&self, spec: &RunSpec) -> Frame<'_> {
+        Frame { mesh: &self.scene.mesh, view_proj: self.view_proj, width: spec.width, height: spec.height }
+    }
+}
+
+/// Loads the scene of a spec and checks its viewport.
+pub fn load(spec: &RunSpec) -> Result<Loaded, RunError> {
+    let max = fragrace_emu::framebuffer::MAX_DIMENSION;
+    if spec.width == 0 || spec.height == 0 || spec.width > max || spec.height > max {
+        return Err(RunError::Viewport(spec.width, spec.height));
+    }
+    let scene = spec.scene.load()?;
+    let view_proj = scene.view_proj(&spec.camera, spec.width, spec.height);
+    Ok(Loaded { scene, view_proj })
+}
+
+/// One algorithm run.
+pub struct Rendered {
+    pub info: AlgoInfo,
+    pub result: AlgoResult,
+    pub wall_ms: f64,
+}
+
+/// Runs the algorithm of `spec` on an already loaded scene.
+pub fn render(spec: &RunSpec, loaded: &Loaded) -> Result<Rendered, RunError> {
+    let algo = fragrace_kernels::algorithm(&spec.algo).ok_or_else(|| RunError::UnknownAlgo(spec.algo.clone()))?;
+    let info = algo.info();
+    let frame = loaded.frame(spec);
+    let t = Instant::now();
+    let result = algo.run(&frame, &spec.params, &spec.exec)?;
+    Ok(Rendered { info, result, wall_ms: t.elapsed().as_secs_f64() * 1e3 })
+}
+
+/// The truth of a frame (computed once, shared by many checks).
+pub fn truth(spec: &RunSpec, loaded: &Loaded) -> Result<AlgoResult, RunError> {
+    Ok(Truth::capture(&loaded.frame(spec), spec.exec.threads)?)
+}
+
+/// A run checked against the truth.
+pub struct Checked {
+    pub rendered: Rendered,
+    pub metrics: Metrics,
+}
+
+impl Checked {
+    pub fn hazards(&self) -> HazardCounts {
+        self.rendered.result.report.hazards
+    }
+    /// Invariants that failed.
+    pub fn failed_checks(&self) -> Vec<&fragrace_kernels::Check> {
+        self.rendered.result.checks.iter().filter(|c| !c.passed).collect()
+    }
+    /// Whether anything at all went wrong (error pixels, hazards, faults, failed invariants).
+    pub fn anomalous(&self) -> bool {
+        self.metrics.error_pixels > 0
+            || self.hazards().total() > 0
+            || self.rendered.result.report.stats.faulted > 0
+            || !self.failed_checks().is_empty()
+    }
+}
+
+/// Runs and checks one spec against a given truth.
+pub fn check_with(spec: &RunSpec, loaded: &Loaded, truth: &AlgoResult) -> Result<Checked, RunError> {
+    let rendered = render(spec, loaded)?;
+    let metrics = compare(&rendered.info, &rendered.result, truth, &spec.params);
+    Ok(Checked { rendered, metrics })
+}
+
+/// The summary of a run as one JSON object (the CLI's `--json`).
+pub fn summary_json(spec: &RunSpec, loaded: &Loaded, checked: Option<&Checked>, rendered: &Rendered) -> serde_json::Value {
+    let r = &rendered.result;
+    let (policy, seed) = match spec.schedule() {
+        Some(s) => (serde_json::json!(s.policy.to_string()), serde_json::json!(s.seed)),
+        None => (serde_json::Value::Null, serde_json::Value::Null),
+    };
+    let counts = r.counts.as_ref();
+    let covered = checked
+        .map(|c| c.metrics.covered_pixels)
+        .or_else(|| counts.map(|c| c.iter().filter(|&&v| v > 0).count() as u64));
+    let max_dc = checked
+        .map(|c| c.metrics.max_depth_complexity)
+        .or_else(|| counts.map(|c| c.iter().copied().max().unwrap_or(0)));
+    let hz = r.report.hazards;
+    let mut v = serde_json::json!({
+        "algo": spec.algo,
+        "scene": spec.scene.name(),
+        "triangles": loaded.scene.mesh.triangle_count(),
+        "width": spec.width,
+        "height": spec.height,
+        "azimuth": spec.camera.azimuth,
+        "elevation": spec.camera.elevation,
+        "exec": spec.exec.mode.name(),
+        "policy": policy,
+        "seed": seed,
+        "threads": spec.exec.threads,
+        "k": spec.params.k,
+        "fragments": r.report.stats.fragments_generated,
+        "covered_pixels": covered,
+        "max_depth_complexity": max_dc,
+        "hazards": { "lost_updates": hz.lost_updates, "races": hz.races, "torn": hz.torn },
+        "faults": r.report.stats.faulted,
+        "dropped": r.dropped,
+        "storage_bytes": r.storage_bytes,
+        "bytes_per_pixel": r.storage_bytes as f64 / (spec.width as f64 * spec.height as f64),
+        "passes": { "geometry": r.report.stats.geometry_passes, "fullscreen": r.report.stats.fullscreen_passes },
+        "stats": r.report.stats,
+        "checks": r.checks,
+        "hazard_class": rendered.info.hazard.name(),
+        "wall_ms": rendered.wall_ms,
+        "epr": serde_json::Value::Null,
+    });
+    if let Some(c) = checked {
+        v["epr"] = serde_json::json!(c.metrics.epr);
+        v["error_pixels"] = serde_json::json!(c.metrics.error_pixels);
+        v["robustness"] = serde_json::json!(c.metrics.robustness);
+        v["coplanarity"] = serde_json::json!(c.metrics.coplanarity);
+        v["first_error"] = serde_json::json!(c.metrics.first_error);
+    }
+    v
+}
+
+/// Parses an executor description from CLI-style parts.
+pub fn exec_config(exec: &str, policy: &str, seed: u64, threads: Option<usize>, window: usize) -> Result<ExecConfig, String> {
+    let threads = threads.unwrap_or_else(fragrace_emu::exec::default_threads).max(1);
+    let mode = match exec {
+        "ordered" => ExecMode::Ordered,
+        "parallel" => ExecMode::Parallel,
+        "scheduled" => {
+            let policy: Policy = policy.parse().map_err(|e: fragrace_emu::exec::PolicyParseError| e.to_string())?;
+            ExecMode::Scheduled(ScheduleConfig { policy, seed, window: window.max(1), record: false })
+        }
+        other => return Err(format!("unknown executor `{other}`: expected ordered, parallel or scheduled")),
+    };
+    Ok(ExecConfig { mode, threads, ..ExecConfig::default() })
+}
