@@ -169,6 +169,7 @@ fn unknown_builtin_lists_the_names() {
         "coplanar-stack:x",
         "coplanar-stack:1:2",
         "cubes:3",
+        "bunny:1",
         "random-triangles:1:0",
     ] {
         assert!(

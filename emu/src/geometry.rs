@@ -25,6 +25,15 @@ pub struct Mesh {
 impl Mesh {
     /// Checks that every position is finite and every index in range.
     pub fn validate(&self) -> Result<(), MeshError> {
+        // Fast paths first (this runs on every draw of an 871K-triangle mesh); the slow
+        // loops below only run to name the culprit.
+        let finite = self.positions.iter().fold(true, |ok, p| ok & p.is_finite());
+        let max_index = self.indices.iter().flatten().fold(0u32, |m, &i| m.max(i));
+        let in_range = self.indices.is_empty() || (max_index as usize) < self.positions.len();
+        let normals_ok = self.normals.as_ref().is_none_or(|n| n.len() == self.positions.len());
+        if finite && in_range && normals_ok {
+            return Ok(());
+        }
         for (index, p) in self.positions.iter().enumerate() {
             if !p.is_finite() {
                 return Err(MeshError::NonFinite { index, value: p.to_array() });

@@ -69,6 +69,7 @@ pub fn mesh(name: &str) -> Result<Mesh, SceneError> {
         "cubes" => no_params(cubes),
         "spheres" => no_params(spheres),
         "hairball" => no_params(hairball),
+        "bunny" | "teapot" if !params.is_empty() => Err(bad(USAGE)),
         "bunny" => parse_obj_bytes(BUNNY_OBJ_GZ),
         "teapot" => parse_obj_bytes(TEAPOT_OBJ_GZ),
         "coplanar-stack" => {

@@ -212,7 +212,8 @@ impl Binned {
 }
 
 // Recycled buffers (see [`super::pool`]).
-static SNAPPED: Pool<Snapped> = Pool::new();
+static XY: Pool<[i32; 2]> = Pool::new();
+static ZW: Pool<[f32; 2]> = Pool::new();
 static TRIS: Pool<SetupTriangle> = Pool::new();
 static PAIRS: Pool<(u32, BinEntry)> = Pool::new();
 static ENTRIES: Pool<BinEntry> = Pool::new();
@@ -229,8 +230,7 @@ impl Drop for Binned {
     }
 }
 
-/// Per-vertex result of step 1: snapped window position, window depth and `1/w`; or
-/// `x == OUT` and `y` = outcode when the vertex is outside a clip plane.
+/// A projected vertex: snapped window position, window depth and `1/w`.
 #[derive(Clone, Copy, Debug, Default)]
 struct Snapped {
     x: i32,
@@ -311,7 +311,11 @@ fn depth_plane(v: &[[i32; 2]; 3], zw: &[f32; 3]) -> (u8, [f32; 3]) {
 struct Ctx<'a> {
     positions: &'a [Vec4],
     indices: &'a [[u32; 3]],
-    snapped: &'a [Snapped],
+    /// Step 1 output, per vertex: the snapped position, or `[OUT, outcode]` outside a clip
+    /// plane (split from `zw` so that the hot reject loop reads half the memory).
+    xy: &'a [[i32; 2]],
+    /// Window depth and `1/w` per vertex.
+    zw: &'a [[f32; 2]],
     planes: Planes,
     xf: Xform,
     si: SampleInfo,
@@ -325,6 +329,9 @@ struct Ctx<'a> {
     /// `FrontFace::Ccw`: front-facing when counter-clockwise on screen.
     ccw_front: bool,
 }
+
+/// Triangles per batch of the reject loop.
+const BATCH: usize = 256;
 
 /// What one chunk of triangles produced.
 struct ChunkOut {
@@ -374,43 +381,93 @@ impl Ctx<'_> {
         found
     }
 
+    /// Sets up a range of triangles, in batches: a branch-free reject pass first, then the
+    /// full setup of the few that remain.
     fn run(&self, range: std::ops::Range<usize>, out: &mut ChunkOut) {
-        let sv = self.snapped;
+        let mut keep = [0u32; BATCH];
+        let mut t = range.start;
+        while t < range.end {
+            let end = (t + BATCH).min(range.end);
+            let n = if self.xy.is_empty() { 0 } else { self.reject(t..end, &mut keep) };
+            if self.xy.is_empty() {
+                out.rejected += (end - t) as u64; // every index is out of range
+            }
+            for &k in &keep[..n] {
+                self.setup(k as usize, out);
+            }
+            t = end;
+        }
+    }
+
+    /// The hot loop over all triangles (`xy` not empty, `range.len() <= BATCH`): writes to
+    /// `keep` the triangles whose snapped bounding box reaches a sample (or that need
+    /// clipping or have bad indices, handled by [`Ctx::setup`]) and returns their number.
+    ///
+    /// Branch-free and minimal (about 30 instructions): whether a sub-pixel triangle's box
+    /// reaches a sample is a coin toss that a branch predictor cannot learn, and without
+    /// branches the CPU overlaps the vertex loads of many triangles. Everything else (area,
+    /// culling, exact coverage) is done only for the triangles kept.
+    #[inline(never)]
+    fn reject(&self, range: std::ops::Range<usize>, keep: &mut [u32; BATCH]) -> usize {
+        let xy = self.xy;
+        let last = xy.len() - 1;
+        let si = &self.si;
+        let (w1, h1) = (self.w - 1, self.h - 1);
+        let mut n = 0;
         for t in range {
             let [ia, ib, ic] = self.indices[t];
-            let (Some(&a), Some(&b), Some(&c)) =
-                (sv.get(ia as usize), sv.get(ib as usize), sv.get(ic as usize))
-            else {
-                out.rejected += 1;
-                continue;
-            };
-            if a.x == OUT || b.x == OUT || c.x == OUT {
-                self.clipped(t as u32, [ia, ib, ic], [a, b, c], out);
-                continue;
-            }
-            let v = [[a.x, a.y], [b.x, b.y], [c.x, c.y]];
-            CNT[3].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else { continue };
-            let a2 = area2(&v);
-            if a2 == 0 {
-                continue;
-            }
-            let Some(front) = self.facing(a2 < 0) else { continue };
-            let (v, s) = if a2 > 0 { (v, [a, b, c]) } else { ([v[0], v[2], v[1]], [a, c, b]) };
-            let perm = if a2 > 0 { [0, 1, 2] } else { [0, 2, 1] };
-            let mut q = [[0.0f32; 3]; 3];
-            for i in 0..3 {
-                q[i][perm[i]] = s[i].iw;
-            }
-            let zw = [s[0].z, s[1].z, s[2].z];
-            self.finish(out, t as u32, front, v, r, zw, q);
+            let (ia, ib, ic) = (ia as usize, ib as usize, ic as usize);
+            let bad_index = (ia > last) | (ib > last) | (ic > last);
+            let (a, b, c) = (xy[ia.min(last)], xy[ib.min(last)], xy[ic.min(last)]);
+            // OUT is i32::MIN: the minimum x is OUT iff a vertex needs clipping.
+            let xmin = a[0].min(b[0]).min(c[0]);
+            let special = bad_index | (xmin == OUT);
+            let x0 = (xmin.max(-(1 << 30)) - si.max_x + (ONE - 1)) >> SUBPIXEL_BITS;
+            let x1 = (a[0].max(b[0]).max(c[0]) - si.min_x) >> SUBPIXEL_BITS;
+            let y0 = (a[1].min(b[1]).min(c[1]) - si.max_y + (ONE - 1)) >> SUBPIXEL_BITS;
+            let y1 = (a[1].max(b[1]).max(c[1]) - si.min_y) >> SUBPIXEL_BITS;
+            let reaches = (x0.max(0) <= x1.min(w1)) & (y0.max(0) <= y1.min(h1));
+            keep[n] = t as u32;
+            n += usize::from(special | reaches);
         }
+        n
+    }
+
+    /// Full setup of one triangle that passed [`Ctx::reject`].
+    fn setup(&self, t: usize, out: &mut ChunkOut) {
+        let [ia, ib, ic] = self.indices[t];
+        let (Some(&a), Some(&b), Some(&c)) =
+            (self.xy.get(ia as usize), self.xy.get(ib as usize), self.xy.get(ic as usize))
+        else {
+            out.rejected += 1;
+            return;
+        };
+        if a[0] == OUT || b[0] == OUT || c[0] == OUT {
+            self.clipped(t as u32, [ia, ib, ic], [a, b, c], out);
+            return;
+        }
+        let v = [a, b, c];
+        let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else { return };
+        let a2 = area2(&v);
+        if a2 == 0 {
+            return;
+        }
+        let Some(front) = self.facing(a2 < 0) else { return };
+        let idx = if a2 > 0 { [ia, ib, ic] } else { [ia, ic, ib] };
+        let perm = if a2 > 0 { [0, 1, 2] } else { [0, 2, 1] };
+        let v = idx.map(|i| self.xy[i as usize]);
+        let zw = idx.map(|i| self.zw[i as usize]);
+        let mut q = [[0.0f32; 3]; 3];
+        for i in 0..3 {
+            q[i][perm[i]] = zw[i][1];
+        }
+        self.finish(out, t as u32, front, v, r, zw.map(|z| z[0]), q);
     }
 
     /// Slow path: a vertex is outside a clip plane (or not finite).
     #[cold]
-    fn clipped(&self, source: u32, idx: [u32; 3], s: [Snapped; 3], out: &mut ChunkOut) {
-        let oc = s.map(|s| if s.x == OUT { s.y as u32 } else { 0 });
+    fn clipped(&self, source: u32, idx: [u32; 3], s: [[i32; 2]; 3], out: &mut ChunkOut) {
+        let oc = s.map(|s| if s[0] == OUT { s[1] as u32 } else { 0 });
         if (oc[0] | oc[1] | oc[2]) & NON_FINITE != 0 {
             out.rejected += 1;
             return;
@@ -478,16 +535,13 @@ impl Ctx<'_> {
         zw: [f32; 3],
         q: [[f32; 3]; 3],
     ) {
-        CNT[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        if NOFIN.load(std::sync::atomic::Ordering::Relaxed) { return; }
         let e = Edges::new(&v);
         let ts = self.tile_size;
         let mut single = 0;
         if r[2] - r[0] <= 1 && r[3] - r[1] <= 1 {
             match self.tiny(&e, r) {
-                Tiny::Empty => { CNT[1].fetch_add(1, std::sync::atomic::Ordering::Relaxed); return },
+                Tiny::Empty => return,
                 Tiny::Single(x, y, m) if ts <= 256 => {
-                    CNT[2].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     single = (m as u32) << 16 | ((y % ts) as u32) << 8 | (x % ts) as u32;
                 }
                 _ => {}
@@ -565,11 +619,17 @@ fn par_map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> 
 }
 
 /// Step 1 for a slice of vertices.
-fn project_vertices(planes: &Planes, xf: &Xform, src: &[Vec4], dst: &mut [Snapped]) {
-    for (d, &p) in dst.iter_mut().zip(src) {
+fn project_vertices(planes: &Planes, xf: &Xform, src: &[Vec4], xy: &mut [[i32; 2]], zw: &mut [[f32; 2]]) {
+    for ((xy, zw), &p) in xy.iter_mut().zip(zw.iter_mut()).zip(src) {
         let p = vec4_f64(p);
         let oc = planes.outcode(&p);
-        *d = if oc != 0 { Snapped { x: OUT, y: oc as i32, z: 0.0, iw: 0.0 } } else { xf.project(&p) };
+        if oc != 0 {
+            *xy = [OUT, oc as i32];
+        } else {
+            let s = xf.project(&p);
+            *xy = [s.x, s.y];
+            *zw = [s.z, s.iw];
+        }
     }
 }
 
@@ -584,7 +644,6 @@ pub fn bin_triangles(
     viewport: Viewport,
     threads: usize,
 ) -> Binned {
-    NOFIN.store(std::env::var_os("NOFIN").is_some(), std::sync::atomic::Ordering::Relaxed);
     let threads = threads.max(1);
     let tile_size = state.tile_size.max(1);
     let tiles_x = viewport.width.div_ceil(tile_size);
@@ -598,24 +657,26 @@ pub fn bin_triangles(
         sy: viewport.height as f64 * (ONE / 2) as f64,
     };
 
-    let _ts = std::time::Instant::now(); let cpu = || _ts.elapsed().as_secs_f64() * 1e3;
+    let cpu = || -> f64 { std::fs::read_to_string("/proc/thread-self/schedstat").unwrap().split_whitespace().next().unwrap().parse::<f64>().unwrap() / 1e6 };
     let _t0 = cpu();
     // 1. Vertices, in parallel slices of one array.
-    let mut snapped = SNAPPED.take();
-    snapped.resize(positions.len(), Snapped::default());
+    let mut xy = XY.take();
+    let mut zw = ZW.take();
+    xy.resize(positions.len(), [0; 2]);
+    zw.resize(positions.len(), [0.0; 2]);
     let vthreads = threads.min(positions.len() / 8192).max(1);
     if vthreads == 1 {
-        project_vertices(&planes, &xf, positions, &mut snapped);
+        project_vertices(&planes, &xf, positions, &mut xy, &mut zw);
     } else {
         let per = positions.len().div_ceil(vthreads);
         std::thread::scope(|s| {
-            let mut parts = snapped.chunks_mut(per).zip(positions.chunks(per));
+            let mut parts = xy.chunks_mut(per).zip(zw.chunks_mut(per)).zip(positions.chunks(per));
             let first = parts.next();
-            for (dst, src) in parts {
-                s.spawn(|| project_vertices(&planes, &xf, src, dst));
+            for ((xy, zw), src) in parts {
+                s.spawn(|| project_vertices(&planes, &xf, src, xy, zw));
             }
-            if let Some((dst, src)) = first {
-                project_vertices(&planes, &xf, src, dst);
+            if let Some(((xy, zw), src)) = first {
+                project_vertices(&planes, &xf, src, xy, zw);
             }
         });
     }
@@ -625,7 +686,8 @@ pub fn bin_triangles(
     let ctx = Ctx {
         positions,
         indices,
-        snapped: &snapped,
+        xy: &xy,
+        zw: &zw,
         planes,
         xf,
         si: SampleInfo::new(state.samples),
@@ -655,7 +717,8 @@ pub fn bin_triangles(
     };
 
     let _t2 = cpu();
-    SNAPPED.give(snapped);
+    XY.give(xy);
+    ZW.give(zw);
 
     // 3. Concatenate in chunk order (a single chunk is moved, not copied).
     let total: usize = parts.iter().map(|p| p.0.len()).sum();
@@ -674,7 +737,6 @@ pub fn bin_triangles(
         }
         tris
     };
-    if std::env::var_os("RT").is_some() { eprintln!("CNT {:?}", CNT); }
     if std::env::var_os("RT").is_some() { eprintln!("TIMING v {:.2} t {:.2} m {:.2}", _t1-_t0, _t2-_t1, cpu()-_t2); }
     Binned {
         tris,
@@ -721,7 +783,3 @@ mod tests {
         assert!(std::mem::size_of::<SetupTriangle>() <= 80);
     }
 }
-
-pub static CNT: [std::sync::atomic::AtomicU64; 4] = [const { std::sync::atomic::AtomicU64::new(0) }; 4];
-
-pub static NOFIN: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);

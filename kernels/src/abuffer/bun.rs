@@ -250,3 +250,71 @@ impl Algorithm for BunLl {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use fragrace_emu::Policy;
+
+    use super::super::dfb::test_support::*;
+    use super::*;
+    use crate::basic::Truth;
+    use crate::oracle;
+
+    #[test]
+    fn bun_ll_is_exact_and_hazard_free_under_every_executor() {
+        let mesh = layers();
+        let f = frame(&mesh, 24, 20);
+        for exec in executors() {
+            let r = assert_exact(&BunLl, &f, &Params::default(), &exec);
+            assert_eq!(r.report.hazards.total(), 0, "{:?}: {:?}", exec.mode, r.report.hazard_list.first());
+        }
+        for buckets in [1, 2, 7] {
+            let params = Params { buckets, ..Params::default() };
+            for exec in [ExecConfig::ordered(), ExecConfig::parallel(3), ExecConfig::scheduled(Policy::Random, buckets as u64)] {
+                assert_exact(&BunLl, &f, &params, &exec);
+            }
+        }
+        let roomy = Params { pool_per_pixel: Some(30.0), ..Params::default() };
+        assert_exact(&BunLl, &f, &roomy, &ExecConfig::scheduled(Policy::Pct { depth: 3 }, 4));
+        let deep = stack(21);
+        let f = frame(&deep, 4, 3);
+        assert_exact(&BunLl, &f, &Params { buckets: 2, ..Params::default() }, &ExecConfig::parallel(2));
+    }
+
+    #[test]
+    fn bun_ll_bucket_overflow_is_counted_per_bucket() {
+        // Every pixel: 5 layers spread over its range, so each of 5 buckets gets about one
+        // fragment per pixel; a pool of 2 nodes per pixel (2 * 20 / 5 = 8 nodes a bucket)
+        // keeps 8 fragments in each bucket and drops the rest.
+        let mesh = stack(5);
+        let f = frame(&mesh, 5, 4);
+        let params = Params { pool_per_pixel: Some(2.0), ..Params::default() };
+        let truth = Truth::capture(&f, 1).unwrap();
+        for exec in executors() {
+            let r = BunLl.run(&f, &params, &exec).unwrap();
+            for c in &r.checks {
+                assert!(c.passed, "{:?}: `{}`: {}", exec.mode, c.name, c.detail);
+            }
+            let m = oracle::compare(&BunLl.info(), &r, &truth, &params);
+            assert_eq!(m.generated, 100);
+            assert_eq!(m.captured + r.dropped, 100, "{:?}", exec.mode);
+            assert!(m.captured <= 40 && r.dropped >= 60, "{:?}: captured {}", exec.mode, m.captured);
+        }
+    }
+
+    #[test]
+    fn bucket_of_is_monotonic_and_clamped() {
+        assert_eq!(bucket_of(0.3, 0.3, 0.3, 5), 0);
+        assert_eq!(bucket_of(0.9, 0.1, 0.9, 5), 4);
+        assert_eq!(bucket_of(0.1, 0.1, 0.9, 5), 0);
+        let (lo, hi) = (0.123_f32, 0.987_f32);
+        let mut last = 0;
+        for i in 0..=1000 {
+            let d = lo + (hi - lo) * i as f32 / 1000.0;
+            let b = bucket_of(d.min(hi), lo, hi, 7);
+            assert!(b >= last && b < 7);
+            last = b;
+        }
+        assert_eq!(last, 6);
+    }
+}

@@ -130,3 +130,53 @@ impl Algorithm for Fab {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use fragrace_emu::Policy;
+
+    use super::super::dfb::test_support::*;
+    use super::*;
+    use crate::basic::Truth;
+    use crate::oracle;
+
+    #[test]
+    fn fab_is_exact_under_every_executor() {
+        let mesh = layers();
+        let f = frame(&mesh, 24, 20);
+        for exec in executors() {
+            let r = assert_exact(&Fab, &f, &Params::default(), &exec);
+            assert_eq!(r.report.hazards.total(), 0, "{:?}", r.report.hazard_list.first());
+        }
+        // Exactly sized arrays: capacity = the deepest pixel.
+        let params = Params { fab_capacity: 6, ..Params::default() };
+        assert_exact(&Fab, &f, &params, &ExecConfig::scheduled(Policy::Random, 5));
+    }
+
+    #[test]
+    fn fab_overflow_is_counted_exactly_and_keeps_the_rest() {
+        let mesh = stack(7);
+        let f = frame(&mesh, 6, 5);
+        let params = Params { fab_capacity: 3, ..Params::default() };
+        let truth = Truth::capture(&f, 1).unwrap();
+        for exec in executors() {
+            let r = Fab.run(&f, &params, &exec).unwrap();
+            for c in &r.checks {
+                assert!(c.passed, "{:?}: `{}`: {}", exec.mode, c.name, c.detail);
+            }
+            assert_eq!(r.dropped, 30 * 4, "{:?}", exec.mode);
+            let m = oracle::compare(&Fab.info(), &r, &truth, &params);
+            assert_eq!(m.captured, 30 * 3);
+            assert_eq!(m.generated, 30 * 7);
+            // Which 3 of the 7 a pixel keeps depends on the interleaving; each kept one is real.
+            let c = r.capture.as_ref().unwrap();
+            let t = truth.capture.as_ref().unwrap();
+            for p in 0..c.pixels() {
+                assert_eq!(c.pixel(p).len(), 3);
+                for fr in c.pixel(p) {
+                    assert!(t.pixel(p).contains(fr), "pixel {p}: {fr:?} is not one of truth's");
+                }
+            }
+        }
+    }
+}

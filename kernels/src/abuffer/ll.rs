@@ -436,3 +436,151 @@ impl Algorithm for LinkedList {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use fragrace_emu::Policy;
+
+    use super::super::dfb::test_support::*;
+    use super::*;
+    use crate::basic::Truth;
+    use crate::oracle;
+
+    #[test]
+    fn ll_is_exact_and_hazard_free_under_every_executor() {
+        let mesh = layers();
+        let f = frame(&mesh, 24, 20);
+        for exec in executors() {
+            let r = assert_exact(&LinkedList::default(), &f, &Params::default(), &exec);
+            assert_eq!(r.report.hazards.total(), 0, "{:?}: {:?}", exec.mode, r.report.hazard_list.first());
+        }
+        // A roomy pool from pool_per_pixel instead of the count pass.
+        let params = Params { pool_per_pixel: Some(8.0), ..Params::default() };
+        for exec in [ExecConfig::ordered(), ExecConfig::parallel(4), ExecConfig::scheduled(Policy::Random, 9)] {
+            assert_exact(&LinkedList::default(), &f, &params, &exec);
+        }
+        // Deep lists: the resolve shell-sorts.
+        let mesh = stack(19);
+        let f = frame(&mesh, 5, 4);
+        for exec in [ExecConfig::ordered(), ExecConfig::parallel(2), ExecConfig::scheduled(Policy::Random, 2)] {
+            assert_exact(&LinkedList::default(), &f, &Params::default(), &exec);
+        }
+    }
+
+    #[test]
+    fn ll_small_pool_counts_overflow_exactly_and_never_corrupts() {
+        let mesh = stack(4);
+        let f = frame(&mesh, 6, 5); // 30 pixels x 4 = 120 fragments
+        let truth = Truth::capture(&f, 1).unwrap();
+        for (per_pixel, capacity) in [(1.5, 45u64), (0.0, 0), (3.99, 119), (4.0, 120)] {
+            let params = Params { pool_per_pixel: Some(per_pixel), ..Params::default() };
+            for exec in executors() {
+                let r = LinkedList::default().run(&f, &params, &exec).unwrap();
+                let what = format!("pool {per_pixel}/px under {:?}", exec.mode);
+                for c in &r.checks {
+                    assert!(c.passed, "{what}: `{}`: {}", c.name, c.detail);
+                }
+                assert_eq!(r.dropped, 120 - capacity, "{what}");
+                let m = oracle::compare(&LinkedList::default().info(), &r, &truth, &params);
+                assert_eq!(m.captured, capacity, "{what}");
+                // Whatever was kept is a real fragment of its pixel, once.
+                let c = r.capture.as_ref().unwrap();
+                let t = truth.capture.as_ref().unwrap();
+                for p in 0..c.pixels() {
+                    for fr in c.pixel(p) {
+                        assert!(t.pixel(p).contains(fr), "{what}: pixel {p}: {fr:?} is not one of truth's");
+                    }
+                }
+                assert_eq!(r.report.hazards.total(), 0, "{what}");
+            }
+        }
+    }
+
+    /// Runs a variant on a tiny, deep scene (16 pixels x 8 layers: every fragment of a pixel
+    /// is in the scheduler's window at once) under `seeds` random schedules; returns
+    /// (torn records, races, half-written nodes seen) per seed.
+    fn race_bug(variant: LinkedList, seeds: u64) -> Vec<(u64, u64, bool)> {
+        let mesh = stack(8);
+        let f = frame(&mesh, 4, 4);
+        let truth = Truth::capture(&f, 1).unwrap();
+        (0..seeds)
+            .map(|seed| {
+                let exec = ExecConfig::scheduled(Policy::Random, seed);
+                let r = variant.run(&f, &Params::default(), &exec).unwrap();
+                // Across the pass boundary the lists are always complete: the oracle cannot
+                // tell the planted bug from the correct order.
+                let m = oracle::compare(&variant.info(), &r, &truth, &Params::default());
+                assert_eq!(m.epr, 0.0, "{} seed {seed}", variant.info().name);
+                let half = r.checks.iter().any(|c| c.name.contains("half-written") && !c.passed);
+                for c in r.checks.iter().filter(|c| !c.name.contains("half-written")) {
+                    assert!(c.passed, "{} seed {seed}: `{}`: {}", variant.info().name, c.name, c.detail);
+                }
+                (r.report.hazards.torn, r.report.hazards.races, half)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn planted_bug_shows_torn_records_and_half_written_nodes() {
+        let bug = race_bug(LinkedList::planted_bug(), 8);
+        assert!(bug.iter().any(|&(torn, _, _)| torn > 0), "no seed tore a record: {bug:?}");
+        assert!(bug.iter().any(|&(_, _, half)| half), "no seed let the reader see a half-written node: {bug:?}");
+        // The control: same reader, correct order. The detector still reports races (the
+        // reader's plain loads overlap the writers' lifetimes) but never a torn payload, and
+        // the reader never sees a half-written one.
+        let control = race_bug(LinkedList::correct_with_reader(), 8);
+        assert!(control.iter().all(|&(torn, _, half)| torn == 0 && !half), "{control:?}");
+        // Without a reader the bug is latent: no hazard, exact result.
+        let latent = race_bug(LinkedList { publish_before_write: true, concurrent_reader: false }, 4);
+        assert!(latent.iter().all(|&(torn, races, half)| torn == 0 && races == 0 && !half), "{latent:?}");
+        let correct = race_bug(LinkedList::correct(), 8);
+        assert!(correct.iter().all(|&(torn, races, half)| torn == 0 && races == 0 && !half), "{correct:?}");
+    }
+
+    #[test]
+    fn names_and_declared_classes() {
+        assert_eq!(LinkedList::default(), LinkedList::correct());
+        assert_eq!(LinkedList::correct().info().name, "ll");
+        assert_eq!(LinkedList::correct().info().hazard, HazardClass::HazardFree);
+        assert_eq!(LinkedList::planted_bug().info().name, "ll-publish-first-reader");
+        assert_eq!(LinkedList::planted_bug().info().hazard, HazardClass::HazardProne);
+        assert_eq!(algorithms().iter().map(|a| a.info().name).collect::<Vec<_>>(), ["ll"]);
+    }
+
+    #[test]
+    fn host_walk_reports_cycles_and_bad_links() {
+        // Pixel 0: 0 -> 1 -> 0 (cycle). Pixel 1: 2 -> 7 (out of the allocated region).
+        let nodes = [0, 0, 1, 0, 0, 0, 0, 0, 7];
+        let heads = [0, 2];
+        let w = Walk::new(&heads, &nodes, 1, &[(0, 3)]);
+        assert_eq!((w.revisits, w.bad_links, w.stored), (1, 1, 3));
+        assert!(!w.integrity_check(&[0, 0]).passed);
+        let ok = Walk::new(&[1, EMPTY], &[0, 0, EMPTY, 0, 0, 0], 1, &[(0, 2)]);
+        assert!(ok.integrity_check(&[0, 0]).passed);
+        assert!(!ok.integrity_check(&[0, 1]).passed);
+    }
+}
+#[cfg(test)]
+mod scratch {
+    use super::super::dfb::test_support::*;
+    use super::*;
+    #[test]
+    fn scratch_print() {
+        let mesh = layers();
+        let f = frame(&mesh, 24, 20);
+        let truth = crate::basic::Truth::capture(&f, 1).unwrap();
+        let m = crate::oracle::compare(&LinkedList::default().info(), &truth, &truth, &Params::default());
+        eprintln!("layers: generated {} covered {} maxdc {} coplanarity {}", m.generated, m.covered_pixels, m.max_depth_complexity, m.coplanarity);
+        for v in [LinkedList::planted_bug(), LinkedList::correct_with_reader()] {
+            let mesh = stack(8);
+            let f = frame(&mesh, 4, 4);
+            for seed in 0..8 {
+                let r = v.run(&f, &Params::default(), &ExecConfig::scheduled(fragrace_emu::Policy::Random, seed)).unwrap();
+                let half = r.checks.iter().find(|c| c.name.contains("half")).unwrap();
+                eprintln!("{} seed {seed}: {:?} half: {}", v.info().name, r.report.hazards, half.detail);
+            }
+        }
+        let r = crate::abuffer::algorithms();
+        eprintln!("{:?}", r.iter().map(|a| a.info().name).collect::<Vec<_>>());
+    }
+}

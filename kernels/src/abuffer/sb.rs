@@ -212,3 +212,46 @@ impl Algorithm for SBuffer {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use fragrace_emu::Policy;
+
+    use super::super::dfb::test_support::*;
+    use super::*;
+
+    #[test]
+    fn sb_is_exact_under_every_executor() {
+        let mesh = layers();
+        let f = frame(&mesh, 24, 20);
+        for exec in executors() {
+            let r = assert_exact(&SBuffer, &f, &Params::default(), &exec);
+            assert_eq!(r.report.hazards.total(), 0, "{:?}", r.report.hazard_list.first());
+        }
+    }
+
+    #[test]
+    fn sb_allocates_only_covered_pixels() {
+        // One small quad in a larger frame: most pixels uncovered; total storage for fragments
+        // equals the fragments generated.
+        let mut mesh = fragrace_emu::Mesh::default();
+        quad(&mut mesh, [-0.3, -0.3, 0.2, 0.1], 0.1, 0.3);
+        quad(&mut mesh, [-0.1, -0.5, 0.4, 0.0], -0.2, 0.0);
+        let f = frame(&mesh, 40, 30);
+        for exec in [ExecConfig::ordered(), ExecConfig::parallel(4), ExecConfig::scheduled(Policy::Random, 11)] {
+            let r = assert_exact(&SBuffer, &f, &Params::default(), &exec);
+            let covered = r.capture.as_ref().unwrap();
+            let n_covered = (0..covered.pixels()).filter(|&p| !covered.pixel(p).is_empty()).count();
+            assert!(n_covered > 0 && n_covered < 40 * 30 / 4, "{n_covered}");
+        }
+    }
+
+    #[test]
+    fn sb_deep_pixels() {
+        let mesh = stack(18);
+        let f = frame(&mesh, 5, 7);
+        for exec in [ExecConfig::ordered(), ExecConfig::parallel(2), ExecConfig::scheduled(Policy::Pct { depth: 2 }, 1)] {
+            assert_exact(&SBuffer, &f, &Params::default(), &exec);
+        }
+    }
+}

@@ -24,7 +24,9 @@
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
 use super::rmw::{depth_key, pack64, KbRun, Shape, Slots};
-use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params};
+use crate::algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+};
 use crate::common::EMPTY;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -111,7 +113,14 @@ impl FragmentKernel for Depth32 {
     }
     async fn shade(&self, f: Frag<'_>) {
         self.census.record(f).await;
-        chain32(f, self.key, f.pixel_index() * self.k, self.k, depth_key(f.depth())).await;
+        chain32(
+            f,
+            self.key,
+            f.pixel_index() * self.k,
+            self.k,
+            depth_key(f.depth()),
+        )
+        .await;
     }
 }
 
@@ -144,7 +153,11 @@ impl FragmentKernel for Claim32 {
                 // Slots are sorted: no slot of this depth is left unclaimed.
                 break;
             }
-            if kv == v && f.atomic_compare_exchange(self.prim, base + i, EMPTY, f.primitive_id()).await.is_ok() {
+            if kv == v
+                && f.atomic_compare_exchange(self.prim, base + i, EMPTY, f.primitive_id())
+                    .await
+                    .is_ok()
+            {
                 return;
             }
         }
@@ -165,7 +178,14 @@ impl FragmentKernel for Store64 {
     }
     async fn shade(&self, f: Frag<'_>) {
         self.census.record(f).await;
-        chain64(f, self.key, f.pixel_index() * self.k, self.k, pack64(f.depth(), f.primitive_id())).await;
+        chain64(
+            f,
+            self.key,
+            f.pixel_index() * self.k,
+            self.k,
+            pack64(f.depth(), f.primitive_id()),
+        )
+        .await;
     }
 }
 
@@ -189,7 +209,12 @@ impl Algorithm for KbAtomic32 {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut run = KbRun::new(frame, params, exec)?;
         let len = run.n as u64 * run.k as u64;
         let key = run.device.buffer::<u32>("kb-key", len)?;
@@ -200,12 +225,21 @@ impl Algorithm for KbAtomic32 {
         let census = Census::new(&mut run)?;
         let k = run.k;
         let mut report = run.capture(&Depth32 { key, k, census })?;
-        report.merge(&run.capture(&Claim32 { key, prim, k, unclaimed })?);
+        report.merge(&run.capture(&Claim32 {
+            key,
+            prim,
+            k,
+            unclaimed,
+        })?);
         let slots = Slots::Key32 { key, prim };
         let mut checks = census.checks(&run, slots)?;
         let keys = run.device.memory.read(key)?;
         let prims = run.device.memory.read(prim)?;
-        let mismatched = keys.iter().zip(&prims).filter(|(&k, &p)| (k == EMPTY) != (p == EMPTY)).count();
+        let mismatched = keys
+            .iter()
+            .zip(&prims)
+            .filter(|(&k, &p)| (k == EMPTY) != (p == EMPTY))
+            .count();
         checks.push(Check::new(
             "every key slot claimed by exactly one fragment of its depth, no empty slot claimed",
             mismatched == 0,
@@ -239,12 +273,23 @@ impl Algorithm for KbAtomic64 {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut run = KbRun::new(frame, params, exec)?;
-        let key = run.device.buffer::<u64>("kb-key64", run.n as u64 * run.k as u64)?;
+        let key = run
+            .device
+            .buffer::<u64>("kb-key64", run.n as u64 * run.k as u64)?;
         run.device.memory.fill(key, u64::MAX)?;
         let census = Census::new(&mut run)?;
-        let report = run.capture(&Store64 { key, k: run.k, census })?;
+        let report = run.capture(&Store64 {
+            key,
+            k: run.k,
+            census,
+        })?;
         let slots = Slots::Key64 { key };
         let checks = census.checks(&run, slots)?;
         run.finish(slots, report, checks, 0, 0)
@@ -273,11 +318,23 @@ mod tests {
         let mesh = quads(16);
         let frame = frame(&mesh, 16);
         for k in [1, 2, 3, 17, 32] {
-            let params = Params { k, ..Params::default() };
-            for exec in [ExecConfig::ordered(), scheduled(fragrace_emu::Policy::Random, k as u64)] {
+            let params = Params {
+                k,
+                ..Params::default()
+            };
+            for exec in [
+                ExecConfig::ordered(),
+                scheduled(fragrace_emu::Policy::Random, k as u64),
+            ] {
                 for algo in [&KbAtomic32 as &dyn Algorithm, &KbAtomic64] {
                     let (r, m) = run(algo, &frame, &params, &exec);
-                    assert_eq!(m.error_pixels, 0, "{} k = {k}: first error {:?}", algo.info().name, m.first_error);
+                    assert_eq!(
+                        m.error_pixels,
+                        0,
+                        "{} k = {k}: first error {:?}",
+                        algo.info().name,
+                        m.first_error
+                    );
                     assert_checks(&r, algo.info().name);
                 }
             }
@@ -290,13 +347,25 @@ mod tests {
         // as two slots, each claimed by a different primitive.
         let mesh = quads(16);
         let frame = frame(&mesh, 16);
-        let (r, m) = run(&KbAtomic32, &frame, &Params::default(), &ExecConfig::ordered());
+        let (r, m) = run(
+            &KbAtomic32,
+            &frame,
+            &Params::default(),
+            &ExecConfig::ordered(),
+        );
         assert_eq!(m.error_pixels, 0);
         assert!(m.coplanarity > 0.0, "the scene has coplanar fragments");
         let c = r.capture.unwrap();
         let doubled = (0..c.pixels())
-            .filter(|&p| c.pixel(p).windows(2).any(|w| w[0].depth == w[1].depth && w[0].prim != w[1].prim))
+            .filter(|&p| {
+                c.pixel(p)
+                    .windows(2)
+                    .any(|w| w[0].depth == w[1].depth && w[0].prim != w[1].prim)
+            })
             .count();
-        assert!(doubled > 0, "coplanar pairs are kept as two slots with two primitives");
+        assert!(
+            doubled > 0,
+            "coplanar pairs are kept as two slots with two primitives"
+        );
     }
 }

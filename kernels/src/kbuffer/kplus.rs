@@ -35,8 +35,7 @@ use crate::algo::{
     HazardClass, Params,
 };
 use crate::common::{
-    self, capture_state, composite_frags, framebuffer, geometry_pass, pixels, sort_fragments,
-    EMPTY,
+    self, capture_state, composite_frags, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
 };
 
 /// Words per slot: depth (f32 bits) and primitive id.
@@ -112,7 +111,9 @@ impl Store {
     /// Max-array replacement of the maximum by a nearer fragment, then the O(k) scan for the
     /// new maximum. Returns the new maximum depth.
     async fn array_replace(&self, f: &Frag<'_>, p: u32, pos: u32, rec: [u32; 2]) -> f32 {
-        let Some(mp) = self.max_pos else { return f32::INFINITY };
+        let Some(mp) = self.max_pos else {
+            return f32::INFINITY;
+        };
         f.store_record(self.slots, self.slot(p, pos), &rec).await;
         let mut best = (0, self.depth_at(f, p, 0).await);
         for i in 1..self.k {
@@ -132,7 +133,8 @@ impl Store {
         while i > 0 {
             let parent = (i - 1) / 2;
             let mut up = [0u32; 2];
-            f.load_record(self.slots, self.slot(p, parent), &mut up).await;
+            f.load_record(self.slots, self.slot(p, parent), &mut up)
+                .await;
             if f32::from_bits(up[0]) < z {
                 f.store_record(self.slots, self.slot(p, i), &up).await;
                 i = parent;
@@ -159,7 +161,8 @@ impl Store {
             let mut c = l;
             if l + 1 < self.k {
                 let mut right = [0u32; 2];
-                f.load_record(self.slots, self.slot(p, l + 1), &mut right).await;
+                f.load_record(self.slots, self.slot(p, l + 1), &mut right)
+                    .await;
                 if f32::from_bits(right[0]) > f32::from_bits(child[0]) {
                     child = right;
                     c = l + 1;
@@ -187,7 +190,9 @@ impl FragmentKernel for Store {
             Structure::MaxArray => "kplus-store",
             Structure::MaxHeap => "kplus-heap-store",
         };
-        KernelInfo::new(name).with_discard().with_interlock(InterlockMode::ORDERED)
+        KernelInfo::new(name)
+            .with_discard()
+            .with_interlock(InterlockMode::ORDERED)
     }
 
     async fn shade(&self, f: Frag<'_>) {
@@ -251,8 +256,12 @@ impl FragmentKernel for Resolve {
         let mut frags = Vec::with_capacity(n as usize);
         for i in 0..n {
             let mut rec = [0u32; 2];
-            f.load_record(self.slots, (p * self.k + i) * SLOT_WORDS, &mut rec).await;
-            frags.push(CapturedFrag { depth: f32::from_bits(rec[0]), prim: rec[1] });
+            f.load_record(self.slots, (p * self.k + i) * SLOT_WORDS, &mut rec)
+                .await;
+            frags.push(CapturedFrag {
+                depth: f32::from_bits(rec[0]),
+                prim: rec[1],
+            });
         }
         sort_fragments(&mut frags);
         f.output(0, composite_frags(&frags, self.alpha, self.background));
@@ -296,7 +305,12 @@ impl Algorithm for KPlus {
     fn info(&self) -> AlgoInfo {
         info(Structure::MaxArray)
     }
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         run(Structure::MaxArray, frame, params, exec)
     }
 }
@@ -305,7 +319,12 @@ impl Algorithm for KPlusHeap {
     fn info(&self) -> AlgoInfo {
         info(Structure::MaxHeap)
     }
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         run(Structure::MaxHeap, frame, params, exec)
     }
 }
@@ -339,13 +358,27 @@ fn run(
     device.memory.fill(bound, f32::INFINITY)?;
     let evicted = device.buffer::<u32>("kplus-evicted", n as u64)?;
 
-    let store = Store { structure, k, slots, count, max_pos, bound, evicted };
+    let store = Store {
+        structure,
+        k,
+        slots,
+        count,
+        max_pos,
+        bound,
+        evicted,
+    };
     let mut fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA32F])?;
     let mut report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
     let store_stats = report.stats.clone();
     let store_faults = report.faults.len();
 
-    let resolve = Resolve { k, slots, count, alpha: params.alpha, background: params.background };
+    let resolve = Resolve {
+        k,
+        slots,
+        count,
+        alpha: params.alpha,
+        background: params.background,
+    };
     let mut state = FragmentState::new();
     state.targets = vec![TargetState::new(Format::RGBA32F)];
     report.merge(&device.fullscreen(&mut fb, &state, &resolve, exec)?);
@@ -364,7 +397,10 @@ fn run(
     let k_us = k as usize;
     let record = |p: usize, i: usize| {
         let w = (p * k_us + i) * SLOT_WORDS as usize;
-        CapturedFrag { depth: f32::from_bits(slot_words[w]), prim: slot_words[w + 1] }
+        CapturedFrag {
+            depth: f32::from_bits(slot_words[w]),
+            prim: slot_words[w + 1],
+        }
     };
 
     let mut lists = Vec::with_capacity(n);
@@ -379,7 +415,10 @@ fn run(
         }
         let c = c.min(k_us);
         let kept: Vec<CapturedFrag> = (0..c).map(|i| record(p, i)).collect();
-        let max = kept.iter().map(|f| f.depth).fold(f32::NEG_INFINITY, f32::max);
+        let max = kept
+            .iter()
+            .map(|f| f.depth)
+            .fold(f32::NEG_INFINITY, f32::max);
         // The structure's invariant: the max-array's position names a maximal slot, the
         // heap has every parent at least as far as its children.
         if structure_bad.is_none() && c > 0 {
@@ -394,9 +433,15 @@ fn run(
         // The published bound is the maximum of a full buffer, +inf before it fills.
         let want = if c == k_us { max } else { f32::INFINITY };
         if bound_bad.is_none() && bounds[p] != want {
-            bound_bad = Some(format!("pixel {p}: bound {} but {} slots with maximum {max}", bounds[p], c));
+            bound_bad = Some(format!(
+                "pixel {p}: bound {} but {} slots with maximum {max}",
+                bounds[p], c
+            ));
         }
-        if unused_bad.is_none() && (c..k_us).any(|i| record(p, i).prim != EMPTY || record(p, i).depth.to_bits() != EMPTY) {
+        if unused_bad.is_none()
+            && (c..k_us)
+                .any(|i| record(p, i).prim != EMPTY || record(p, i).depth.to_bits() != EMPTY)
+        {
             unused_bad = Some(format!("pixel {p}: a slot past the count was written"));
         }
         let mut kept = kept;
@@ -471,14 +516,25 @@ mod tests {
     /// exactly coplanar layers, and diagonal edges.
     fn scene() -> Mesh {
         let mut m = Mesh::default();
-        let zs = [0.3, -0.5, 0.7, 0.1, -0.2, 0.5, -0.7, 0.0, 0.2, -0.4, 0.6, -0.1, 0.3, 0.45];
+        let zs = [
+            0.3, -0.5, 0.7, 0.1, -0.2, 0.5, -0.7, 0.0, 0.2, -0.4, 0.6, -0.1, 0.3, 0.45,
+        ];
         for (i, &z) in zs.iter().enumerate() {
             let o = (i % 4) as f32 * 0.1;
             let tilt = if i % 3 == 0 { 0.0 } else { 0.05 };
-            quad(&mut m, [-0.9 + o, 0.8 - o, -0.85 + o * 0.5, 0.9 - o], z, tilt);
+            quad(
+                &mut m,
+                [-0.9 + o, 0.8 - o, -0.85 + o * 0.5, 0.9 - o],
+                z,
+                tilt,
+            );
         }
         // A few thin triangles to break symmetry.
-        m.positions.extend([Vec3::new(-1.0, -1.0, -0.9), Vec3::new(1.0, 0.2, 0.9), Vec3::new(0.0, 1.0, 0.0)]);
+        m.positions.extend([
+            Vec3::new(-1.0, -1.0, -0.9),
+            Vec3::new(1.0, 0.2, 0.9),
+            Vec3::new(0.0, 1.0, 0.0),
+        ]);
         let b = m.positions.len() as u32 - 3;
         m.indices.push([b, b + 1, b + 2]);
         m
@@ -496,18 +552,46 @@ mod tests {
 
     fn check_exact(algo: &dyn Algorithm, k: u32) {
         let mesh = scene();
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 24, height: 20 };
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 24,
+            height: 20,
+        };
         let truth = Truth::capture(&frame, 1).unwrap();
-        let params = Params { k, ..Params::default() };
+        let params = Params {
+            k,
+            ..Params::default()
+        };
         let mut culled = 0;
         for exec in execs() {
             let r = algo.run(&frame, &params, &exec).unwrap();
             for c in &r.checks {
-                assert!(c.passed, "{} {:?}: {} ({})", algo.info().name, exec.mode, c.name, c.detail);
+                assert!(
+                    c.passed,
+                    "{} {:?}: {} ({})",
+                    algo.info().name,
+                    exec.mode,
+                    c.name,
+                    c.detail
+                );
             }
             let m = oracle::compare(&algo.info(), &r, &truth, &params);
-            assert_eq!(m.epr, 0.0, "{} k={k} {:?}: first error {:?}", algo.info().name, exec.mode, m.first_error);
-            assert_eq!(r.report.hazards.total(), 0, "{:?}: {:?}", exec.mode, r.report.hazard_list.first());
+            assert_eq!(
+                m.epr,
+                0.0,
+                "{} k={k} {:?}: first error {:?}",
+                algo.info().name,
+                exec.mode,
+                m.first_error
+            );
+            assert_eq!(
+                r.report.hazards.total(),
+                0,
+                "{:?}: {:?}",
+                exec.mode,
+                r.report.hazard_list.first()
+            );
             // The resolve composites exactly the kept fragments.
             let cap = r.capture.as_ref().unwrap();
             let img = r.image.as_ref().unwrap();
@@ -537,16 +621,32 @@ mod tests {
         // As the paper notes, k = 1 behaves as a Z-buffer and k >= depth complexity as an
         // A-buffer (every fragment kept, nothing culled or evicted).
         let mesh = scene();
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 16, height: 16 };
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 16,
+            height: 16,
+        };
         let truth = Truth::capture(&frame, 1).unwrap();
         for algo in [&KPlus as &dyn Algorithm, &KPlusHeap] {
-            let p1 = Params { k: 1, ..Params::default() };
+            let p1 = Params {
+                k: 1,
+                ..Params::default()
+            };
             let r = algo.run(&frame, &p1, &ExecConfig::ordered()).unwrap();
             assert_eq!(oracle::compare(&algo.info(), &r, &truth, &p1).epr, 0.0);
-            let p64 = Params { k: 64, ..Params::default() };
-            let r = algo.run(&frame, &p64, &ExecConfig::scheduled(Policy::Random, 3)).unwrap();
+            let p64 = Params {
+                k: 64,
+                ..Params::default()
+            };
+            let r = algo
+                .run(&frame, &p64, &ExecConfig::scheduled(Policy::Random, 3))
+                .unwrap();
             assert_eq!(r.dropped, 0);
-            let all = crate::algo::AlgoInfo { capacity: Capacity::All, ..algo.info() };
+            let all = crate::algo::AlgoInfo {
+                capacity: Capacity::All,
+                ..algo.info()
+            };
             assert_eq!(oracle::compare(&all, &r, &truth, &p64).epr, 0.0);
         }
     }
@@ -557,11 +657,24 @@ mod tests {
         // API order is nearest-last here, and the result must stay exact.
         let mut mesh = Mesh::default();
         for i in 0..12 {
-            quad(&mut mesh, [-1.0, 1.0, -1.0, 1.0], 0.9 - i as f32 * 0.15, 0.0);
+            quad(
+                &mut mesh,
+                [-1.0, 1.0, -1.0, 1.0],
+                0.9 - i as f32 * 0.15,
+                0.0,
+            );
         }
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 8, height: 8 };
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 8,
+            height: 8,
+        };
         let truth = Truth::capture(&frame, 1).unwrap();
-        let params = Params { k: 4, ..Params::default() };
+        let params = Params {
+            k: 4,
+            ..Params::default()
+        };
         for algo in [&KPlus as &dyn Algorithm, &KPlusHeap] {
             let r = algo.run(&frame, &params, &ExecConfig::ordered()).unwrap();
             assert_eq!(oracle::compare(&algo.info(), &r, &truth, &params).epr, 0.0);
@@ -571,7 +684,10 @@ mod tests {
             // Reversed (nearest first): every fragment after the 4th is culled.
             let mut rev = mesh.clone();
             rev.indices.reverse();
-            let frame = Frame { mesh: &rev, ..frame };
+            let frame = Frame {
+                mesh: &rev,
+                ..frame
+            };
             let r = algo.run(&frame, &params, &ExecConfig::ordered()).unwrap();
             assert_eq!(r.report.stats.discarded, 64 * 8);
         }
@@ -580,8 +696,16 @@ mod tests {
     #[test]
     fn k_zero_is_rejected() {
         let mesh = scene();
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 4, height: 4 };
-        let params = Params { k: 0, ..Params::default() };
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 4,
+            height: 4,
+        };
+        let params = Params {
+            k: 0,
+            ..Params::default()
+        };
         assert!(KPlus.run(&frame, &params, &ExecConfig::ordered()).is_err());
     }
 }

@@ -43,12 +43,14 @@
 //! rasterizer that broke this.
 
 use fragrace_emu::{
-    Buf, CompareFunc, DepthState, EarlyTests, ExecConfig, Format, Frag, FragmentKernel, FragmentState, Image,
-    KernelInfo, SampleCount, TargetState,
+    Buf, CompareFunc, DepthState, EarlyTests, ExecConfig, Format, Frag, FragmentKernel,
+    FragmentState, Image, KernelInfo, SampleCount, TargetState,
 };
 
 use super::rmw::{key_less, rmw_insert, KbRun, Shape, Slots, SplitSlots, MAX_K};
-use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params};
+use crate::algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+};
 use crate::common::{framebuffer, geometry_pass, EMPTY};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -176,7 +178,16 @@ impl FragmentKernel for Merge<'_> {
             && (1..m).all(|i| key_less(d[i - 1], c[i - 1], d[i], c[i]))
             && d[m..cap].iter().all(|&x| x == f32::INFINITY);
         if !dirty {
-            self.bump(f, if well_formed { stat::CLEAN } else { stat::CLEAN_DISAGREES }, 1).await;
+            self.bump(
+                f,
+                if well_formed {
+                    stat::CLEAN
+                } else {
+                    stat::CLEAN_DISAGREES
+                },
+                1,
+            )
+            .await;
         } else {
             self.bump(f, stat::DIRTY, 1).await;
             if (d[0], c[0]) != near {
@@ -230,7 +241,12 @@ impl Algorithm for KbMultipass {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut run = KbRun::new(frame, params, exec)?;
         let n = run.n as u64;
         let kb = SplitSlots::new(&mut run.device, run.n, run.k)?;
@@ -248,7 +264,11 @@ impl Algorithm for KbMultipass {
 
         let mut fb = framebuffer(frame, SampleCount::X1, &[Format::RG32F])?;
         let mut capture_state = crate::common::capture_state();
-        capture_state.fragment.depth = DepthState { test: true, func: CompareFunc::Less, write: true };
+        capture_state.fragment.depth = DepthState {
+            test: true,
+            func: CompareFunc::Less,
+            write: true,
+        };
         capture_state.fragment.early = EarlyTests::ForceLate;
         capture_state.fragment.targets = vec![TargetState::new(Format::RG32F)];
         let merge_state = FragmentState::new();
@@ -261,12 +281,29 @@ impl Algorithm for KbMultipass {
             // Depth cleared past any fragment (1.0 is a valid depth), target to "none".
             fb.clear_depth(f32::INFINITY);
             fb.clear_color(0, [f32::INFINITY.to_bits(), EMPTY, 0, 0]);
-            report.merge(&geometry_pass(&run.device, &mut fb, frame, &capture_state, &Capture { s }, exec)?);
+            report.merge(&geometry_pass(
+                &run.device,
+                &mut fb,
+                frame,
+                &capture_state,
+                &Capture { s },
+                exec,
+            )?);
             let nearest = fb.image(0);
-            run.device.memory.write(s.stats, stat::ACTIVE as u64, &[0])?;
+            run.device
+                .memory
+                .write(s.stats, stat::ACTIVE as u64, &[0])?;
             let before = run.device.memory.read(s.stats)?[stat::CERTIFIED as usize];
             let mut merge_fb = framebuffer(frame, SampleCount::X1, &[])?;
-            report.merge(&run.device.fullscreen(&mut merge_fb, &merge_state, &Merge { s, nearest: &nearest }, exec)?);
+            report.merge(&run.device.fullscreen(
+                &mut merge_fb,
+                &merge_state,
+                &Merge {
+                    s,
+                    nearest: &nearest,
+                },
+                exec,
+            )?);
             let st = run.device.memory.read(s.stats)?;
             active = st[stat::ACTIVE as usize];
             per_pass.push(st[stat::CERTIFIED as usize] - before);
@@ -335,9 +372,19 @@ mod tests {
     fn one_pass_when_nothing_races() {
         let mesh = quads(16);
         let frame = frame(&mesh, 16);
-        let (r, m) = run(&KbMultipass, &frame, &Params::default(), &ExecConfig::ordered());
+        let (r, m) = run(
+            &KbMultipass,
+            &frame,
+            &Params::default(),
+            &ExecConfig::ordered(),
+        );
         assert_eq!(m.error_pixels, 0);
-        assert_eq!(passes(&r), 1, "serial insertions are all clean: {:?}", r.checks);
+        assert_eq!(
+            passes(&r),
+            1,
+            "serial insertions are all clean: {:?}",
+            r.checks
+        );
     }
 
     #[test]
@@ -348,11 +395,22 @@ mod tests {
         for seed in 0..3 {
             let exec = scheduled(Policy::Random, seed);
             let (racy, racy_m) = run(&KbRmw, &frame, &params, &exec);
-            assert!(racy_m.error_pixels > 0, "the single-pass k-buffer loses fragments here");
+            assert!(
+                racy_m.error_pixels > 0,
+                "the single-pass k-buffer loses fragments here"
+            );
             let (r, m) = run(&KbMultipass, &frame, &params, &exec);
             assert_eq!(m.error_pixels, 0, "seed {seed}");
-            assert!(passes(&r) > 1 && passes(&r) <= params.k as u64, "seed {seed}: {} passes", passes(&r));
-            assert!(r.report.hazards.lost_updates > 0, "the capture still races: {:?}", racy.report.hazards);
+            assert!(
+                passes(&r) > 1 && passes(&r) <= params.k as u64,
+                "seed {seed}: {} passes",
+                passes(&r)
+            );
+            assert!(
+                r.report.hazards.lost_updates > 0,
+                "the capture still races: {:?}",
+                racy.report.hazards
+            );
             assert_checks(&r, "random");
         }
     }
@@ -362,10 +420,20 @@ mod tests {
         let mesh = quads(16);
         let frame = frame(&mesh, 16);
         for k in [1, 2, 5, 16, 20] {
-            let params = Params { k, ..Params::default() };
-            for exec in [ExecConfig::ordered(), scheduled(Policy::Pct { depth: 3 }, k as u64)] {
+            let params = Params {
+                k,
+                ..Params::default()
+            };
+            for exec in [
+                ExecConfig::ordered(),
+                scheduled(Policy::Pct { depth: 3 }, k as u64),
+            ] {
                 let (r, m) = run(&KbMultipass, &frame, &params, &exec);
-                assert_eq!(m.error_pixels, 0, "k = {k}: first error {:?}", m.first_error);
+                assert_eq!(
+                    m.error_pixels, 0,
+                    "k = {k}: first error {:?}",
+                    m.first_error
+                );
                 assert_checks(&r, &format!("k = {k}"));
                 assert!(passes(&r) <= k as u64);
             }

@@ -14,14 +14,17 @@
 //! exact.
 
 use fragrace_emu::{
-    Buf, Device, ExecConfig, Format, Frag, FragmentKernel, FragmentState, KernelInfo, PassReport, SampleCount,
-    TargetState,
+    Buf, Device, ExecConfig, Format, Frag, FragmentKernel, FragmentState, KernelInfo, PassReport,
+    SampleCount, TargetState,
 };
 
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame, HazardClass, Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
+    HazardClass, Params,
 };
-use crate::common::{self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY};
+use crate::common::{
+    self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
+};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![Box::new(KbRmw)]
@@ -34,7 +37,10 @@ pub(super) const MAX_K: u32 = 64;
 /// `params.k`, checked against `1..=MAX_K`.
 pub(super) fn k_of(params: &Params) -> Result<u32, AlgoError> {
     if params.k == 0 || params.k > MAX_K {
-        Err(AlgoError::Invalid(format!("k = {} is outside 1..={MAX_K}", params.k)))
+        Err(AlgoError::Invalid(format!(
+            "k = {} is outside 1..={MAX_K}",
+            params.k
+        )))
     } else {
         Ok(params.k)
     }
@@ -73,7 +79,14 @@ impl SplitSlots {
 /// store), sorted insertion if `(z, prim)` is nearer than the farthest (which falls out),
 /// store them all back. Returns whether it inserted. Correct only if no other fragment of the
 /// pixel touches the slots meanwhile (a serial run, a lock, or pixel interlock).
-pub(super) async fn rmw_insert(f: Frag<'_>, kb: SplitSlots, base: u32, cap: usize, z: f32, prim: u32) -> bool {
+pub(super) async fn rmw_insert(
+    f: Frag<'_>,
+    kb: SplitSlots,
+    base: u32,
+    cap: usize,
+    z: f32,
+    prim: u32,
+) -> bool {
     let mut d = [f32::INFINITY; MAX_K as usize];
     let mut c = [EMPTY; MAX_K as usize];
     let cap = cap.clamp(1, MAX_K as usize);
@@ -118,7 +131,10 @@ impl Slots {
             Slots::Key32 { key, prim } => {
                 let k = f.load(key, i).await;
                 let prim = f.load(prim, i).await;
-                (k != EMPTY).then_some(CapturedFrag { depth: f32::from_bits(k), prim })
+                (k != EMPTY).then_some(CapturedFrag {
+                    depth: f32::from_bits(k),
+                    prim,
+                })
             }
             Slots::Key64 { key } => {
                 let k = f.load(key, i).await;
@@ -128,14 +144,20 @@ impl Slots {
     }
 
     /// Every slot, read back on the host, per pixel in slot order.
-    pub(super) fn read(&self, device: &Device, k: u32) -> Result<Vec<Vec<Option<CapturedFrag>>>, AlgoError> {
+    pub(super) fn read(
+        &self,
+        device: &Device,
+        k: u32,
+    ) -> Result<Vec<Vec<Option<CapturedFrag>>>, AlgoError> {
         let flat: Vec<Option<CapturedFrag>> = match *self {
             Slots::Split(s) => {
                 let d = device.memory.read(s.depth)?;
                 let p = device.memory.read(s.prim)?;
                 d.iter()
                     .zip(&p)
-                    .map(|(&depth, &prim)| (depth != f32::INFINITY).then_some(CapturedFrag { depth, prim }))
+                    .map(|(&depth, &prim)| {
+                        (depth != f32::INFINITY).then_some(CapturedFrag { depth, prim })
+                    })
                     .collect()
             }
             Slots::Key32 { key, prim } => {
@@ -143,12 +165,20 @@ impl Slots {
                 let p = device.memory.read(prim)?;
                 d.iter()
                     .zip(&p)
-                    .map(|(&k, &prim)| (k != EMPTY).then_some(CapturedFrag { depth: f32::from_bits(k), prim }))
+                    .map(|(&k, &prim)| {
+                        (k != EMPTY).then_some(CapturedFrag {
+                            depth: f32::from_bits(k),
+                            prim,
+                        })
+                    })
                     .collect()
             }
-            Slots::Key64 { key } => {
-                device.memory.read(key)?.into_iter().map(|k| (k != u64::MAX).then(|| unpack64(k))).collect()
-            }
+            Slots::Key64 { key } => device
+                .memory
+                .read(key)?
+                .into_iter()
+                .map(|k| (k != u64::MAX).then(|| unpack64(k)))
+                .collect(),
         };
         Ok(flat.chunks(k as usize).map(<[_]>::to_vec).collect())
     }
@@ -161,7 +191,10 @@ pub(super) fn pack64(depth: f32, prim: u32) -> u64 {
 }
 
 fn unpack64(k: u64) -> CapturedFrag {
-    CapturedFrag { depth: f32::from_bits((k >> 32) as u32), prim: k as u32 }
+    CapturedFrag {
+        depth: f32::from_bits((k >> 32) as u32),
+        prim: k as u32,
+    }
 }
 
 /// The f32 bits of a depth as an unsigned key. For depth >= 0 the unsigned order of the bits
@@ -189,7 +222,10 @@ impl FragmentKernel for Resolve {
     }
     async fn shade(&self, f: Frag<'_>) {
         let base = f.pixel_index() * self.k;
-        let mut frags = [CapturedFrag { depth: 0.0, prim: 0 }; MAX_K as usize];
+        let mut frags = [CapturedFrag {
+            depth: 0.0,
+            prim: 0,
+        }; MAX_K as usize];
         let mut n = 0;
         for i in 0..self.k {
             if let Some(c) = self.slots.load(f, base + i).await {
@@ -198,7 +234,10 @@ impl FragmentKernel for Resolve {
             }
         }
         sort_fragments(&mut frags[..n]);
-        f.output(0, common::composite_frags(&frags[..n], self.alpha, self.background));
+        f.output(
+            0,
+            common::composite_frags(&frags[..n], self.alpha, self.background),
+        );
     }
 }
 
@@ -216,14 +255,32 @@ pub(super) struct KbRun<'a> {
 }
 
 impl<'a> KbRun<'a> {
-    pub(super) fn new(frame: &Frame<'a>, params: &'a Params, exec: &'a ExecConfig) -> Result<KbRun<'a>, AlgoError> {
-        Ok(KbRun { device: common::fresh(), frame: *frame, params, exec, k: k_of(params)?, n: pixels(frame) })
+    pub(super) fn new(
+        frame: &Frame<'a>,
+        params: &'a Params,
+        exec: &'a ExecConfig,
+    ) -> Result<KbRun<'a>, AlgoError> {
+        Ok(KbRun {
+            device: common::fresh(),
+            frame: *frame,
+            params,
+            exec,
+            k: k_of(params)?,
+            n: pixels(frame),
+        })
     }
 
     /// One capture pass of the frame with `kernel`, every fragment through (no targets).
     pub(super) fn capture<K: FragmentKernel>(&self, kernel: &K) -> Result<PassReport, AlgoError> {
         let mut fb = framebuffer(&self.frame, SampleCount::X1, &[])?;
-        geometry_pass(&self.device, &mut fb, &self.frame, &capture_state(), kernel, self.exec)
+        geometry_pass(
+            &self.device,
+            &mut fb,
+            &self.frame,
+            &capture_state(),
+            kernel,
+            self.exec,
+        )
     }
 
     /// Resolves `slots` with the full-screen kernel (the image), reads them back (the
@@ -240,9 +297,23 @@ impl<'a> KbRun<'a> {
         let mut fb = framebuffer(&self.frame, SampleCount::X1, &[Format::RGBA32F])?;
         let mut state = FragmentState::new();
         state.targets = vec![TargetState::new(Format::RGBA32F)];
-        let resolve = Resolve { slots, k: self.k, alpha: self.params.alpha, background: self.params.background };
-        report.merge(&self.device.fullscreen(&mut fb, &state, &resolve, self.exec)?);
-        let image = fb.image(0).texels.iter().map(|t| t.map(f32::from_bits)).collect();
+        let resolve = Resolve {
+            slots,
+            k: self.k,
+            alpha: self.params.alpha,
+            background: self.params.background,
+        };
+        report.merge(
+            &self
+                .device
+                .fullscreen(&mut fb, &state, &resolve, self.exec)?,
+        );
+        let image = fb
+            .image(0)
+            .texels
+            .iter()
+            .map(|t| t.map(f32::from_bits))
+            .collect();
         let lists = slots.read(&self.device, self.k)?.into_iter().map(|l| {
             let mut v: Vec<CapturedFrag> = l.into_iter().flatten().collect();
             sort_fragments(&mut v);
@@ -255,7 +326,8 @@ impl<'a> KbRun<'a> {
             report,
             checks,
             dropped,
-            storage_bytes: self.device.memory.bytes() + self.n as u64 * (target_bytes + RESOLVE_TARGET_BYTES),
+            storage_bytes: self.device.memory.bytes()
+                + self.n as u64 * (target_bytes + RESOLVE_TARGET_BYTES),
             ..Default::default()
         })
     }
@@ -279,7 +351,11 @@ impl Shape {
     /// Tallies `raw` (slots per pixel, in slot order). `by_prim`: slots are ordered by
     /// `(depth, primitive)`; otherwise by depth only (primitives attached afterwards).
     /// `counts`: fragments per pixel, to check that exactly `min(k, n)` slots are occupied.
-    pub(super) fn of(raw: &[Vec<Option<CapturedFrag>>], by_prim: bool, counts: Option<&[u32]>) -> Shape {
+    pub(super) fn of(
+        raw: &[Vec<Option<CapturedFrag>>],
+        by_prim: bool,
+        counts: Option<&[u32]>,
+    ) -> Shape {
         let mut s = Shape::default();
         for (p, slots) in raw.iter().enumerate() {
             let mut bad = false;
@@ -301,7 +377,10 @@ impl Shape {
             }
             let mut sorted = occupied.clone();
             sorted.sort_by(common::depth_order);
-            if sorted.windows(2).any(|w| w[0].depth == w[1].depth && w[0].prim == w[1].prim && w[0].prim != EMPTY) {
+            if sorted
+                .windows(2)
+                .any(|w| w[0].depth == w[1].depth && w[0].prim == w[1].prim && w[0].prim != EMPTY)
+            {
                 s.duplicates += 1;
                 bad = true;
             }
@@ -357,7 +436,15 @@ impl FragmentKernel for RmwStore {
     }
     async fn shade(&self, f: Frag<'_>) {
         let base = f.pixel_index() * self.k;
-        rmw_insert(f, self.kb, base, self.k as usize, f.depth(), f.primitive_id()).await;
+        rmw_insert(
+            f,
+            self.kb,
+            base,
+            self.k as usize,
+            f.depth(),
+            f.primitive_id(),
+        )
+        .await;
     }
 }
 
@@ -381,7 +468,12 @@ impl Algorithm for KbRmw {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut run = KbRun::new(frame, params, exec)?;
         let kb = SplitSlots::new(&mut run.device, run.n, run.k)?;
         let report = run.capture(&RmwStore { kb, k: run.k })?;
@@ -391,11 +483,18 @@ impl Algorithm for KbRmw {
         // symptoms are reported as information (what the hazard did to the slots).
         let h = report.hazards;
         let checks = vec![
-            Check::new("slot corruption by races (informational)", true, shape.detail(frame.width)),
+            Check::new(
+                "slot corruption by races (informational)",
+                true,
+                shape.detail(frame.width),
+            ),
             Check::new(
                 "hazards seen by the detector (informational)",
                 true,
-                format!("lost updates {}, races {}, torn records {}", h.lost_updates, h.races, h.torn),
+                format!(
+                    "lost updates {}, races {}, torn records {}",
+                    h.lost_updates, h.races, h.torn
+                ),
             ),
         ];
         run.finish(slots, report, checks, 0, 0)
@@ -412,6 +511,9 @@ pub(super) mod testing {
     use crate::basic::Truth;
     use crate::oracle::{self, Metrics};
 
+    /// At 8 x 8 pixels the RMW k-buffer under a random schedule has an EPR of about 0.6; at
+    /// 16 x 16, about 0.04 (fewer fragments of one pixel in the scheduler's window at once).
+    ///
     /// `n` overlapping axis-aligned quads at constant depths in a shuffled (not depth)
     /// order, each offset a little so that depth complexity varies from pixel to pixel, plus
     /// an exact duplicate of quad 0 (coplanar fragments, depth-fighting paper section 1) and
@@ -420,7 +522,12 @@ pub(super) mod testing {
         let mut m = Mesh::default();
         let mut quad = |x0: f32, y0: f32, x1: f32, y1: f32, z: f32| {
             let b = m.positions.len() as u32;
-            m.positions.extend([Vec3::new(x0, y0, z), Vec3::new(x1, y0, z), Vec3::new(x1, y1, z), Vec3::new(x0, y1, z)]);
+            m.positions.extend([
+                Vec3::new(x0, y0, z),
+                Vec3::new(x1, y0, z),
+                Vec3::new(x1, y1, z),
+                Vec3::new(x0, y1, z),
+            ]);
             m.indices.push([b, b + 1, b + 2]);
             m.indices.push([b, b + 2, b + 3]);
         };
@@ -441,7 +548,12 @@ pub(super) mod testing {
     }
 
     pub fn frame(mesh: &Mesh, size: u32) -> Frame<'_> {
-        Frame { mesh, view_proj: Mat4::IDENTITY, width: size, height: size }
+        Frame {
+            mesh,
+            view_proj: Mat4::IDENTITY,
+            width: size,
+            height: size,
+        }
     }
 
     /// Scheduled executor with `policy`, `seed` and the default window.
@@ -455,18 +567,30 @@ pub(super) mod testing {
         let mut v = vec![
             ("ordered".to_string(), ExecConfig::ordered()),
             ("parallel(2)".to_string(), ExecConfig::parallel(2)),
-            ("parallel(4) batch 8".to_string(), ExecConfig { batch: 8, ..ExecConfig::parallel(4) }),
+            (
+                "parallel(4) batch 8".to_string(),
+                ExecConfig {
+                    batch: 8,
+                    ..ExecConfig::parallel(4)
+                },
+            ),
         ];
         for policy in Policy::all() {
             for seed in 0..seeds {
-                v.push((format!("scheduled {policy} seed {seed}"), scheduled(policy.clone(), seed)));
+                v.push((
+                    format!("scheduled {policy} seed {seed}"),
+                    scheduled(policy.clone(), seed),
+                ));
             }
         }
         // A wide window: more fragments of one pixel in flight at once.
         v.push((
             "scheduled random window 256".to_string(),
             ExecConfig {
-                mode: ExecMode::Scheduled(ScheduleConfig { window: 256, ..Default::default() }),
+                mode: ExecMode::Scheduled(ScheduleConfig {
+                    window: 256,
+                    ..Default::default()
+                }),
                 ..ExecConfig::default()
             },
         ));
@@ -474,7 +598,12 @@ pub(super) mod testing {
     }
 
     /// Runs `algo` and compares it with the truth.
-    pub fn run(algo: &dyn Algorithm, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> (AlgoResult, Metrics) {
+    pub fn run(
+        algo: &dyn Algorithm,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> (AlgoResult, Metrics) {
         let result = algo.run(frame, params, exec).expect("the algorithm runs");
         let truth = Truth::capture(frame, 1).expect("truth runs");
         let m = oracle::compare(&algo.info(), &result, &truth, params);
@@ -486,19 +615,32 @@ pub(super) mod testing {
         for c in &r.checks {
             assert!(c.passed, "{what}: check `{}` failed: {}", c.name, c.detail);
         }
-        assert_eq!(r.report.stats.faulted, 0, "{what}: faults {:?}", r.report.faults);
+        assert_eq!(
+            r.report.stats.faulted, 0,
+            "{what}: faults {:?}",
+            r.report.faults
+        );
     }
 
     /// Runs a hazard-free algorithm under every executor: EPR 0, checks pass, no faults, and
     /// the resolve's image is the composite of the capture.
+    /// Two sizes of the 16-quad scene: 8 x 8 (every pixel's fragments in flight together)
+    /// and 16 x 16 (more pixels, varied depth complexity).
     pub fn assert_exact_everywhere(algo: &dyn Algorithm, params: &Params, seeds: u64) {
         let mesh = quads(16);
-        let frame = frame(&mesh, 16);
-        for (what, exec) in executors(seeds) {
+        for (size, (what, exec)) in [8, 16]
+            .into_iter()
+            .flat_map(|s| executors(seeds).into_iter().map(move |e| (s, e)))
+        {
+            let frame = frame(&mesh, size);
             let (r, m) = run(algo, &frame, params, &exec);
-            let what = format!("{} under {what}", algo.info().name);
+            let what = format!("{} at {size} x {size} under {what}", algo.info().name);
             assert!(m.covered_pixels > 0, "{what}: the scene covers pixels");
-            assert_eq!(m.error_pixels, 0, "{what}: EPR {} (first error at {:?})", m.epr, m.first_error);
+            assert_eq!(
+                m.error_pixels, 0,
+                "{what}: EPR {} (first error at {:?})",
+                m.epr, m.first_error
+            );
             assert_checks(&r, &what);
             assert_image_matches_capture(&r, params, &what);
         }
@@ -510,7 +652,10 @@ pub(super) mod testing {
         let img = r.image.as_ref().expect("image");
         for p in 0..c.pixels() {
             let want = crate::common::composite_frags(c.pixel(p), params.alpha, params.background);
-            assert_eq!(img[p], want, "{what}: resolve image differs from the capture at pixel {p}");
+            assert_eq!(
+                img[p], want,
+                "{what}: resolve image differs from the capture at pixel {p}"
+            );
         }
     }
 }
@@ -527,9 +672,16 @@ mod tests {
         let mesh = quads(16);
         let frame = frame(&mesh, 16);
         for k in [1, 4, 8, 16] {
-            let params = Params { k, ..Params::default() };
+            let params = Params {
+                k,
+                ..Params::default()
+            };
             let (r, m) = run(&KbRmw, &frame, &params, &ExecConfig::ordered());
-            assert_eq!(m.error_pixels, 0, "k = {k}: first error {:?}", m.first_error);
+            assert_eq!(
+                m.error_pixels, 0,
+                "k = {k}: first error {:?}",
+                m.first_error
+            );
             assert_eq!(r.report.hazards.total(), 0);
             assert_image_matches_capture(&r, &params, "ordered");
         }
@@ -543,14 +695,36 @@ mod tests {
         let mut wrong_runs = 0;
         for seed in 0..4 {
             let (r, m) = run(&KbRmw, &frame, &params, &scheduled(Policy::Random, seed));
-            assert!(r.report.hazards.lost_updates > 0, "seed {seed}: the detector sees lost updates");
-            assert!(r.report.hazards.races > 0, "seed {seed}: the detector sees races");
+            assert!(
+                r.report.hazards.lost_updates > 0,
+                "seed {seed}: the detector sees lost updates"
+            );
+            assert!(
+                r.report.hazards.races > 0,
+                "seed {seed}: the detector sees races"
+            );
             if m.error_pixels > 0 {
                 wrong_runs += 1;
             }
             assert!(m.robustness <= 1.0);
         }
-        assert_eq!(wrong_runs, 4, "every random schedule loses fragments somewhere (EPR > 0)");
+        assert_eq!(
+            wrong_runs, 4,
+            "every random schedule loses fragments somewhere (EPR > 0)"
+        );
+    }
+
+    #[test]
+    fn loses_fragments_in_lockstep_warps() {
+        // At 8 x 8 a warp of 64 fragments holds fragments of one pixel from consecutive
+        // quads, whose lanes interleave at every access whatever the threads do.
+        let mesh = quads(16);
+        let frame = frame(&mesh, 8);
+        let (_, m) = run(&KbRmw, &frame, &Params::default(), &ExecConfig::parallel(2));
+        assert!(
+            m.error_pixels > 0,
+            "parallel lockstep warps lose fragments too"
+        );
     }
 
     #[test]
@@ -558,8 +732,14 @@ mod tests {
         let mesh = quads(2);
         let frame = frame(&mesh, 8);
         for k in [0, MAX_K + 1] {
-            let params = Params { k, ..Params::default() };
-            assert!(matches!(KbRmw.run(&frame, &params, &ExecConfig::ordered()), Err(AlgoError::Invalid(_))));
+            let params = Params {
+                k,
+                ..Params::default()
+            };
+            assert!(matches!(
+                KbRmw.run(&frame, &params, &ExecConfig::ordered()),
+                Err(AlgoError::Invalid(_))
+            ));
         }
     }
 
@@ -581,9 +761,18 @@ mod tests {
         let good = vec![vec![f(0.1, 1), f(0.2, 0), None]];
         assert!(Shape::of(&good, true, Some(&[2])).ok());
         assert_eq!(Shape::of(&good, true, Some(&[1])).wrong_count, 1);
-        assert_eq!(Shape::of(&[vec![f(0.2, 1), f(0.1, 0), None]], true, None).unsorted, 1);
-        assert_eq!(Shape::of(&[vec![f(0.1, 1), None, f(0.2, 0)]], true, None).gaps, 1);
-        assert_eq!(Shape::of(&[vec![f(0.1, 1), f(0.1, 1), None]], true, None).duplicates, 1);
+        assert_eq!(
+            Shape::of(&[vec![f(0.2, 1), f(0.1, 0), None]], true, None).unsorted,
+            1
+        );
+        assert_eq!(
+            Shape::of(&[vec![f(0.1, 1), None, f(0.2, 0)]], true, None).gaps,
+            1
+        );
+        assert_eq!(
+            Shape::of(&[vec![f(0.1, 1), f(0.1, 1), None]], true, None).duplicates,
+            1
+        );
         // Depth-only order accepts primitives in any order at equal depths.
         assert!(Shape::of(&[vec![f(0.1, 5), f(0.1, 2)]], false, None).ok());
     }

@@ -51,7 +51,9 @@ use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
     HazardClass, Params,
 };
-use crate::common::{self, composite_frags, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY};
+use crate::common::{
+    self, composite_frags, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
+};
 
 /// Slots per pixel: the samples of the MSAA framebuffer.
 const SAMPLES: usize = 8;
@@ -147,7 +149,10 @@ impl FragmentKernel for Resolve<'_> {
         for s in 0..SAMPLES as u32 {
             let t = f.texel(self.image, f.x(), f.y(), s);
             if t[1] != EMPTY {
-                frags.push(CapturedFrag { depth: f32::from_bits(t[0]), prim: t[1] });
+                frags.push(CapturedFrag {
+                    depth: f32::from_bits(t[0]),
+                    prim: t[1],
+                });
             }
         }
         sort_fragments(&mut frags);
@@ -157,19 +162,31 @@ impl FragmentKernel for Resolve<'_> {
 
 fn msaa_pass(fragment: FragmentState) -> PassState {
     PassState {
-        raster: RasterState { samples: SampleCount::X8, ..RasterState::default() },
+        raster: RasterState {
+            samples: SampleCount::X8,
+            ..RasterState::default()
+        },
         fragment,
         condition: None,
     }
 }
 
 fn stencil(face: StencilFace) -> StencilState {
-    StencilState { enabled: true, front: face, back: face }
+    StencilState {
+        enabled: true,
+        front: face,
+        back: face,
+    }
 }
 
 /// Bytes of a framebuffer's colour targets plus a 32-bit depth-stencil per sample.
 fn fb_bytes(fb: &Framebuffer) -> u64 {
-    let per_sample: u64 = fb.formats.iter().map(|f| 4 * f.channels() as u64).sum::<u64>() + 4;
+    let per_sample: u64 = fb
+        .formats
+        .iter()
+        .map(|f| 4 * f.channels() as u64)
+        .sum::<u64>()
+        + 4;
     fb.width as u64 * fb.height as u64 * fb.samples.count() as u64 * per_sample
 }
 
@@ -184,7 +201,8 @@ impl Algorithm for Srab {
             source: "Myers & Bavoil, Stencil routed A-buffer, SIGGRAPH 2007 sketch + NVIDIA SDK \
                      whitepaper Stencil Routed K-Buffer (2007); depth-fighting seed [18] (sec. 2, \
                      Table 1), occupancy-culling seed [BMO08]",
-            passes: "8 full-screen (stencil init) + 1 geometry (capture) + 1 full-screen (resolve); \
+            passes:
+                "8 full-screen (stencil init) + 1 geometry (capture) + 1 full-screen (resolve); \
                      + 1 geometry count pass for the exact loss figure",
             memory: "4K+2 words in Table 1 of the depth-fighting paper (16K + 8 bytes, K = 8); \
                      here K samples x (RG32F depth+id + 32-bit depth-stencil) = 12K bytes",
@@ -193,12 +211,22 @@ impl Algorithm for Srab {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         run(frame, params, exec, Routing::Saturate)
     }
 }
 
-fn run(frame: &Frame<'_>, params: &Params, exec: &ExecConfig, routing: Routing) -> Result<AlgoResult, AlgoError> {
+fn run(
+    frame: &Frame<'_>,
+    params: &Params,
+    exec: &ExecConfig,
+    routing: Routing,
+) -> Result<AlgoResult, AlgoError> {
     let n = pixels(frame);
     let (w, h) = (frame.width, frame.height);
     let mut device = common::fresh();
@@ -207,9 +235,18 @@ fn run(frame: &Frame<'_>, params: &Params, exec: &ExecConfig, routing: Routing) 
     let counts = device.buffer::<u32>("srab-counts", n as u64)?;
     let mut count_fb = framebuffer(frame, SampleCount::X8, &[Format::R32F])?;
     let mut count_state = FragmentState::new();
-    count_state.targets =
-        vec![TargetState { blend: Some(BlendState::equation(BlendEquation::Add)), ..TargetState::new(Format::R32F) }];
-    let mut report = geometry_pass(&device, &mut count_fb, frame, &msaa_pass(count_state), &Count { counts }, exec)?;
+    count_state.targets = vec![TargetState {
+        blend: Some(BlendState::equation(BlendEquation::Add)),
+        ..TargetState::new(Format::R32F)
+    }];
+    let mut report = geometry_pass(
+        &device,
+        &mut count_fb,
+        frame,
+        &msaa_pass(count_state),
+        &Count { counts },
+        exec,
+    )?;
     let frag_counts = device.memory.read(counts)?;
     let covering = count_fb.image(0);
 
@@ -241,7 +278,14 @@ fn run(frame: &Frame<'_>, params: &Params, exec: &ExecConfig, routing: Routing) 
         read_mask: 0xff,
         write_mask: 0xff,
     });
-    let capture_report = geometry_pass(&device, &mut fb, frame, &msaa_pass(cap_state), &Capture8, exec)?;
+    let capture_report = geometry_pass(
+        &device,
+        &mut fb,
+        frame,
+        &msaa_pass(cap_state),
+        &Capture8,
+        exec,
+    )?;
     let capture_faults = capture_report.stats.faulted;
     report.merge(&capture_report);
     let image = fb.image(0);
@@ -250,7 +294,11 @@ fn run(frame: &Frame<'_>, params: &Params, exec: &ExecConfig, routing: Routing) 
     let mut out_fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA32F])?;
     let mut st = FragmentState::new();
     st.targets = vec![TargetState::new(Format::RGBA32F)];
-    let resolve = Resolve { image: &image, alpha: params.alpha, background: params.background };
+    let resolve = Resolve {
+        image: &image,
+        alpha: params.alpha,
+        background: params.background,
+    };
     report.merge(&device.fullscreen(&mut out_fb, &st, &resolve, exec)?);
     let out = out_fb.image(0);
     let resolved: Vec<[f32; 4]> = (0..n).map(|p| out.texels[p].map(f32::from_bits)).collect();
@@ -261,12 +309,15 @@ fn run(frame: &Frame<'_>, params: &Params, exec: &ExecConfig, routing: Routing) 
     let mut stencil_bad: Option<String> = None;
     let mut order_bad: Option<String> = None;
     let mut overcount: Option<String> = None;
-    let (mut full_pixels, mut partial_pixels, mut partial_dups, mut partial_lost) = (0u64, 0u64, 0u64, 0u64);
+    let (mut full_pixels, mut partial_pixels, mut partial_dups, mut partial_lost) =
+        (0u64, 0u64, 0u64, 0u64);
     let mut lost_full = 0u64;
     for p in 0..n {
         let (x, y) = (p as u32 % w, p as u32 / w);
         let nf = frag_counts[p] as u64;
-        let cov: Vec<u64> = (0..SAMPLES).map(|s| f32::from_bits(covering.texels[p * SAMPLES + s][0]) as u64).collect();
+        let cov: Vec<u64> = (0..SAMPLES)
+            .map(|s| f32::from_bits(covering.texels[p * SAMPLES + s][0]) as u64)
+            .collect();
         for (s, &c) in cov.iter().enumerate() {
             let want = routing.predict(ROUTE + s as u8, c);
             let got = fb.stencil(x, y, s as u32);
@@ -277,7 +328,10 @@ fn run(frame: &Frame<'_>, params: &Params, exec: &ExecConfig, routing: Routing) 
         let samples: Vec<Option<CapturedFrag>> = (0..SAMPLES)
             .map(|s| {
                 let t = image.texels[p * SAMPLES + s];
-                (t[1] != EMPTY).then(|| CapturedFrag { depth: f32::from_bits(t[0]), prim: t[1] })
+                (t[1] != EMPTY).then(|| CapturedFrag {
+                    depth: f32::from_bits(t[0]),
+                    prim: t[1],
+                })
             })
             .collect();
         let stored: Vec<CapturedFrag> = samples.iter().flatten().copied().collect();
@@ -287,7 +341,9 @@ fn run(frame: &Frame<'_>, params: &Params, exec: &ExecConfig, routing: Routing) 
         let distinct = prims.len() as u64;
         if distinct > nf {
             if overcount.is_none() {
-                overcount = Some(format!("pixel ({x}, {y}): {distinct} distinct fragments stored of {nf}"));
+                overcount = Some(format!(
+                    "pixel ({x}, {y}): {distinct} distinct fragments stored of {nf}"
+                ));
             }
         } else {
             dropped += nf - distinct;
@@ -300,10 +356,17 @@ fn run(frame: &Frame<'_>, params: &Params, exec: &ExecConfig, routing: Routing) 
                 full_pixels += 1;
             }
             let m = (nf as usize).min(SAMPLES);
-            let prefix = samples[..m].iter().all(Option::is_some) && samples[m..].iter().all(Option::is_none);
+            let prefix = samples[..m].iter().all(Option::is_some)
+                && samples[m..].iter().all(Option::is_none);
             let ordered = stored.windows(2).all(|v| v[0].prim < v[1].prim);
             if order_bad.is_none() && !(prefix && ordered) {
-                order_bad = Some(format!("pixel ({x}, {y}), {nf} fragments: samples hold {:?}", samples.iter().map(|s| s.map(|f| f.prim)).collect::<Vec<_>>()));
+                order_bad = Some(format!(
+                    "pixel ({x}, {y}), {nf} fragments: samples hold {:?}",
+                    samples
+                        .iter()
+                        .map(|s| s.map(|f| f.prim))
+                        .collect::<Vec<_>>()
+                ));
             }
             lost_full += nf.saturating_sub(SAMPLES as u64);
         } else {
@@ -381,7 +444,8 @@ mod tests {
     fn corner(mesh: &mut Mesh, x0: f32, y0: f32, z: f32, tilt: f32) {
         let b = mesh.positions.len() as u32;
         for (x, y) in [(x0, y0), (x0 + 8.0, y0), (x0, y0 + 8.0)] {
-            mesh.positions.push(Vec3::new(x, y, z + tilt * x.clamp(-1.0, 1.0)));
+            mesh.positions
+                .push(Vec3::new(x, y, z + tilt * x.clamp(-1.0, 1.0)));
         }
         mesh.indices.push([b, b + 1, b + 2]);
     }
@@ -417,11 +481,18 @@ mod tests {
         corner(&mut mesh, 0.5, 0.5, 0.15, 0.0);
         corner(&mut mesh, 0.25, 0.25, 0.55, 0.0);
         corner(&mut mesh, 0.5, -1.0, 0.05, 0.0);
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 16, height: 16 };
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 16,
+            height: 16,
+        };
         let truth = Truth::capture(&frame, 1).unwrap();
         let t = truth.capture.as_ref().unwrap();
         let params = Params::default();
-        let expected_lost: u64 = (0..t.pixels()).map(|p| t.pixel(p).len().saturating_sub(8) as u64).sum();
+        let expected_lost: u64 = (0..t.pixels())
+            .map(|p| t.pixel(p).len().saturating_sub(8) as u64)
+            .sum();
         let deep = (0..t.pixels()).filter(|&p| t.pixel(p).len() > 8).count() as u64;
         assert!(expected_lost > 0 && deep > 0 && deep < t.pixels() as u64);
         for exec in execs() {
@@ -432,7 +503,12 @@ mod tests {
             let m = oracle::compare(&Srab.info(), &r, &truth, &params);
             // Errors exactly on the pixels with more than 8 fragments.
             for p in 0..t.pixels() {
-                assert_eq!(m.error_mask[p], t.pixel(p).len() > 8, "{:?} pixel {p}", exec.mode);
+                assert_eq!(
+                    m.error_mask[p],
+                    t.pixel(p).len() > 8,
+                    "{:?} pixel {p}",
+                    exec.mode
+                );
             }
             assert_eq!(m.error_pixels, deep);
             // Pixels with <= 8 fragments: the resolved image is the exact composite.
@@ -453,7 +529,12 @@ mod tests {
         for i in 0..10 {
             cover_all(&mut mesh, 0.8 - 0.15 * i as f32, 0.01);
         }
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 8, height: 8 };
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 8,
+            height: 8,
+        };
         let truth = Truth::capture(&frame, 1).unwrap();
         let params = Params::default();
         for exec in execs() {
@@ -478,7 +559,12 @@ mod tests {
         for i in 0..260 {
             cover_all(&mut mesh, -0.9 + 1.8 * (i as f32 / 260.0), 0.0);
         }
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 4, height: 4 };
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 4,
+            height: 4,
+        };
         let params = Params::default();
         let exec = ExecConfig::ordered();
         let good = run(&frame, &params, &exec, Routing::Saturate).unwrap();
@@ -490,8 +576,16 @@ mod tests {
         let mut prims: Vec<u32> = cap.pixel(0).iter().map(|f| f.prim).collect();
         prims.sort_unstable();
         assert_eq!(prims, vec![4, 5, 6, 7, 256, 257, 258, 259]);
-        let routing = bad.checks.iter().find(|c| c.name.starts_with("routing")).unwrap();
-        assert!(!routing.passed, "the wrap must be caught: {}", routing.detail);
+        let routing = bad
+            .checks
+            .iter()
+            .find(|c| c.name.starts_with("routing"))
+            .unwrap();
+        assert!(
+            !routing.passed,
+            "the wrap must be caught: {}",
+            routing.detail
+        );
     }
 
     #[test]
@@ -505,10 +599,21 @@ mod tests {
             Vec3::new(-0.7, 0.7, 0.0),
         ]);
         mesh.indices.extend([[0, 1, 2], [0, 2, 3]]);
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 16, height: 16 };
-        let r = Srab.run(&frame, &Params::default(), &ExecConfig::ordered()).unwrap();
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 16,
+            height: 16,
+        };
+        let r = Srab
+            .run(&frame, &Params::default(), &ExecConfig::ordered())
+            .unwrap();
         assert_checks(&r, "quad");
-        let info = r.checks.iter().find(|c| c.name.starts_with("partial")).unwrap();
+        let info = r
+            .checks
+            .iter()
+            .find(|c| c.name.starts_with("partial"))
+            .unwrap();
         assert!(!info.detail.starts_with("0 pixels"), "{}", info.detail);
     }
 }

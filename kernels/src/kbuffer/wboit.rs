@@ -29,12 +29,16 @@
 //! overflowed RGBA16F.
 
 use fragrace_emu::{
-    BlendEquation, BlendFactor, BlendState, ExecConfig, Format, Frag, FragmentKernel, FragmentState,
-    Image, KernelInfo, SampleCount, TargetState,
+    BlendEquation, BlendFactor, BlendState, ExecConfig, Format, Frag, FragmentKernel,
+    FragmentState, Image, KernelInfo, SampleCount, TargetState,
 };
 
-use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params};
-use crate::common::{self, capture_state, framebuffer, geometry_pass, pixels, prim_color_packed, unpack_color};
+use crate::algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+};
+use crate::common::{
+    self, capture_state, framebuffer, geometry_pass, pixels, prim_color_packed, unpack_color,
+};
 
 /// Largest finite half float: what the paper's RGBA16F accumulator can hold.
 pub const F16_MAX: f32 = 65504.0;
@@ -118,7 +122,12 @@ impl Algorithm for Wboit {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let n = pixels(frame);
         let device = common::fresh();
         let mut fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA32F, Format::R32F])?;
@@ -135,42 +144,79 @@ impl Algorithm for Wboit {
             constant: [0.0; 4],
         };
         state.fragment.targets = vec![
-            TargetState { blend: Some(BlendState::equation(BlendEquation::Add)), ..TargetState::new(Format::RGBA32F) },
-            TargetState { blend: Some(revealage_blend), ..TargetState::new(Format::R32F) },
+            TargetState {
+                blend: Some(BlendState::equation(BlendEquation::Add)),
+                ..TargetState::new(Format::RGBA32F)
+            },
+            TargetState {
+                blend: Some(revealage_blend),
+                ..TargetState::new(Format::R32F)
+            },
         ];
-        let mut report = geometry_pass(&device, &mut fb, frame, &state, &Accumulate { alpha: params.alpha }, exec)?;
+        let mut report = geometry_pass(
+            &device,
+            &mut fb,
+            frame,
+            &state,
+            &Accumulate {
+                alpha: params.alpha,
+            },
+            exec,
+        )?;
         let accum = fb.image(0);
         let revealage = fb.image(1);
 
         let mut out_fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA32F])?;
         let mut st = FragmentState::new();
         st.targets = vec![TargetState::new(Format::RGBA32F)];
-        let resolve = Resolve { accum: &accum, revealage: &revealage, background: params.background };
+        let resolve = Resolve {
+            accum: &accum,
+            revealage: &revealage,
+            background: params.background,
+        };
         report.merge(&device.fullscreen(&mut out_fb, &st, &resolve, exec)?);
         let out = out_fb.image(0);
         let image: Vec<[f32; 4]> = (0..n).map(|p| out.texels[p].map(f32::from_bits)).collect();
 
         let acc: Vec<[f32; 4]> = accum.texels.iter().map(|t| t.map(f32::from_bits)).collect();
-        let rev: Vec<f32> = revealage.texels.iter().map(|t| f32::from_bits(t[0])).collect();
+        let rev: Vec<f32> = revealage
+            .texels
+            .iter()
+            .map(|t| f32::from_bits(t[0]))
+            .collect();
         let first = |bad: &dyn Fn(usize) -> bool| (0..n).find(|&p| bad(p));
         let acc_bad = first(&|p| acc[p].iter().any(|v| !v.is_finite() || *v < 0.0));
         let rev_bad = first(&|p| !(0.0..=1.0).contains(&rev[p]));
         let cov_bad = first(&|p| (acc[p][3] > 0.0) != (rev[p] < 1.0) && params.alpha > 0.0);
         let img_bad = first(&|p| image[p].iter().any(|v| !v.is_finite()));
-        let f16 = (0..n).filter(|&p| acc[p].iter().any(|v| *v > F16_MAX)).count();
+        let f16 = (0..n)
+            .filter(|&p| acc[p].iter().any(|v| *v > F16_MAX))
+            .count();
         let detail = |bad: Option<usize>, what: &str| match bad {
             Some(p) => format!("pixel {p}: {what} accum {:?}, revealage {}", acc[p], rev[p]),
             None => format!("{n} pixels"),
         };
         let checks = vec![
-            Check::new("accumulator finite and non-negative", acc_bad.is_none(), detail(acc_bad, "")),
-            Check::new("revealage in [0, 1]", rev_bad.is_none(), detail(rev_bad, "")),
+            Check::new(
+                "accumulator finite and non-negative",
+                acc_bad.is_none(),
+                detail(acc_bad, ""),
+            ),
+            Check::new(
+                "revealage in [0, 1]",
+                rev_bad.is_none(),
+                detail(rev_bad, ""),
+            ),
             Check::new(
                 "coverage consistent: accumulated weight exactly where revealage < 1",
                 cov_bad.is_none(),
                 detail(cov_bad, ""),
             ),
-            Check::new("composite finite everywhere", img_bad.is_none(), detail(img_bad, "image non-finite;")),
+            Check::new(
+                "composite finite everywhere",
+                img_bad.is_none(),
+                detail(img_bad, "image non-finite;"),
+            ),
             Check::new(
                 "pixels whose accumulator would overflow RGBA16F (informational)",
                 true,
@@ -219,17 +265,29 @@ mod tests {
         let mut mesh = Mesh::default();
         quad(&mut mesh, [-0.8, 0.3, -0.9, 0.1], 0.2, 0.05);
         quad(&mut mesh, [0.35, 0.9, -0.2, 0.8], -0.4, 0.05);
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 20, height: 16 };
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 20,
+            height: 16,
+        };
         let truth = Truth::capture(&frame, 1).unwrap();
         for alpha in [0.3, 0.75, 1.0] {
-            let params = Params { alpha, ..Params::default() };
+            let params = Params {
+                alpha,
+                ..Params::default()
+            };
             for exec in execs() {
                 let r = Wboit.run(&frame, &params, &exec).unwrap();
                 for c in &r.checks {
                     assert!(c.passed, "{}: {}", c.name, c.detail);
                 }
                 let m = oracle::compare(&Wboit.info(), &r, &truth, &params);
-                assert_eq!(m.epr, 0.0, "alpha {alpha} {:?}: {:?}", exec.mode, m.first_error);
+                assert_eq!(
+                    m.epr, 0.0,
+                    "alpha {alpha} {:?}: {:?}",
+                    exec.mode, m.first_error
+                );
                 // Background untouched where nothing was drawn.
                 let img = r.image.as_ref().unwrap();
                 let t = truth.capture.as_ref().unwrap();
@@ -247,9 +305,19 @@ mod tests {
         let mut mesh = Mesh::default();
         for i in 0..40 {
             let o = (i % 5) as f32 * 0.08;
-            quad(&mut mesh, [-0.9 + o, 0.9 - o, -0.9 + o, 0.9], -0.95 + 0.045 * i as f32, 0.05);
+            quad(
+                &mut mesh,
+                [-0.9 + o, 0.9 - o, -0.9 + o, 0.9],
+                -0.95 + 0.045 * i as f32,
+                0.05,
+            );
         }
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 16, height: 16 };
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 16,
+            height: 16,
+        };
         let truth = Truth::capture(&frame, 1).unwrap();
         let t = truth.capture.as_ref().unwrap();
         let params = Params::default();
@@ -263,7 +331,12 @@ mod tests {
             // Coverage (alpha) matches the exact composite's within rounding.
             for p in 0..t.pixels() {
                 let want = common::composite_frags(t.pixel(p), params.alpha, params.background);
-                assert!((img[p][3] - want[3]).abs() < 1e-5, "pixel {p}: {} vs {}", img[p][3], want[3]);
+                assert!(
+                    (img[p][3] - want[3]).abs() < 1e-5,
+                    "pixel {p}: {} vs {}",
+                    img[p][3],
+                    want[3]
+                );
             }
             // Fixed-function blending in API order: bit-identical under every executor.
             match &reference {
@@ -271,8 +344,15 @@ mod tests {
                 Some(r0) => assert_eq!(r0, &img, "{:?}", exec.mode),
             }
             let m = oracle::compare(&Wboit.info(), &r, &truth, &params);
-            assert!(m.epr > 0.0, "weighted blending is an approximation on deep pixels");
-            assert!(m.error_mask.iter().enumerate().all(|(p, &e)| !e || t.pixel(p).len() >= 2));
+            assert!(
+                m.epr > 0.0,
+                "weighted blending is an approximation on deep pixels"
+            );
+            assert!(m
+                .error_mask
+                .iter()
+                .enumerate()
+                .all(|(p, &e)| !e || t.pixel(p).len() >= 2));
         }
     }
 
@@ -289,12 +369,32 @@ mod tests {
         // 400 layers near the camera: accum.a = sum a * w ~ 400 * 0.3 * 0.3 * 3e3 * (1 - d)^3 ~ 1e5.
         let mut mesh = Mesh::default();
         for i in 0..400 {
-            quad(&mut mesh, [-1.0, 1.0, -1.0, 1.0], -0.99 + 0.0001 * i as f32, 0.0);
+            quad(
+                &mut mesh,
+                [-1.0, 1.0, -1.0, 1.0],
+                -0.99 + 0.0001 * i as f32,
+                0.0,
+            );
         }
-        let frame = Frame { mesh: &mesh, view_proj: Mat4::IDENTITY, width: 4, height: 4 };
-        let r = Wboit.run(&frame, &Params::default(), &ExecConfig::ordered()).unwrap();
-        let f16 = r.checks.iter().find(|c| c.name.contains("RGBA16F")).unwrap();
+        let frame = Frame {
+            mesh: &mesh,
+            view_proj: Mat4::IDENTITY,
+            width: 4,
+            height: 4,
+        };
+        let r = Wboit
+            .run(&frame, &Params::default(), &ExecConfig::ordered())
+            .unwrap();
+        let f16 = r
+            .checks
+            .iter()
+            .find(|c| c.name.contains("RGBA16F"))
+            .unwrap();
         assert_eq!(f16.detail, format!("16 pixels above {F16_MAX}"));
-        assert!(r.image.unwrap().iter().all(|p| p.iter().all(|v| v.is_finite())));
+        assert!(r
+            .image
+            .unwrap()
+            .iter()
+            .all(|p| p.iter().all(|v| v.is_finite())));
     }
 }
