@@ -5,9 +5,12 @@
 //! checks ([`run`]), images and heatmaps ([`output`]), case files, fuzzing and the CLI.
 //! The GPU itself is [`fragrace_emu`]; the algorithms are [`fragrace_kernels`].
 
+pub mod case;
+pub mod fuzz;
 pub mod output;
 pub mod run;
 pub mod scene;
+pub mod shrink;
 
 pub use fragrace_emu as emu;
 pub use fragrace_kernels as kernels;

@@ -10,7 +10,11 @@ use fragrace::scene::Camera;
 use fragrace_kernels::Params;
 
 #[derive(Parser)]
-#[command(name = "fragrace", version, about = "A software GPU that makes the race hazards of multi-fragment rendering visible, reproducible and measurable")]
+#[command(
+    name = "fragrace",
+    version,
+    about = "A software GPU that makes the race hazards of multi-fragment rendering visible, reproducible and measurable"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -29,6 +33,77 @@ enum Command {
     },
     /// Measure throughput: fragments and triangles per second, scheduled steps per second.
     Bench(BenchArgs),
+    /// Fuzz campaign: random scenes x algorithms x schedules, shrunk case files for findings.
+    Fuzz(FuzzArgs),
+    /// Rerun a case file and say whether its observation still holds, bit for bit.
+    Replay {
+        case: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Tables of measured EPR, R_h, bytes per pixel and time (markdown), and EPR over views.
+    Report(ReportArgs),
+}
+
+#[derive(Args)]
+struct FuzzArgs {
+    /// Stop after this long (e.g. 60s, 10m, 1h).
+    #[arg(long)]
+    time: Option<String>,
+    #[arg(long)]
+    iterations: Option<u64>,
+    /// Algorithms to fuzz (repeat or comma-separate; default: all but truth).
+    #[arg(long, value_delimiter = ',')]
+    algo: Vec<String>,
+    /// Parallel workers.
+    #[arg(long, default_value_t = 1)]
+    jobs: usize,
+    #[arg(long, default_value = "fuzz-out")]
+    out: PathBuf,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Continue the campaign in --out where it stopped.
+    #[arg(long)]
+    resume: bool,
+    /// A directory of OBJ meshes to draw scenes from as well.
+    #[arg(long)]
+    meshes: Option<PathBuf>,
+    /// Seconds to shrink each new case.
+    #[arg(long, default_value_t = 20)]
+    shrink_secs: u64,
+    /// Largest viewport side.
+    #[arg(long, default_value_t = 48)]
+    max_size: u32,
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+struct ReportArgs {
+    /// Algorithms (default: all).
+    #[arg(long, value_delimiter = ',')]
+    algo: Vec<String>,
+    /// Scenes: built-in names or OBJ paths.
+    #[arg(long, value_delimiter = ',', default_value = "hairball,cubes")]
+    scenes: Vec<String>,
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// ordered | parallel | scheduled (scheduled runs use --policy and --seed).
+    #[arg(long, default_value = "parallel")]
+    exec: String,
+    #[arg(long, default_value = "random")]
+    policy: String,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    #[arg(long)]
+    threads: Option<usize>,
+    #[arg(long, default_value_t = 8)]
+    k: u32,
+    /// Instead of the table: EPR of each algorithm over this many azimuths (PNG plot to --out).
+    #[arg(long)]
+    views: Option<u32>,
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 #[derive(Args, Clone)]
@@ -107,14 +182,23 @@ struct BenchArgs {
 fn spec_of(a: &RunArgs) -> Result<RunSpec> {
     let scene = match &a.obj {
         Some(p) => {
-            let bytes = std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))?;
-            SceneSpec::Obj { path: p.clone(), sha256: Some(fragrace::scene::obj::content_hash(&bytes)) }
+            let bytes =
+                std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))?;
+            SceneSpec::Obj {
+                path: p.clone(),
+                sha256: Some(fragrace::scene::obj::content_hash(&bytes)),
+            }
         }
         None => SceneSpec::Builtin(a.scene.clone()),
     };
-    let exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window).map_err(anyhow::Error::msg)?;
+    let exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)
+        .map_err(anyhow::Error::msg)?;
     if fragrace_kernels::algorithm(&a.algo).is_none() {
-        bail!("unknown algorithm `{}`; known: {}", a.algo, fragrace_kernels::names().join(", "));
+        bail!(
+            "unknown algorithm `{}`; known: {}",
+            a.algo,
+            fragrace_kernels::names().join(", ")
+        );
     }
     Ok(RunSpec {
         scene,
@@ -122,7 +206,11 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
         width: a.width,
         height: a.height,
         algo: a.algo.clone(),
-        params: Params { k: a.k.max(1), alpha: a.alpha, ..Params::default() },
+        params: Params {
+            k: a.k.max(1),
+            alpha: a.alpha,
+            ..Params::default()
+        },
         exec,
     })
 }
@@ -143,6 +231,9 @@ fn real_main() -> Result<()> {
         Command::Check(a) => cmd_check(&a),
         Command::List { json } => cmd_list(json),
         Command::Bench(a) => cmd_bench(&a),
+        Command::Fuzz(a) => cmd_fuzz(&a),
+        Command::Replay { case, json } => cmd_replay(&case, json),
+        Command::Report(a) => cmd_report(&a),
     }
 }
 
@@ -160,7 +251,12 @@ fn cmd_render(a: &RunArgs) -> Result<()> {
     Ok(())
 }
 
-fn write_outputs(a: &RunArgs, spec: &RunSpec, r: &run::Rendered, checked: Option<&run::Checked>) -> Result<()> {
+fn write_outputs(
+    a: &RunArgs,
+    spec: &RunSpec,
+    r: &run::Rendered,
+    checked: Option<&run::Checked>,
+) -> Result<()> {
     let res = &r.result;
     if let Some(path) = &a.out {
         if let Some(img) = &res.image {
@@ -172,21 +268,38 @@ fn write_outputs(a: &RunArgs, spec: &RunSpec, r: &run::Rendered, checked: Option
         }
     }
     if let Some(path) = &a.raw_out {
-        let Some(c) = &res.counts else { bail!("--raw-out needs a counting algorithm (count, count-plain)") };
+        let Some(c) = &res.counts else {
+            bail!("--raw-out needs a counting algorithm (count, count-plain)")
+        };
         let bytes: Vec<u8> = c.iter().flat_map(|v| v.to_le_bytes()).collect();
         fragrace::output::write_atomic(path, &bytes)?;
     }
     if let Some(dir) = &a.heatmap {
         std::fs::create_dir_all(dir)?;
         if let Some(c) = &res.counts {
-            fragrace::output::write_heatmap(&dir.join("depth-complexity.png"), spec.width, spec.height, c)?;
+            fragrace::output::write_heatmap(
+                &dir.join("depth-complexity.png"),
+                spec.width,
+                spec.height,
+                c,
+            )?;
         }
         if !res.report.hazard_heat.is_empty() {
-            fragrace::output::write_heatmap(&dir.join("hazards.png"), spec.width, spec.height, &res.report.hazard_heat)?;
+            fragrace::output::write_heatmap(
+                &dir.join("hazards.png"),
+                spec.width,
+                spec.height,
+                &res.report.hazard_heat,
+            )?;
         }
         if let Some(c) = checked {
             let errs: Vec<u32> = c.metrics.error_mask.iter().map(|&e| e as u32).collect();
-            fragrace::output::write_heatmap(&dir.join("errors.png"), spec.width, spec.height, &errs)?;
+            fragrace::output::write_heatmap(
+                &dir.join("errors.png"),
+                spec.width,
+                spec.height,
+                &errs,
+            )?;
         }
     }
     Ok(())
@@ -206,16 +319,41 @@ fn print_summary(v: &serde_json::Value) {
             None => format!(" ({} threads)", v["threads"]),
         }
     );
-    println!("  fragments {}   covered pixels {}   max depth complexity {}", v["fragments"], v["covered_pixels"], v["max_depth_complexity"]);
-    println!("  hazards: lost updates {}, races {}, torn {}   faults {}   dropped {}", v["hazards"]["lost_updates"], v["hazards"]["races"], v["hazards"]["torn"], v["faults"], v["dropped"]);
+    println!(
+        "  fragments {}   covered pixels {}   max depth complexity {}",
+        v["fragments"], v["covered_pixels"], v["max_depth_complexity"]
+    );
+    println!(
+        "  hazards: lost updates {}, races {}, torn {}   faults {}   dropped {}",
+        v["hazards"]["lost_updates"],
+        v["hazards"]["races"],
+        v["hazards"]["torn"],
+        v["faults"],
+        v["dropped"]
+    );
     if !v["epr"].is_null() {
-        println!("  EPR {:.6}  ({} error pixels)   R_h {:.6}   C_p {:.4}", v["epr"].as_f64().unwrap_or(0.0), v["error_pixels"], v["robustness"].as_f64().unwrap_or(0.0), v["coplanarity"].as_f64().unwrap_or(0.0));
+        println!(
+            "  EPR {:.6}  ({} error pixels)   R_h {:.6}   C_p {:.4}",
+            v["epr"].as_f64().unwrap_or(0.0),
+            v["error_pixels"],
+            v["robustness"].as_f64().unwrap_or(0.0),
+            v["coplanarity"].as_f64().unwrap_or(0.0)
+        );
     }
-    println!("  storage {:.1} bytes/pixel   {:.1} ms", v["bytes_per_pixel"].as_f64().unwrap_or(0.0), v["wall_ms"].as_f64().unwrap_or(0.0));
+    println!(
+        "  storage {:.1} bytes/pixel   {:.1} ms",
+        v["bytes_per_pixel"].as_f64().unwrap_or(0.0),
+        v["wall_ms"].as_f64().unwrap_or(0.0)
+    );
     if let Some(checks) = v["checks"].as_array() {
         for c in checks {
             let ok = c["passed"].as_bool().unwrap_or(false);
-            println!("  [{}] {}: {}", if ok { "ok" } else { "FAIL" }, c["name"].as_str().unwrap_or(""), c["detail"].as_str().unwrap_or(""));
+            println!(
+                "  [{}] {}: {}",
+                if ok { "ok" } else { "FAIL" },
+                c["name"].as_str().unwrap_or(""),
+                c["detail"].as_str().unwrap_or("")
+            );
         }
     }
 }
@@ -224,7 +362,11 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
     let spec = spec_of(&a.run)?;
     let loaded = run::load(&spec)?;
     let truth = run::truth(&spec, &loaded)?;
-    let n = if spec.schedule().is_some() { a.schedules.max(1) } else { 1 };
+    let n = if spec.schedule().is_some() {
+        a.schedules.max(1)
+    } else {
+        1
+    };
     let base_seed = spec.schedule().map(|s| s.seed).unwrap_or(0);
     let mut worst: Option<(RunSpec, run::Checked)> = None;
     let mut totals = fragrace_emu::HazardCounts::default();
@@ -251,8 +393,22 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
     summary["hazards_total"] = serde_json::json!({"lost_updates": totals.lost_updates, "races": totals.races, "torn": totals.torn});
     summary["epr_max"] = serde_json::json!(eprs.iter().cloned().fold(0.0, f64::max));
     summary["epr_mean"] = serde_json::json!(eprs.iter().sum::<f64>() / eprs.len() as f64);
-    summary["hazard_list"] = serde_json::json!(w.rendered.result.report.hazard_list.iter().take(8).collect::<Vec<_>>());
-    summary["faults_list"] = serde_json::json!(w.rendered.result.report.faults.iter().take(8).collect::<Vec<_>>());
+    summary["hazard_list"] = serde_json::json!(w
+        .rendered
+        .result
+        .report
+        .hazard_list
+        .iter()
+        .take(8)
+        .collect::<Vec<_>>());
+    summary["faults_list"] = serde_json::json!(w
+        .rendered
+        .result
+        .report
+        .faults
+        .iter()
+        .take(8)
+        .collect::<Vec<_>>());
     let replay = wspec.command("check");
     summary["replay"] = serde_json::json!(replay);
     if a.run.json {
@@ -272,11 +428,21 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
         for h in w.rendered.result.report.hazard_list.iter().take(3) {
             println!(
                 "  {} on {}[{}] at step {}: pixel ({}, {}) primitive {} vs primitive {}",
-                h.kind.name(), h.buffer, h.index, h.step, h.victim.x, h.victim.y, h.victim.primitive, h.other.primitive
+                h.kind.name(),
+                h.buffer,
+                h.index,
+                h.step,
+                h.victim.x,
+                h.victim.y,
+                h.victim.primitive,
+                h.other.primitive
             );
         }
         for f in w.rendered.result.report.faults.iter().take(3) {
-            println!("  fault at pixel ({}, {}) primitive {}: {}", f.invocation.x, f.invocation.y, f.invocation.primitive, f.kind);
+            println!(
+                "  fault at pixel ({}, {}) primitive {}: {}",
+                f.invocation.x, f.invocation.y, f.invocation.primitive, f.kind
+            );
         }
         if w.anomalous() {
             println!("  worst case replays with:\n    {replay}");
@@ -286,14 +452,30 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
 }
 
 fn cmd_list(json: bool) -> Result<()> {
-    let infos: Vec<_> = fragrace_kernels::algorithms().iter().map(|a| a.info()).collect();
+    let infos: Vec<_> = fragrace_kernels::algorithms()
+        .iter()
+        .map(|a| a.info())
+        .collect();
     if json {
-        println!("{}", serde_json::json!({"algorithms": infos, "scenes": fragrace::scene::builtin_names(), "policies": ["random", "pct:D", "warp:N", "reverse", "fifo", "far-first", "bytes:HEX"]}));
+        println!(
+            "{}",
+            serde_json::json!({"algorithms": infos, "scenes": fragrace::scene::builtin_names(), "policies": ["random", "pct:D", "warp:N", "reverse", "fifo", "far-first", "bytes:HEX"]})
+        );
         return Ok(());
     }
-    println!("{:<24} {:<12} {:<16} {:<26} {}", "algorithm", "family", "hazard class", "passes", "memory per pixel");
+    println!(
+        "{:<24} {:<12} {:<16} {:<26} {}",
+        "algorithm", "family", "hazard class", "passes", "memory per pixel"
+    );
     for i in &infos {
-        println!("{:<24} {:<12} {:<16} {:<26} {}", i.name, i.family, i.hazard.name(), i.passes, i.memory);
+        println!(
+            "{:<24} {:<12} {:<16} {:<26} {}",
+            i.name,
+            i.family,
+            i.hazard.name(),
+            i.passes,
+            i.memory
+        );
     }
     println!("\nscenes: {}", fragrace::scene::builtin_names().join(", "));
     println!("policies: random, pct:D, warp:N, reverse, fifo, far-first, bytes:HEX");
@@ -351,5 +533,234 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         );
     }
     let _ = Path::new("");
+    Ok(())
+}
+
+fn parse_duration(s: &str) -> Result<std::time::Duration> {
+    let (num, unit) = s.split_at(
+        s.find(|c: char| !c.is_ascii_digit() && c != '.')
+            .unwrap_or(s.len()),
+    );
+    let v: f64 = num.parse().with_context(|| format!("bad duration `{s}`"))?;
+    let secs = match unit {
+        "" | "s" => v,
+        "ms" => v / 1e3,
+        "m" | "min" => v * 60.0,
+        "h" => v * 3600.0,
+        _ => bail!("bad duration unit in `{s}` (use s, m or h)"),
+    };
+    Ok(std::time::Duration::from_secs_f64(secs))
+}
+
+fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
+    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+    use std::sync::Arc;
+    let cfg = fragrace::fuzz::FuzzConfig {
+        out: a.out.clone(),
+        time: a.time.as_deref().map(parse_duration).transpose()?,
+        iterations: a.iterations,
+        algos: a.algo.clone(),
+        jobs: a.jobs,
+        seed: a.seed,
+        resume: a.resume,
+        meshes: a.meshes.clone(),
+        shrink_budget: std::time::Duration::from_secs(a.shrink_secs),
+        max_size: a.max_size,
+    };
+    if cfg.time.is_none() && cfg.iterations.is_none() {
+        bail!("give --time or --iterations (a campaign needs a budget)");
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        // Ctrl-C: finish the runs in flight, save the state, exit cleanly.
+        let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
+    }
+    let progress = fragrace::fuzz::Progress {
+        executions: AtomicU64::new(0),
+        cases: AtomicU64::new(0),
+        violations: AtomicU64::new(0),
+    };
+    let bar = indicatif::ProgressBar::new_spinner();
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {elapsed_precise} {msg}")
+            .expect("valid template"),
+    );
+    let start = Instant::now();
+    let state = std::thread::scope(|s| {
+        let h = s.spawn(|| fragrace::fuzz::campaign(&cfg, &stop, &progress));
+        while !h.is_finished() {
+            let e = progress.executions.load(Ordering::Relaxed);
+            bar.set_message(format!(
+                "{e} executions ({:.1}/s), {} cases, {} violations",
+                e as f64 / start.elapsed().as_secs_f64().max(1e-3),
+                progress.cases.load(Ordering::Relaxed),
+                progress.violations.load(Ordering::Relaxed)
+            ));
+            bar.tick();
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+        h.join().expect("campaign thread")
+    })?;
+    bar.finish_and_clear();
+    if a.json {
+        println!("{}", serde_json::to_string(&state)?);
+        return Ok(());
+    }
+    println!(
+        "{} executions in {:.1} s ({:.1}/s): {} violations, {} expected findings, {} case files in {}",
+        state.executions,
+        state.elapsed_s,
+        state.executions as f64 / state.elapsed_s.max(1e-3),
+        state.violations,
+        state.expected_findings,
+        state.cases.len(),
+        a.out.display()
+    );
+    for (sig, n) in &state.signatures {
+        println!("  {n:>6}  {sig}");
+    }
+    let algos = state
+        .coverage
+        .keys()
+        .map(|k| k.split(" x ").next().unwrap_or(""))
+        .collect::<std::collections::BTreeSet<_>>()
+        .len();
+    println!(
+        "  coverage: {} algorithm x policy pairs over {algos} algorithms",
+        state.coverage.len()
+    );
+    for c in &state.cases {
+        println!(
+            "  case: {}  (fragrace replay {})",
+            c,
+            a.out.join(c).display()
+        );
+    }
+    Ok(())
+}
+
+fn cmd_replay(path: &Path, json: bool) -> Result<()> {
+    let case = fragrace::case::read(path)?;
+    let r = fragrace::case::replay(&case)?;
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({"exact": r.exact, "holds": r.holds, "recorded": case.observed, "observed": r.observed})
+        );
+    } else {
+        println!("{}: {}", path.display(), case.verdict);
+        println!("  {}", case.spec.command("check"));
+        if let (Some(b), Some(a)) = (&case.original_size, &case.shrunk_size) {
+            println!(
+                "  shrunk from {} triangles, {} pixels, window {} to {} triangles, {} pixels, window {}, {} schedule steps",
+                b.triangles, b.pixels, b.window, a.triangles, a.pixels, a.window, a.schedule_steps
+            );
+        }
+        println!("  recorded: {:?}", case.observed.signature());
+        println!(
+            "  observed: {:?}   {}",
+            r.observed.signature(),
+            r.observed.first_hazard.clone().unwrap_or_default()
+        );
+        println!(
+            "  {}",
+            if r.exact {
+                "reproduced exactly (bit-identical result)"
+            } else if r.holds {
+                "the observation holds, but the result is not bit-identical"
+            } else {
+                "the observation no longer holds"
+            }
+        );
+    }
+    if !r.holds {
+        std::process::exit(1);
+    }
+    Ok(())
+}
+
+fn cmd_report(a: &ReportArgs) -> Result<()> {
+    let algos: Vec<String> = if a.algo.is_empty() {
+        fragrace_kernels::names()
+            .into_iter()
+            .map(String::from)
+            .collect()
+    } else {
+        a.algo.clone()
+    };
+    let exec =
+        run::exec_config(&a.exec, &a.policy, a.seed, a.threads, 64).map_err(anyhow::Error::msg)?;
+    let scene_spec = |s: &str| {
+        if s.contains(".obj") {
+            SceneSpec::Obj {
+                path: s.into(),
+                sha256: None,
+            }
+        } else {
+            SceneSpec::Builtin(s.into())
+        }
+    };
+    if let Some(views) = a.views {
+        let scene = a.scenes.first().context("one scene for --views")?;
+        let mut series: Vec<(String, Vec<f64>)> =
+            algos.iter().map(|n| (n.clone(), Vec::new())).collect();
+        for v in 0..views {
+            let mut spec = RunSpec::new(scene_spec(scene), "truth");
+            spec.width = a.size;
+            spec.height = a.size;
+            spec.camera = Camera::new(360.0 * v as f32 / views as f32, 0.0);
+            spec.exec = exec.clone();
+            spec.params.k = a.k;
+            let loaded = run::load(&spec)?;
+            let truth = run::truth(&spec, &loaded)?;
+            for (name, eprs) in &mut series {
+                let mut s = spec.clone();
+                s.algo = name.clone();
+                eprs.push(run::check_with(&s, &loaded, &truth)?.metrics.epr);
+            }
+            eprintln!("view {}/{views}", v + 1);
+        }
+        println!("azimuth,{}", algos.join(","));
+        for v in 0..views as usize {
+            let row: Vec<String> = series.iter().map(|(_, e)| format!("{:.6}", e[v])).collect();
+            println!("{:.1},{}", 360.0 * v as f32 / views as f32, row.join(","));
+        }
+        if let Some(out) = &a.out {
+            fragrace::output::write_plot(out, "EPR over azimuth", &series)?;
+        }
+        return Ok(());
+    }
+    println!("| algorithm | scene | EPR | R_h | bytes/pixel | dropped | hazards (lost/race/torn) | time ms |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for scene in &a.scenes {
+        let mut spec = RunSpec::new(scene_spec(scene), "truth");
+        spec.width = a.size;
+        spec.height = a.size;
+        spec.exec = exec.clone();
+        spec.params.k = a.k;
+        let loaded = run::load(&spec)?;
+        let truth = run::truth(&spec, &loaded)?;
+        for name in &algos {
+            let mut s = spec.clone();
+            s.algo = name.clone();
+            let c = run::check_with(&s, &loaded, &truth)?;
+            let r = &c.rendered.result;
+            let hz = r.report.hazards;
+            println!(
+                "| {} | {} | {:.6} | {:.4} | {:.1} | {} | {}/{}/{} | {:.1} |",
+                name,
+                scene,
+                c.metrics.epr,
+                c.metrics.robustness,
+                r.storage_bytes as f64 / (a.size as f64 * a.size as f64),
+                r.dropped,
+                hz.lost_updates,
+                hz.races,
+                hz.torn,
+                c.rendered.wall_ms
+            );
+        }
+    }
     Ok(())
 }

@@ -18,9 +18,20 @@ pub enum SceneSpec {
     /// A built-in scene by name (with parameters, e.g. `coplanar-stack:16`).
     Builtin(String),
     /// An OBJ file (plain or gzip); `sha256` of its bytes, checked on replay when present.
-    Obj { path: PathBuf, sha256: Option<String> },
-    /// Triangles inline (fuzz cases): positions and indices.
-    Inline { positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]> },
+    Obj {
+        path: PathBuf,
+        sha256: Option<String>,
+    },
+    /// Triangles inline (fuzz and shrunk cases). With `radius`, the positions are taken as
+    /// already normalised and the camera frames a sphere of that radius (so a subset of a
+    /// scene's triangles renders exactly as they did in the whole scene); without it they
+    /// are normalised like any mesh.
+    Inline {
+        positions: Vec<[f32; 3]>,
+        indices: Vec<[u32; 3]>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        radius: Option<f32>,
+    },
 }
 
 impl SceneSpec {
@@ -30,21 +41,50 @@ impl SceneSpec {
             SceneSpec::Builtin(name) => Scene::builtin(name).map_err(Box::new)?,
             SceneSpec::Obj { path, sha256 } => {
                 if let Some(want) = sha256 {
-                    let bytes = std::fs::read(path).map_err(|source| RunError::Io { path: path.clone(), source })?;
+                    let bytes = std::fs::read(path).map_err(|source| RunError::Io {
+                        path: path.clone(),
+                        source,
+                    })?;
                     let got = crate::scene::obj::content_hash(&bytes);
                     if &got != want {
-                        return Err(RunError::HashMismatch { path: path.clone(), want: want.clone(), got });
+                        return Err(RunError::HashMismatch {
+                            path: path.clone(),
+                            want: want.clone(),
+                            got,
+                        });
                     }
                 }
                 Scene::from_obj(path).map_err(Box::new)?
             }
-            SceneSpec::Inline { positions, indices } => {
+            SceneSpec::Inline {
+                positions,
+                indices,
+                radius,
+            } => {
                 let mesh = fragrace_emu::Mesh {
-                    positions: positions.iter().map(|p| glam::Vec3::from_array(*p)).collect(),
+                    positions: positions
+                        .iter()
+                        .map(|p| glam::Vec3::from_array(*p))
+                        .collect(),
                     normals: None,
                     indices: indices.clone(),
                 };
-                Scene::from_mesh("inline", mesh).map_err(Box::new)?
+                match radius {
+                    Some(r) if r.is_finite() && *r > 0.0 => {
+                        mesh.validate().map_err(|source| {
+                            Box::new(SceneError::InvalidMesh {
+                                name: "inline".into(),
+                                source,
+                            })
+                        })?;
+                        Scene {
+                            name: "inline".into(),
+                            mesh,
+                            radius: *r,
+                        }
+                    }
+                    _ => Scene::from_mesh("inline", mesh).map_err(Box::new)?,
+                }
             }
         })
     }
@@ -117,7 +157,10 @@ impl RunSpec {
             self.exec.mode.name()
         );
         if let Some(s) = self.schedule() {
-            c += &format!(" --policy {} --seed {} --window {}", s.policy, s.seed, s.window);
+            c += &format!(
+                " --policy {} --seed {} --window {}",
+                s.policy, s.seed, s.window
+            );
         } else if self.exec.mode == ExecMode::Parallel {
             c += &format!(" --threads {}", self.exec.threads);
         }
@@ -135,9 +178,16 @@ pub enum RunError {
     #[error(transparent)]
     Algo(#[from] fragrace_kernels::AlgoError),
     #[error("{}: {source}", path.display())]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{}: sha256 is {got}, but the case was recorded with {want}", path.display())]
-    HashMismatch { path: PathBuf, want: String, got: String },
+    HashMismatch {
+        path: PathBuf,
+        want: String,
+        got: String,
+    },
     #[error("viewport {0}x{1}: width and height must be between 1 and {max}", max = fragrace_emu::framebuffer::MAX_DIMENSION)]
     Viewport(u32, u32),
 }
@@ -150,7 +200,12 @@ pub struct Loaded {
 
 impl Loaded {
     pub fn frame(&self, spec: &RunSpec) -> Frame<'_> {
-        Frame { mesh: &self.scene.mesh, view_proj: self.view_proj, width: spec.width, height: spec.height }
+        Frame {
+            mesh: &self.scene.mesh,
+            view_proj: self.view_proj,
+            width: spec.width,
+            height: spec.height,
+        }
     }
 }
 
@@ -174,12 +229,17 @@ pub struct Rendered {
 
 /// Runs the algorithm of `spec` on an already loaded scene.
 pub fn render(spec: &RunSpec, loaded: &Loaded) -> Result<Rendered, RunError> {
-    let algo = fragrace_kernels::algorithm(&spec.algo).ok_or_else(|| RunError::UnknownAlgo(spec.algo.clone()))?;
+    let algo = fragrace_kernels::algorithm(&spec.algo)
+        .ok_or_else(|| RunError::UnknownAlgo(spec.algo.clone()))?;
     let info = algo.info();
     let frame = loaded.frame(spec);
     let t = Instant::now();
     let result = algo.run(&frame, &spec.params, &spec.exec)?;
-    Ok(Rendered { info, result, wall_ms: t.elapsed().as_secs_f64() * 1e3 })
+    Ok(Rendered {
+        info,
+        result,
+        wall_ms: t.elapsed().as_secs_f64() * 1e3,
+    })
 }
 
 /// The truth of a frame (computed once, shared by many checks).
@@ -199,7 +259,12 @@ impl Checked {
     }
     /// Invariants that failed.
     pub fn failed_checks(&self) -> Vec<&fragrace_kernels::Check> {
-        self.rendered.result.checks.iter().filter(|c| !c.passed).collect()
+        self.rendered
+            .result
+            .checks
+            .iter()
+            .filter(|c| !c.passed)
+            .collect()
     }
     /// Whether anything at all went wrong (error pixels, hazards, faults, failed invariants).
     pub fn anomalous(&self) -> bool {
@@ -211,17 +276,29 @@ impl Checked {
 }
 
 /// Runs and checks one spec against a given truth.
-pub fn check_with(spec: &RunSpec, loaded: &Loaded, truth: &AlgoResult) -> Result<Checked, RunError> {
+pub fn check_with(
+    spec: &RunSpec,
+    loaded: &Loaded,
+    truth: &AlgoResult,
+) -> Result<Checked, RunError> {
     let rendered = render(spec, loaded)?;
     let metrics = compare(&rendered.info, &rendered.result, truth, &spec.params);
     Ok(Checked { rendered, metrics })
 }
 
 /// The summary of a run as one JSON object (the CLI's `--json`).
-pub fn summary_json(spec: &RunSpec, loaded: &Loaded, checked: Option<&Checked>, rendered: &Rendered) -> serde_json::Value {
+pub fn summary_json(
+    spec: &RunSpec,
+    loaded: &Loaded,
+    checked: Option<&Checked>,
+    rendered: &Rendered,
+) -> serde_json::Value {
     let r = &rendered.result;
     let (policy, seed) = match spec.schedule() {
-        Some(s) => (serde_json::json!(s.policy.to_string()), serde_json::json!(s.seed)),
+        Some(s) => (
+            serde_json::json!(s.policy.to_string()),
+            serde_json::json!(s.seed),
+        ),
         None => (serde_json::Value::Null, serde_json::Value::Null),
     };
     let counts = r.counts.as_ref();
@@ -270,17 +347,74 @@ pub fn summary_json(spec: &RunSpec, loaded: &Loaded, checked: Option<&Checked>, 
     v
 }
 
+/// A digest (sha256, hex) of everything a run produced: captured fragments, counts, image
+/// bits, hazards and faults. Equal digests = bit-identical runs.
+pub fn digest(r: &AlgoResult) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    if let Some(c) = &r.capture {
+        for o in &c.offsets {
+            h.update(o.to_le_bytes());
+        }
+        for f in &c.frags {
+            h.update(f.depth.to_bits().to_le_bytes());
+            h.update(f.prim.to_le_bytes());
+        }
+    }
+    if let Some(c) = &r.counts {
+        for v in c {
+            h.update(v.to_le_bytes());
+        }
+    }
+    if let Some(img) = &r.image {
+        for p in img {
+            for c in p {
+                h.update(c.to_bits().to_le_bytes());
+            }
+        }
+    }
+    let hz = r.report.hazards;
+    h.update(format!(
+        "{}/{}/{}/{}/{}",
+        hz.lost_updates, hz.races, hz.torn, r.report.stats.faulted, r.dropped
+    ));
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
 /// Parses an executor description from CLI-style parts.
-pub fn exec_config(exec: &str, policy: &str, seed: u64, threads: Option<usize>, window: usize) -> Result<ExecConfig, String> {
-    let threads = threads.unwrap_or_else(fragrace_emu::exec::default_threads).max(1);
+pub fn exec_config(
+    exec: &str,
+    policy: &str,
+    seed: u64,
+    threads: Option<usize>,
+    window: usize,
+) -> Result<ExecConfig, String> {
+    let threads = threads
+        .unwrap_or_else(fragrace_emu::exec::default_threads)
+        .max(1);
     let mode = match exec {
         "ordered" => ExecMode::Ordered,
         "parallel" => ExecMode::Parallel,
         "scheduled" => {
-            let policy: Policy = policy.parse().map_err(|e: fragrace_emu::exec::PolicyParseError| e.to_string())?;
-            ExecMode::Scheduled(ScheduleConfig { policy, seed, window: window.max(1), record: false })
+            let policy: Policy = policy
+                .parse()
+                .map_err(|e: fragrace_emu::exec::PolicyParseError| e.to_string())?;
+            ExecMode::Scheduled(ScheduleConfig {
+                policy,
+                seed,
+                window: window.max(1),
+                record: false,
+            })
         }
-        other => return Err(format!("unknown executor `{other}`: expected ordered, parallel or scheduled")),
+        other => {
+            return Err(format!(
+                "unknown executor `{other}`: expected ordered, parallel or scheduled"
+            ))
+        }
     };
-    Ok(ExecConfig { mode, threads, ..ExecConfig::default() })
+    Ok(ExecConfig {
+        mode,
+        threads,
+        ..ExecConfig::default()
+    })
 }

@@ -11,7 +11,10 @@ use fragrace_emu::{ExecConfig, ExecMode, Policy, ScheduleConfig};
 use fragrace_kernels::{AlgoResult, Capacity, HazardClass};
 
 fn env_or(name: &str, default: u64) -> u64 {
-    std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
 }
 
 fn spec(scene: &str, algo: &str, size: u32, azimuth: f32) -> RunSpec {
@@ -23,11 +26,23 @@ fn spec(scene: &str, algo: &str, size: u32, azimuth: f32) -> RunSpec {
 }
 
 fn executors(seeds: u64) -> Vec<ExecConfig> {
-    let mut v = vec![ExecConfig::ordered(), ExecConfig::parallel(2), ExecConfig { lockstep: false, ..ExecConfig::parallel(3) }];
+    let mut v = vec![
+        ExecConfig::ordered(),
+        ExecConfig::parallel(2),
+        ExecConfig {
+            lockstep: false,
+            ..ExecConfig::parallel(3)
+        },
+    ];
     for p in Policy::all() {
         for seed in 0..seeds {
             v.push(ExecConfig {
-                mode: ExecMode::Scheduled(ScheduleConfig { policy: p.clone(), seed, window: 32, record: false }),
+                mode: ExecMode::Scheduled(ScheduleConfig {
+                    policy: p.clone(),
+                    seed,
+                    window: 32,
+                    record: false,
+                }),
                 ..ExecConfig::parallel(2)
             });
         }
@@ -38,9 +53,17 @@ fn executors(seeds: u64) -> Vec<ExecConfig> {
 /// What went wrong in one run, or None. `baseline` is the same algorithm under the ordered
 /// executor: a hazard-free algorithm must give exactly its error pixels under every
 /// executor (none at all for exact algorithms, which is checked on the baseline itself).
-fn verdict(c: &run::Checked, class: HazardClass, baseline: Option<&run::Checked>) -> Option<String> {
+fn verdict(
+    c: &run::Checked,
+    class: HazardClass,
+    baseline: Option<&run::Checked>,
+) -> Option<String> {
     let r = &c.rendered.result;
-    let failed: Vec<_> = c.failed_checks().iter().map(|c| format!("{}: {}", c.name, c.detail)).collect();
+    let failed: Vec<_> = c
+        .failed_checks()
+        .iter()
+        .map(|c| format!("{}: {}", c.name, c.detail))
+        .collect();
     if !failed.is_empty() {
         return Some(format!("invariants failed: {failed:?}"));
     }
@@ -59,11 +82,19 @@ fn verdict(c: &run::Checked, class: HazardClass, baseline: Option<&run::Checked>
                 c.metrics.epr,
                 c.metrics.error_pixels,
                 c.metrics.first_error,
-                if baseline.is_some() { " differs from the ordered run" } else { "" }
+                if baseline.is_some() {
+                    " differs from the ordered run"
+                } else {
+                    ""
+                }
             ));
         }
         if r.report.hazards.total() > 0 {
-            return Some(format!("hazards {:?}: {:?}", r.report.hazards, r.report.hazard_list.first()));
+            return Some(format!(
+                "hazards {:?}: {:?}",
+                r.report.hazards,
+                r.report.hazard_list.first()
+            ));
         }
     }
     None
@@ -82,7 +113,8 @@ fn sweep(scene: &str, size: u32, azimuths: &[f32], seeds: u64) {
             for exec in executors(seeds) {
                 let mut s = spec(scene, info.name, size, az);
                 s.exec = exec;
-                let c = run::check_with(&s, &loaded, &truth).unwrap_or_else(|e| panic!("{}: {e}", s.command("check")));
+                let c = run::check_with(&s, &loaded, &truth)
+                    .unwrap_or_else(|e| panic!("{}: {e}", s.command("check")));
                 if let Some(why) = verdict(&c, info.hazard, baseline.as_ref()) {
                     failures.push(format!("{why}\n    {}", s.command("check")));
                 }
@@ -97,39 +129,75 @@ fn sweep(scene: &str, size: u32, azimuths: &[f32], seeds: u64) {
             }
         }
     }
-    assert!(failures.is_empty(), "{} failing runs on {scene}:\n{}", failures.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} failing runs on {scene}:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
     if scene == "hairball" {
         for (name, (epr_runs, hazard_runs)) in prone_seen {
             if name == "kb-spinlock" {
                 continue; // hazard-prone only with a small spin cap: see the kernels' tests
             }
-            assert!(hazard_runs > 0, "{name}: no scheduled run showed a hazard on {scene}");
-            assert!(epr_runs > 0, "{name}: no scheduled run differed from the truth on {scene}");
+            assert!(
+                hazard_runs > 0,
+                "{name}: no scheduled run showed a hazard on {scene}"
+            );
+            assert!(
+                epr_runs > 0,
+                "{name}: no scheduled run differed from the truth on {scene}"
+            );
         }
     }
 }
 
 #[test]
 fn every_algorithm_on_cubes() {
-    sweep("cubes", env_or("FRAGRACE_SIZE", 48) as u32, &[0.0, 135.0], env_or("FRAGRACE_SEEDS", 3));
+    sweep(
+        "cubes",
+        env_or("FRAGRACE_SIZE", 48) as u32,
+        &[0.0, 135.0],
+        env_or("FRAGRACE_SEEDS", 3),
+    );
 }
 
 #[test]
 fn every_algorithm_on_coplanar_stack() {
-    sweep("coplanar-stack", env_or("FRAGRACE_SIZE", 48) as u32, &[20.0], env_or("FRAGRACE_SEEDS", 3));
+    sweep(
+        "coplanar-stack",
+        env_or("FRAGRACE_SIZE", 48) as u32,
+        &[20.0],
+        env_or("FRAGRACE_SEEDS", 3),
+    );
 }
 
 #[test]
 fn every_algorithm_on_spheres() {
-    sweep("spheres", env_or("FRAGRACE_SIZE", 48) as u32, &[0.0], env_or("FRAGRACE_SEEDS", 3));
+    sweep(
+        "spheres",
+        env_or("FRAGRACE_SIZE", 48) as u32,
+        &[0.0],
+        env_or("FRAGRACE_SEEDS", 3),
+    );
 }
 
 #[test]
 fn every_algorithm_on_hairball() {
-    sweep("hairball", env_or("FRAGRACE_SIZE", 48) as u32, &[0.0], env_or("FRAGRACE_SEEDS", 3));
+    sweep(
+        "hairball",
+        env_or("FRAGRACE_SIZE", 48) as u32,
+        &[0.0],
+        env_or("FRAGRACE_SEEDS", 3),
+    );
 }
 
 #[test]
 fn every_algorithm_on_bunny() {
-    sweep("bunny", env_or("FRAGRACE_SIZE", 48) as u32, &[90.0], env_or("FRAGRACE_SEEDS", 2));
+    sweep(
+        "bunny",
+        env_or("FRAGRACE_SIZE", 48) as u32,
+        &[90.0],
+        env_or("FRAGRACE_SEEDS", 2),
+    );
 }

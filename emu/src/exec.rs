@@ -21,8 +21,8 @@ mod threads;
 
 pub use policy::{Policy, PolicyParseError};
 pub use run::Fault;
-pub use threads::{run_on_threads, ThreadOutcome};
 pub(crate) use run::{shade, FragOut, ShadeOutcome};
+pub use threads::{run_on_threads, ThreadOutcome};
 
 /// Configuration of the `scheduled` executor.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -37,7 +37,12 @@ pub struct ScheduleConfig {
 
 impl Default for ScheduleConfig {
     fn default() -> Self {
-        ScheduleConfig { policy: Policy::Random, seed: 0, window: 64, record: false }
+        ScheduleConfig {
+            policy: Policy::Random,
+            seed: 0,
+            window: 64,
+            record: false,
+        }
     }
 }
 
@@ -95,14 +100,25 @@ impl Default for ExecConfig {
 
 impl ExecConfig {
     pub fn ordered() -> ExecConfig {
-        ExecConfig { mode: ExecMode::Ordered, ..Default::default() }
+        ExecConfig {
+            mode: ExecMode::Ordered,
+            ..Default::default()
+        }
     }
     pub fn parallel(threads: usize) -> ExecConfig {
-        ExecConfig { mode: ExecMode::Parallel, threads: threads.max(1), ..Default::default() }
+        ExecConfig {
+            mode: ExecMode::Parallel,
+            threads: threads.max(1),
+            ..Default::default()
+        }
     }
     pub fn scheduled(policy: Policy, seed: u64) -> ExecConfig {
         ExecConfig {
-            mode: ExecMode::Scheduled(ScheduleConfig { policy, seed, ..Default::default() }),
+            mode: ExecMode::Scheduled(ScheduleConfig {
+                policy,
+                seed,
+                ..Default::default()
+            }),
             ..Default::default()
         }
     }
@@ -110,5 +126,7 @@ impl ExecConfig {
 
 /// All cores.
 pub fn default_threads() -> usize {
-    std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
 }

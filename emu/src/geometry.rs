@@ -8,7 +8,11 @@ pub enum MeshError {
     #[error("vertex {index} has a non-finite coordinate {value:?}")]
     NonFinite { index: usize, value: [f32; 3] },
     #[error("triangle {tri} refers to vertex {index}, but the mesh has {vertices} vertices")]
-    IndexOutOfRange { tri: usize, index: u32, vertices: usize },
+    IndexOutOfRange {
+        tri: usize,
+        index: u32,
+        vertices: usize,
+    },
     #[error("normals: {normals} given for {vertices} vertices")]
     NormalCount { normals: usize, vertices: usize },
 }
@@ -30,25 +34,38 @@ impl Mesh {
         let finite = self.positions.iter().fold(true, |ok, p| ok & p.is_finite());
         let max_index = self.indices.iter().flatten().fold(0u32, |m, &i| m.max(i));
         let in_range = self.indices.is_empty() || (max_index as usize) < self.positions.len();
-        let normals_ok = self.normals.as_ref().is_none_or(|n| n.len() == self.positions.len());
+        let normals_ok = self
+            .normals
+            .as_ref()
+            .is_none_or(|n| n.len() == self.positions.len());
         if finite && in_range && normals_ok {
             return Ok(());
         }
         for (index, p) in self.positions.iter().enumerate() {
             if !p.is_finite() {
-                return Err(MeshError::NonFinite { index, value: p.to_array() });
+                return Err(MeshError::NonFinite {
+                    index,
+                    value: p.to_array(),
+                });
             }
         }
         if let Some(n) = &self.normals {
             if n.len() != self.positions.len() {
-                return Err(MeshError::NormalCount { normals: n.len(), vertices: self.positions.len() });
+                return Err(MeshError::NormalCount {
+                    normals: n.len(),
+                    vertices: self.positions.len(),
+                });
             }
         }
         let vertices = self.positions.len();
         for (tri, t) in self.indices.iter().enumerate() {
             for &index in t {
                 if index as usize >= vertices {
-                    return Err(MeshError::IndexOutOfRange { tri, index, vertices });
+                    return Err(MeshError::IndexOutOfRange {
+                        tri,
+                        index,
+                        vertices,
+                    });
                 }
             }
         }
@@ -62,7 +79,11 @@ impl Mesh {
     /// Axis-aligned bounds `(min, max)`; `None` for an empty mesh.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         let first = *self.positions.first()?;
-        Some(self.positions.iter().fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))))
+        Some(
+            self.positions
+                .iter()
+                .fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))),
+        )
     }
 
     /// Appends another mesh (indices rebased).
@@ -73,7 +94,8 @@ impl Mesh {
             (Some(a), Some(b)) => a.extend_from_slice(b),
             _ => self.normals = None,
         }
-        self.indices.extend(other.indices.iter().map(|t| t.map(|i| i + base)));
+        self.indices
+            .extend(other.indices.iter().map(|t| t.map(|i| i + base)));
     }
 }
 
@@ -90,6 +112,10 @@ pub struct Draw<'m> {
 impl<'m> Draw<'m> {
     /// One instance with the identity model matrix.
     pub fn new(mesh: &'m Mesh, view_proj: Mat4) -> Draw<'m> {
-        Draw { mesh, instances: vec![Mat4::IDENTITY], view_proj }
+        Draw {
+            mesh,
+            instances: vec![Mat4::IDENTITY],
+            view_proj,
+        }
     }
 }

@@ -18,7 +18,9 @@ use std::hash::{BuildHasherDefault, Hasher};
 use crate::memory::{Addr, OpKind};
 
 /// The kinds of hazard.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 pub enum HazardKind {
     LostUpdate,
     Race,
@@ -98,7 +100,9 @@ impl Hasher for AddrHasher {
         }
     }
     fn write_u64(&mut self, v: u64) {
-        self.0 = (self.0 ^ v).wrapping_mul(0x9E37_79B9_7F4A_7C15).rotate_left(29);
+        self.0 = (self.0 ^ v)
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .rotate_left(29);
     }
     fn write_usize(&mut self, v: usize) {
         self.write_u64(v as u64);
@@ -170,7 +174,16 @@ impl Detector {
 
     /// An invocation was admitted at `step`.
     pub fn start(&mut self, id: InvocationId, step: u64) {
-        self.invs.insert(id.seq, InvState { id, start: step, end: None, loads: Vec::new(), record: None });
+        self.invs.insert(
+            id.seq,
+            InvState {
+                id,
+                start: step,
+                end: None,
+                loads: Vec::new(),
+                record: None,
+            },
+        );
     }
 
     /// An invocation finished (or was dropped after a fault) at `step`.
@@ -186,7 +199,9 @@ impl Detector {
     /// other started).
     fn overlapped(&self, a: u64, b: u64) -> bool {
         match (self.invs.get(&a), self.invs.get(&b)) {
-            (Some(x), Some(y)) => x.end.is_none_or(|e| e > y.start) && y.end.is_none_or(|e| e > x.start),
+            (Some(x), Some(y)) => {
+                x.end.is_none_or(|e| e > y.start) && y.end.is_none_or(|e| e > x.start)
+            }
             _ => false,
         }
     }
@@ -197,14 +212,27 @@ impl Detector {
             return;
         }
         self.counts.bump(kind);
-        let (Some(v), Some(o)) = (self.invs.get(&victim), self.invs.get(&other)) else { return };
+        let (Some(v), Some(o)) = (self.invs.get(&victim), self.invs.get(&other)) else {
+            return;
+        };
         let (v, o) = (v.id, o.id);
         if let Some(h) = self.heat.get_mut((v.y * self.width + v.x) as usize) {
             *h += 1;
         }
         if self.hazards.len() < self.keep {
-            let buffer = self.names.get(addr.buffer() as usize).cloned().unwrap_or_default();
-            self.hazards.push(Hazard { kind, buffer, index: addr.index(), victim: v, other: o, step });
+            let buffer = self
+                .names
+                .get(addr.buffer() as usize)
+                .cloned()
+                .unwrap_or_default();
+            self.hazards.push(Hazard {
+                kind,
+                buffer,
+                index: addr.index(),
+                victim: v,
+                other: o,
+                step,
+            });
         }
     }
 
@@ -221,14 +249,23 @@ impl Detector {
     ) {
         let plain = op.is_plain();
         let write = op.is_write();
-        let me = Access { seq, step, plain, lock };
+        let me = Access {
+            seq,
+            step,
+            plain,
+            lock,
+        };
         let state = self.addrs.entry(addr).or_default();
         state.accesses += 1;
         if !state.touchers.contains(&seq) {
             state.touchers.push(seq);
         }
         let prev_write = state.last_write;
-        let reads = if write { std::mem::take(&mut state.reads) } else { Vec::new() };
+        let reads = if write {
+            std::mem::take(&mut state.reads)
+        } else {
+            Vec::new()
+        };
         // Conflicts with the last write (and, for a write, with the reads since it).
         let mut conflicts: Vec<Access> = Vec::new();
         if let Some(w) = prev_write {
@@ -256,7 +293,10 @@ impl Detector {
         }
         // Lost update: my plain store after my plain load, with another's write between.
         if op == OpKind::Store {
-            let my_load = self.invs.get(&seq).and_then(|s| s.loads.iter().rev().find(|l| l.0 == addr).map(|l| l.1));
+            let my_load = self
+                .invs
+                .get(&seq)
+                .and_then(|s| s.loads.iter().rev().find(|l| l.0 == addr).map(|l| l.1));
             if let (Some(load_step), Some(w)) = (my_load, prev_write) {
                 if w.seq != seq && w.step > load_step {
                     self.report(HazardKind::LostUpdate, addr, seq, w.seq, step);
@@ -315,8 +355,10 @@ impl Detector {
         }
         // Peak concurrency: touchers still in flight.
         let live: Vec<u64> = self.addrs[&addr].touchers.clone();
-        let live: Vec<u64> =
-            live.into_iter().filter(|t| self.invs.get(t).is_some_and(|s| s.end.is_none())).collect();
+        let live: Vec<u64> = live
+            .into_iter()
+            .filter(|t| self.invs.get(t).is_some_and(|s| s.end.is_none()))
+            .collect();
         let st = self.addrs.get_mut(&addr).expect("entry exists");
         st.peak = st.peak.max(live.len() as u32);
         st.touchers = live;
@@ -330,7 +372,11 @@ impl Detector {
     }
     /// The hottest addresses: (address, accesses, peak concurrent accessors).
     pub fn hotspots(&self, n: usize) -> Vec<(Addr, u64, u32)> {
-        let mut v: Vec<(Addr, u64, u32)> = self.addrs.iter().map(|(a, s)| (*a, s.accesses, s.peak)).collect();
+        let mut v: Vec<(Addr, u64, u32)> = self
+            .addrs
+            .iter()
+            .map(|(a, s)| (*a, s.accesses, s.peak))
+            .collect();
         v.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
         v.truncate(n);
         v

@@ -37,7 +37,10 @@ pub struct Interlock {
 impl Interlock {
     pub fn new(width: u32, height: u32) -> Interlock {
         let n = width as usize * height as usize;
-        Interlock { width, words: (0..n).map(|_| AtomicU32::new(0)).collect() }
+        Interlock {
+            width,
+            words: (0..n).map(|_| AtomicU32::new(0)).collect(),
+        }
     }
 
     /// The lock word of a pixel.
@@ -51,7 +54,8 @@ impl Interlock {
         if mode.ordered {
             w.load(Ordering::Acquire) == ticket
         } else {
-            w.compare_exchange(0, 1, Ordering::Acquire, Ordering::Relaxed).is_ok()
+            w.compare_exchange(0, 1, Ordering::Acquire, Ordering::Relaxed)
+                .is_ok()
         }
     }
 

@@ -45,7 +45,12 @@ pub struct KernelInfo {
 
 impl KernelInfo {
     pub const fn new(name: &'static str) -> KernelInfo {
-        KernelInfo { name, may_discard: false, writes_depth: false, interlock: None }
+        KernelInfo {
+            name,
+            may_discard: false,
+            writes_depth: false,
+            interlock: None,
+        }
     }
     pub const fn with_discard(mut self) -> KernelInfo {
         self.may_discard = true;
@@ -92,7 +97,11 @@ pub struct FragInput {
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum FaultKind {
     /// An access past the end of a buffer.
-    OutOfBounds { buffer: String, index: u64, len: u32 },
+    OutOfBounds {
+        buffer: String,
+        index: u64,
+        len: u32,
+    },
     /// The invocation took more steps than the watchdog allows (an endless loop, a
     /// spinlock that never gets its lock).
     Watchdog { steps: u64 },
@@ -109,13 +118,22 @@ impl std::fmt::Display for FaultKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             FaultKind::OutOfBounds { buffer, index, len } => {
-                write!(f, "out-of-bounds access: `{buffer}`[{index}] but it holds {len} words")
+                write!(
+                    f,
+                    "out-of-bounds access: `{buffer}`[{index}] but it holds {len} words"
+                )
             }
             FaultKind::Watchdog { steps } => {
-                write!(f, "watchdog: the invocation ran {steps} steps without finishing")
+                write!(
+                    f,
+                    "watchdog: the invocation ran {steps} steps without finishing"
+                )
             }
             FaultKind::Deadlock { waits } => {
-                write!(f, "deadlock: the invocation waited {waits} times without getting in")
+                write!(
+                    f,
+                    "deadlock: the invocation waited {waits} times without getting in"
+                )
             }
             FaultKind::Panic { message } => write!(f, "kernel panicked: {message}"),
             FaultKind::Misuse { message } => write!(f, "kernel API misuse: {message}"),
@@ -128,7 +146,11 @@ impl std::fmt::Display for FaultKind {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum StepKind {
     /// A memory access.
-    Mem { addr: Addr, op: OpKind, record: Option<RecordSpan> },
+    Mem {
+        addr: Addr,
+        op: OpKind,
+        record: Option<RecordSpan>,
+    },
     /// Entering the interlock critical section.
     InterlockBegin,
     /// Leaving it.
@@ -425,7 +447,9 @@ impl<'a> Frag<'a> {
         if let Some(o) = self.inv.outputs.get(target) {
             o.set(value);
         } else {
-            self.inv.set_fault(FaultKind::Misuse { message: format!("output to target {target}; at most 8 exist") });
+            self.inv.set_fault(FaultKind::Misuse {
+                message: format!("output to target {target}; at most 8 exist"),
+            });
         }
     }
     /// Discards the fragment: no colour, depth or stencil write after the shader (memory
@@ -439,7 +463,11 @@ impl<'a> Frag<'a> {
     }
 
     fn step(&self, kind: StepKind) -> Step<'a> {
-        Step { frag: *self, kind, yielded: false }
+        Step {
+            frag: *self,
+            kind,
+            yielded: false,
+        }
     }
 
     /// Checks bounds; on failure records the fault (the invocation ends at its next await).
@@ -456,13 +484,24 @@ impl<'a> Frag<'a> {
         }
     }
 
-    async fn access<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp, record: Option<RecordSpan>) -> T {
+    async fn access<T: Word>(
+        &self,
+        buf: Buf<T>,
+        index: u32,
+        op: MemOp,
+        record: Option<RecordSpan>,
+    ) -> T {
         let Some(addr) = self.addr(buf, index) else {
             Halt.await;
             unreachable!("a halted invocation is never resumed")
         };
         let kind = op.kind();
-        self.step(StepKind::Mem { addr, op: kind, record }).await;
+        self.step(StepKind::Mem {
+            addr,
+            op: kind,
+            record,
+        })
+        .await;
         let k = kind as usize;
         self.inv.ops[k].set(self.inv.ops[k].get() + 1);
         let ordering = if kind.is_plain() {
@@ -486,7 +525,8 @@ impl<'a> Frag<'a> {
     }
     /// Plain store.
     pub async fn store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) {
-        self.access(buf, index, MemOp::Store(value.to_bits()), None).await;
+        self.access(buf, index, MemOp::Store(value.to_bits()), None)
+            .await;
     }
     /// Atomic load (acquire).
     pub async fn atomic_load<T: Word>(&self, buf: Buf<T>, index: u32) -> T {
@@ -494,44 +534,66 @@ impl<'a> Frag<'a> {
     }
     /// Atomic store (release).
     pub async fn atomic_store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) {
-        self.access(buf, index, MemOp::AtomicStore(value.to_bits()), None).await;
+        self.access(buf, index, MemOp::AtomicStore(value.to_bits()), None)
+            .await;
     }
     /// Atomic add; returns the previous value (wrapping for integers).
     pub async fn atomic_add<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
-        self.access(buf, index, MemOp::Add(value.to_bits()), None).await
+        self.access(buf, index, MemOp::Add(value.to_bits()), None)
+            .await
     }
     /// Atomic subtract; returns the previous value.
     pub async fn atomic_sub<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
-        self.access(buf, index, MemOp::Sub(value.to_bits()), None).await
+        self.access(buf, index, MemOp::Sub(value.to_bits()), None)
+            .await
     }
     /// Atomic minimum (as `T`: signed for i32, float order for f32); returns the previous value.
     pub async fn atomic_min<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
-        self.access(buf, index, MemOp::Min(value.to_bits()), None).await
+        self.access(buf, index, MemOp::Min(value.to_bits()), None)
+            .await
     }
     /// Atomic maximum; returns the previous value.
     pub async fn atomic_max<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
-        self.access(buf, index, MemOp::Max(value.to_bits()), None).await
+        self.access(buf, index, MemOp::Max(value.to_bits()), None)
+            .await
     }
     /// Atomic bitwise and; returns the previous value.
     pub async fn atomic_and<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
-        self.access(buf, index, MemOp::And(value.to_bits()), None).await
+        self.access(buf, index, MemOp::And(value.to_bits()), None)
+            .await
     }
     /// Atomic bitwise or; returns the previous value.
     pub async fn atomic_or<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
-        self.access(buf, index, MemOp::Or(value.to_bits()), None).await
+        self.access(buf, index, MemOp::Or(value.to_bits()), None)
+            .await
     }
     /// Atomic bitwise xor; returns the previous value.
     pub async fn atomic_xor<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
-        self.access(buf, index, MemOp::Xor(value.to_bits()), None).await
+        self.access(buf, index, MemOp::Xor(value.to_bits()), None)
+            .await
     }
     /// Atomic exchange; returns the previous value.
     pub async fn atomic_exchange<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
-        self.access(buf, index, MemOp::Exchange(value.to_bits()), None).await
+        self.access(buf, index, MemOp::Exchange(value.to_bits()), None)
+            .await
     }
     /// Atomic compare-exchange: `Ok(previous)` if the word held `expected` and now holds
     /// `new`, `Err(current)` otherwise (bitwise comparison, as GLSL's `atomicCompSwap`).
-    pub async fn atomic_compare_exchange<T: Word>(&self, buf: Buf<T>, index: u32, expected: T, new: T) -> Result<T, T> {
-        let prev: T = self.access(buf, index, MemOp::CompareExchange(expected.to_bits(), new.to_bits()), None).await;
+    pub async fn atomic_compare_exchange<T: Word>(
+        &self,
+        buf: Buf<T>,
+        index: u32,
+        expected: T,
+        new: T,
+    ) -> Result<T, T> {
+        let prev: T = self
+            .access(
+                buf,
+                index,
+                MemOp::CompareExchange(expected.to_bits(), new.to_bits()),
+                None,
+            )
+            .await;
         if prev.to_bits() == expected.to_bits() {
             Ok(prev)
         } else {
@@ -546,8 +608,14 @@ impl<'a> Frag<'a> {
         let len = out.len() as u32;
         let span_base = Addr::new(buf.id, base);
         for (w, slot) in out.iter_mut().enumerate() {
-            let record = Some(RecordSpan { base: span_base, len, word: w as u32 });
-            *slot = self.access(buf, base.wrapping_add(w as u32), MemOp::Load, record).await;
+            let record = Some(RecordSpan {
+                base: span_base,
+                len,
+                word: w as u32,
+            });
+            *slot = self
+                .access(buf, base.wrapping_add(w as u32), MemOp::Load, record)
+                .await;
         }
     }
     /// Stores a multi-word record with plain stores, one step per word.
@@ -555,8 +623,18 @@ impl<'a> Frag<'a> {
         let len = values.len() as u32;
         let span_base = Addr::new(buf.id, base);
         for (w, v) in values.iter().enumerate() {
-            let record = Some(RecordSpan { base: span_base, len, word: w as u32 });
-            self.access(buf, base.wrapping_add(w as u32), MemOp::Store(v.to_bits()), record).await;
+            let record = Some(RecordSpan {
+                base: span_base,
+                len,
+                word: w as u32,
+            });
+            self.access(
+                buf,
+                base.wrapping_add(w as u32),
+                MemOp::Store(v.to_bits()),
+                record,
+            )
+            .await;
         }
     }
 
@@ -576,7 +654,9 @@ impl<'a> Frag<'a> {
             return Halt.await;
         };
         if self.inv.in_interlock.get() || self.inv.entered_interlock.get() {
-            self.inv.set_fault(FaultKind::Misuse { message: "interlock entered twice".into() });
+            self.inv.set_fault(FaultKind::Misuse {
+                message: "interlock entered twice".into(),
+            });
             return Halt.await;
         }
         let input = self.input();
@@ -589,8 +669,12 @@ impl<'a> Frag<'a> {
                 debug_assert!(ok, "scheduler granted an interlock that was not free");
             }
             Mode::Direct { .. } => {
-                WaitUntil { frag: *self, ready: || lock.try_enter(mode, key, input.ticket), kind: StepKind::InterlockBegin }
-                    .await;
+                WaitUntil {
+                    frag: *self,
+                    ready: || lock.try_enter(mode, key, input.ticket),
+                    kind: StepKind::InterlockBegin,
+                }
+                .await;
             }
         }
         self.inv.in_interlock.set(true);
@@ -603,7 +687,9 @@ impl<'a> Frag<'a> {
             return;
         };
         if !self.inv.in_interlock.get() {
-            self.inv.set_fault(FaultKind::Misuse { message: "interlock_end outside the critical section".into() });
+            self.inv.set_fault(FaultKind::Misuse {
+                message: "interlock_end outside the critical section".into(),
+            });
             return Halt.await;
         }
         if self.env.mode == Mode::Scheduled {
@@ -635,7 +721,12 @@ impl<'a> Frag<'a> {
                 lock.pass_turn(key, input.ticket);
             }
             Mode::Direct { .. } => {
-                WaitUntil { frag: *self, ready: || lock.is_turn(key, input.ticket), kind: StepKind::PassTurn }.await;
+                WaitUntil {
+                    frag: *self,
+                    ready: || lock.is_turn(key, input.ticket),
+                    kind: StepKind::PassTurn,
+                }
+                .await;
                 lock.pass_turn(key, input.ticket);
             }
         }
@@ -643,6 +734,10 @@ impl<'a> Frag<'a> {
 
     /// A read-only image from an earlier pass (not shared memory: no step).
     pub fn texel(&self, image: &Image, x: u32, y: u32, sample: u32) -> [u32; 4] {
-        image.texel(x.min(image.width.saturating_sub(1)), y.min(image.height.saturating_sub(1)), sample % image.samples.max(1))
+        image.texel(
+            x.min(image.width.saturating_sub(1)),
+            y.min(image.height.saturating_sub(1)),
+            sample % image.samples.max(1),
+        )
     }
 }

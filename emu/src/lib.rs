@@ -39,5 +39,8 @@ pub use kernel::{FaultKind, Frag, FragmentKernel, KernelInfo};
 pub use memory::{Buf, Memory, Word};
 pub use pipeline::{Device, Fault, OcclusionQuery, PassError, PassReport, PassState};
 pub use raster::{CullMode, FrontFace, RasterState, SampleCount, Viewport};
-pub use state::{BlendEquation, BlendFactor, BlendState, CompareFunc, DepthState, EarlyTests, Format, FragmentState, LogicOp, StencilFace, StencilOp, StencilState, TargetState};
+pub use state::{
+    BlendEquation, BlendFactor, BlendState, CompareFunc, DepthState, EarlyTests, Format,
+    FragmentState, LogicOp, StencilFace, StencilOp, StencilState, TargetState,
+};
 pub use stats::Stats;

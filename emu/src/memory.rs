@@ -121,7 +121,9 @@ impl<T: Word> Buf<T> {
 }
 
 /// A global word address: buffer id in the high 32 bits, word index in the low 32.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 pub struct Addr(pub u64);
 
 impl Addr {
@@ -139,16 +141,29 @@ impl Addr {
 /// Why a buffer cannot be created.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
 pub enum MemoryError {
-    #[error("buffer `{name}`: {words} words is more than the {MAX_BUFFER_WORDS} a buffer may hold")]
+    #[error(
+        "buffer `{name}`: {words} words is more than the {MAX_BUFFER_WORDS} a buffer may hold"
+    )]
     BufferTooLarge { name: String, words: u64 },
-    #[error("buffer `{name}`: {bytes} bytes would bring device storage past {MAX_TOTAL_BYTES} bytes")]
+    #[error(
+        "buffer `{name}`: {bytes} bytes would bring device storage past {MAX_TOTAL_BYTES} bytes"
+    )]
     OutOfMemory { name: String, bytes: u64 },
     #[error("buffer `{name}` holds {actual} words, but was used as {expected}")]
-    WrongType { name: String, actual: &'static str, expected: &'static str },
+    WrongType {
+        name: String,
+        actual: &'static str,
+        expected: &'static str,
+    },
     #[error("buffer #{0} does not exist on this device")]
     NoSuchBuffer(u32),
     #[error("write of {len} words at {offset} into buffer `{name}` of {words} words")]
-    OutOfRange { name: String, offset: u64, len: u64, words: u32 },
+    OutOfRange {
+        name: String,
+        offset: u64,
+        len: u64,
+        words: u32,
+    },
 }
 
 enum Words {
@@ -170,7 +185,9 @@ pub struct Memory {
 }
 
 /// The kind of a memory operation, for statistics and hazard detection.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 pub enum OpKind {
     Load,
     Store,
@@ -245,7 +262,9 @@ pub fn f32_order_key(v: f32) -> u32 {
 fn less<T: Word>(a: u64, b: u64) -> bool {
     match T::KIND {
         WordKind::I32 => (a as u32 as i32) < (b as u32 as i32),
-        WordKind::F32 => f32_order_key(f32::from_bits(a as u32)) < f32_order_key(f32::from_bits(b as u32)),
+        WordKind::F32 => {
+            f32_order_key(f32::from_bits(a as u32)) < f32_order_key(f32::from_bits(b as u32))
+        }
         _ => a < b,
     }
 }
@@ -258,11 +277,17 @@ impl Memory {
     /// Creates a zero-filled buffer of `len` words of `T`.
     pub fn create<T: Word>(&mut self, name: &str, len: u64) -> Result<Buf<T>, MemoryError> {
         if len > MAX_BUFFER_WORDS {
-            return Err(MemoryError::BufferTooLarge { name: name.into(), words: len });
+            return Err(MemoryError::BufferTooLarge {
+                name: name.into(),
+                words: len,
+            });
         }
         let bytes = len * if T::WIDE { 8 } else { 4 };
         if self.bytes + bytes > MAX_TOTAL_BYTES {
-            return Err(MemoryError::OutOfMemory { name: name.into(), bytes });
+            return Err(MemoryError::OutOfMemory {
+                name: name.into(),
+                bytes,
+            });
         }
         let words = if T::WIDE {
             Words::W64((0..len).map(|_| AtomicU64::new(0)).collect())
@@ -271,8 +296,16 @@ impl Memory {
         };
         self.bytes += bytes;
         let id = self.buffers.len() as u32;
-        self.buffers.push(Buffer { name: name.into(), ty: T::NAME, words });
-        Ok(Buf { id, len: len as u32, _t: PhantomData })
+        self.buffers.push(Buffer {
+            name: name.into(),
+            ty: T::NAME,
+            words,
+        });
+        Ok(Buf {
+            id,
+            len: len as u32,
+            _t: PhantomData,
+        })
     }
 
     /// Total bytes of all buffers.
@@ -290,7 +323,10 @@ impl Memory {
     }
 
     pub fn buffer_name(&self, id: u32) -> &str {
-        self.buffers.get(id as usize).map(|b| b.name.as_str()).unwrap_or("?")
+        self.buffers
+            .get(id as usize)
+            .map(|b| b.name.as_str())
+            .unwrap_or("?")
     }
 
     /// Names and sizes (bytes) of all buffers.
@@ -308,9 +344,16 @@ impl Memory {
     }
 
     fn check<T: Word>(&self, buf: Buf<T>) -> Result<&Buffer, MemoryError> {
-        let b = self.buffers.get(buf.id as usize).ok_or(MemoryError::NoSuchBuffer(buf.id))?;
+        let b = self
+            .buffers
+            .get(buf.id as usize)
+            .ok_or(MemoryError::NoSuchBuffer(buf.id))?;
         if b.ty != T::NAME {
-            return Err(MemoryError::WrongType { name: b.name.clone(), actual: b.ty, expected: T::NAME });
+            return Err(MemoryError::WrongType {
+                name: b.name.clone(),
+                actual: b.ty,
+                expected: T::NAME,
+            });
         }
         Ok(b)
     }
@@ -319,8 +362,14 @@ impl Memory {
     pub fn read<T: Word>(&self, buf: Buf<T>) -> Result<Vec<T>, MemoryError> {
         let b = self.check(buf)?;
         Ok(match &b.words {
-            Words::W32(w) => w.iter().map(|a| T::from_bits(a.load(Ordering::Relaxed) as u64)).collect(),
-            Words::W64(w) => w.iter().map(|a| T::from_bits(a.load(Ordering::Relaxed))).collect(),
+            Words::W32(w) => w
+                .iter()
+                .map(|a| T::from_bits(a.load(Ordering::Relaxed) as u64))
+                .collect(),
+            Words::W64(w) => w
+                .iter()
+                .map(|a| T::from_bits(a.load(Ordering::Relaxed)))
+                .collect(),
         })
     }
 
@@ -336,7 +385,8 @@ impl Memory {
             });
         }
         for (i, v) in data.iter().enumerate() {
-            self.word(buf.id, offset as u32 + i as u32).store(v.to_bits());
+            self.word(buf.id, offset as u32 + i as u32)
+                .store(v.to_bits());
         }
         Ok(())
     }
@@ -363,7 +413,8 @@ impl Memory {
     /// the loaded one) as raw bits. `ordering` is the memory order of the real atomic.
     #[inline]
     pub(crate) fn apply<T: Word>(&self, addr: Addr, op: MemOp, ordering: Ordering) -> u64 {
-        self.word(addr.buffer(), addr.index()).apply::<T>(op, ordering)
+        self.word(addr.buffer(), addr.index())
+            .apply::<T>(op, ordering)
     }
 }
 
@@ -459,20 +510,36 @@ fn apply32<T: Word>(a: &AtomicU32, op: MemOp, ord: Ordering) -> u32 {
             0
         }
         MemOp::Add(v) => match T::KIND {
-            WordKind::F32 => rmw32(a, ord, |old| (f32::from_bits(old) + f32::from_bits(v as u32)).to_bits()),
+            WordKind::F32 => rmw32(a, ord, |old| {
+                (f32::from_bits(old) + f32::from_bits(v as u32)).to_bits()
+            }),
             _ => a.fetch_add(v as u32, ord),
         },
         MemOp::Sub(v) => match T::KIND {
-            WordKind::F32 => rmw32(a, ord, |old| (f32::from_bits(old) - f32::from_bits(v as u32)).to_bits()),
+            WordKind::F32 => rmw32(a, ord, |old| {
+                (f32::from_bits(old) - f32::from_bits(v as u32)).to_bits()
+            }),
             _ => a.fetch_sub(v as u32, ord),
         },
         MemOp::Min(v) => match T::KIND {
             WordKind::U32 => a.fetch_min(v as u32, ord),
-            _ => rmw32(a, ord, |old| if less::<T>(v, old as u64) { v as u32 } else { old }),
+            _ => rmw32(a, ord, |old| {
+                if less::<T>(v, old as u64) {
+                    v as u32
+                } else {
+                    old
+                }
+            }),
         },
         MemOp::Max(v) => match T::KIND {
             WordKind::U32 => a.fetch_max(v as u32, ord),
-            _ => rmw32(a, ord, |old| if less::<T>(old as u64, v) { v as u32 } else { old }),
+            _ => rmw32(a, ord, |old| {
+                if less::<T>(old as u64, v) {
+                    v as u32
+                } else {
+                    old
+                }
+            }),
         },
         MemOp::And(v) => a.fetch_and(v as u32, ord),
         MemOp::Or(v) => a.fetch_or(v as u32, ord),

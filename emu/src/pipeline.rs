@@ -76,7 +76,9 @@ pub struct PassReport {
 impl PassReport {
     /// The occlusion query of this pass.
     pub fn query(&self) -> OcclusionQuery {
-        OcclusionQuery { samples_passed: self.stats.samples_passed }
+        OcclusionQuery {
+            samples_passed: self.stats.samples_passed,
+        }
     }
     /// Adds another pass (for multipass algorithms).
     pub fn merge(&mut self, o: &PassReport) {
@@ -92,7 +94,9 @@ impl PassReport {
         }
         self.faults.extend(o.faults.iter().cloned());
         if let Some(s) = &o.schedule {
-            self.schedule.get_or_insert_with(Vec::new).extend_from_slice(s);
+            self.schedule
+                .get_or_insert_with(Vec::new)
+                .extend_from_slice(s);
         }
         self.wall += o.wall;
     }
@@ -129,10 +133,16 @@ impl Device {
         let start = Instant::now();
         draw.mesh.validate()?;
         if fb.samples != state.raster.samples {
-            return Err(PassError::SampleMismatch { fb: fb.samples.count(), pass: state.raster.samples.count() });
+            return Err(PassError::SampleMismatch {
+                fb: fb.samples.count(),
+                pass: state.raster.samples.count(),
+            });
         }
         if state.fragment.targets.len() > fb.formats.len() {
-            return Err(PassError::TargetMismatch { state: state.fragment.targets.len(), fb: fb.formats.len() });
+            return Err(PassError::TargetMismatch {
+                state: state.fragment.targets.len(),
+                fb: fb.formats.len(),
+            });
         }
         let mut report = PassReport::default();
         report.stats.geometry_passes = 1;
@@ -141,17 +151,39 @@ impl Device {
             report.wall = start.elapsed();
             return Ok(report);
         }
-        let raster = RasterState { tile_size: fb.tile_size, ..state.raster };
-        let viewport = Viewport { width: fb.width, height: fb.height };
+        let raster = RasterState {
+            tile_size: fb.tile_size,
+            ..state.raster
+        };
+        let viewport = Viewport {
+            width: fb.width,
+            height: fb.height,
+        };
         let threads = exec.threads.max(1);
         let mut clip = Vec::new();
         let mut seq_base = 0u64;
         for (instance, model) in draw.instances.iter().enumerate() {
-            transform(&draw.mesh.positions, draw.view_proj * *model, threads, &mut clip);
+            transform(
+                &draw.mesh.positions,
+                draw.view_proj * *model,
+                threads,
+                &mut clip,
+            );
             let binned = bin_triangles(&clip, &draw.mesh.indices, &raster, viewport, threads);
             report.stats.rejected_triangles += binned.rejected;
-            let geo = Geometry::Binned { binned: &binned, instance: instance as u32 };
-            self.run_waves(fb, &geo, &state.fragment, kernel, exec, &mut seq_base, &mut report);
+            let geo = Geometry::Binned {
+                binned: &binned,
+                instance: instance as u32,
+            };
+            self.run_waves(
+                fb,
+                &geo,
+                &state.fragment,
+                kernel,
+                exec,
+                &mut seq_base,
+                &mut report,
+            );
         }
         report.wall = start.elapsed();
         Ok(report)
@@ -168,12 +200,23 @@ impl Device {
     ) -> Result<PassReport, PassError> {
         let start = Instant::now();
         if state.targets.len() > fb.formats.len() {
-            return Err(PassError::TargetMismatch { state: state.targets.len(), fb: fb.formats.len() });
+            return Err(PassError::TargetMismatch {
+                state: state.targets.len(),
+                fb: fb.formats.len(),
+            });
         }
         let mut report = PassReport::default();
         report.stats.fullscreen_passes = 1;
         let mut seq_base = 0;
-        self.run_waves(fb, &Geometry::FullScreen, state, kernel, exec, &mut seq_base, &mut report);
+        self.run_waves(
+            fb,
+            &Geometry::FullScreen,
+            state,
+            kernel,
+            exec,
+            &mut seq_base,
+            &mut report,
+        );
         report.wall = start.elapsed();
         Ok(report)
     }
@@ -238,10 +281,16 @@ impl Device {
             let tiles = &mut fb.tiles_mut()[first..last];
             lists.resize_with(tiles.len(), Vec::new);
             // 1. Rasterize and run early tests, per tile in parallel, in API order within a tile.
-            let front = RasterFront { geo, state, early, samples: env.samples };
-            let counts = for_each_tile(tiles, &mut lists, exec.threads, |tile_index, tile, list| {
-                front.tile(first + tile_index, tile, list)
-            });
+            let front = RasterFront {
+                geo,
+                state,
+                early,
+                samples: env.samples,
+            };
+            let counts =
+                for_each_tile(tiles, &mut lists, exec.threads, |tile_index, tile, list| {
+                    front.tile(first + tile_index, tile, list)
+                });
             for c in &counts {
                 report.stats.fragments_generated += c.0;
                 report.stats.early_culled += c.1;
@@ -262,21 +311,48 @@ impl Device {
             let exec_wave = match &exec.mode {
                 ExecMode::Scheduled(sc) => {
                     let mut sc = sc.clone();
-                    sc.seed = sc.seed.wrapping_add(wave_index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-                    ExecConfig { mode: ExecMode::Scheduled(sc), ..exec.clone() }
+                    sc.seed = sc
+                        .seed
+                        .wrapping_add(wave_index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                    ExecConfig {
+                        mode: ExecMode::Scheduled(sc),
+                        ..exec.clone()
+                    }
                 }
                 _ => exec.clone(),
             };
-            let outcome = shade(kernel, &env, &exec_wave, &inputs, &mut outs, &mut colors, targets);
+            let outcome = shade(
+                kernel,
+                &env,
+                &exec_wave,
+                &inputs,
+                &mut outs,
+                &mut colors,
+                targets,
+            );
             absorb(report, outcome, &self.memory);
             // 3. Late tests and writes, per tile in API order.
             let tiles = &mut fb.tiles_mut()[first..last];
-            let back = RasterBack { geo, state, early, samples: env.samples, targets };
+            let back = RasterBack {
+                geo,
+                state,
+                early,
+                samples: env.samples,
+                targets,
+            };
             let mut ins_lists: Vec<(&[FragInput], &[FragOut], &[[u32; 4]])> = ranges
                 .iter()
-                .map(|r| (&inputs[r.clone()], &outs[r.clone()], &colors[r.start * targets..r.end * targets]))
+                .map(|r| {
+                    (
+                        &inputs[r.clone()],
+                        &outs[r.clone()],
+                        &colors[r.start * targets..r.end * targets],
+                    )
+                })
                 .collect();
-            let counts = for_each_tile(tiles, &mut ins_lists, exec.threads, |_, tile, l| back.tile(tile, l));
+            let counts = for_each_tile(tiles, &mut ins_lists, exec.threads, |_, tile, l| {
+                back.tile(tile, l)
+            });
             for c in &counts {
                 report.stats.late_culled += c.0;
                 report.stats.samples_passed += c.1;
@@ -289,7 +365,10 @@ impl Device {
         }
         if let Some(table) = &contention {
             let hot = table.hotspots(|b| self.memory.buffer_name(b).to_string());
-            let mut s = Stats { hotspots: hot, ..Default::default() };
+            let mut s = Stats {
+                hotspots: hot,
+                ..Default::default()
+            };
             s.hotspots.sort_by(|a, b| b.accesses.cmp(&a.accesses));
             report.stats.merge(&s);
         }
@@ -327,7 +406,10 @@ fn absorb(report: &mut PassReport, outcome: ShadeOutcome, memory: &Memory) {
                 peak_concurrent: peak,
             })
             .collect();
-        report.stats.merge(&Stats { hotspots: hot, ..Default::default() });
+        report.stats.merge(&Stats {
+            hotspots: hot,
+            ..Default::default()
+        });
     }
 }
 
@@ -365,7 +447,12 @@ fn for_each_tile<T: Send, R: Send + Default + Clone>(
     let mut results = vec![R::default(); n];
     let threads = threads.max(1).min(n.max(1));
     if threads == 1 {
-        for (i, ((t, it), r)) in tiles.iter_mut().zip(items.iter_mut()).zip(results.iter_mut()).enumerate() {
+        for (i, ((t, it), r)) in tiles
+            .iter_mut()
+            .zip(items.iter_mut())
+            .zip(results.iter_mut())
+            .enumerate()
+        {
             *r = f(i, t, it);
         }
         return results;
@@ -400,14 +487,23 @@ struct RasterFront<'a> {
 
 impl RasterFront<'_> {
     /// Returns (fragments generated, early-culled).
-    fn tile(&self, tile_index: usize, tile: &mut TileMemory, list: &mut Vec<FragInput>) -> (u64, u64) {
+    fn tile(
+        &self,
+        tile_index: usize,
+        tile: &mut TileMemory,
+        list: &mut Vec<FragInput>,
+    ) -> (u64, u64) {
         let mut generated = 0u64;
         let mut culled = 0u64;
         let ts = tile.tile_size;
         // Tickets: per-pixel rank among shaded fragments (ordered interlock).
         let mut tickets = vec![0u32; (ts * ts) as usize];
         let tests = self.early && (self.state.depth.test || self.state.stencil.enabled);
-        let all = if self.samples >= 8 { 0xff } else { (1u8 << self.samples) - 1 };
+        let all = if self.samples >= 8 {
+            0xff
+        } else {
+            (1u8 << self.samples) - 1
+        };
         let sample_mask = self.state.sample_mask & all;
         match self.geo {
             Geometry::Binned { binned, instance } => {
@@ -432,7 +528,15 @@ impl RasterFront<'_> {
                                 depths[s] = t.depth_at(fx + p.0, fy + p.1);
                             }
                         }
-                        cov = tile.depth_stencil(self.state, lx, ly, cov, &depths, t.front_facing, true);
+                        cov = tile.depth_stencil(
+                            self.state,
+                            lx,
+                            ly,
+                            cov,
+                            &depths,
+                            t.front_facing,
+                            true,
+                        );
                         if cov == 0 {
                             culled += 1;
                             return;
@@ -461,7 +565,8 @@ impl RasterFront<'_> {
                         generated += 1;
                         let mut cov = sample_mask;
                         if tests {
-                            cov = tile.depth_stencil(self.state, lx, ly, cov, &[0.5; 8], true, true);
+                            cov =
+                                tile.depth_stencil(self.state, lx, ly, cov, &[0.5; 8], true, true);
                             if cov == 0 {
                                 culled += 1;
                                 continue;
@@ -498,12 +603,17 @@ struct RasterBack<'a> {
 
 impl RasterBack<'_> {
     /// Returns (late-culled fragments, samples passed).
-    fn tile(&self, tile: &mut TileMemory, (ins, outs, colors): &mut (&[FragInput], &[FragOut], &[[u32; 4]])) -> (u64, u64) {
+    fn tile(
+        &self,
+        tile: &mut TileMemory,
+        (ins, outs, colors): &mut (&[FragInput], &[FragOut], &[[u32; 4]]),
+    ) -> (u64, u64) {
         let mut culled = 0;
         let mut passed_samples = 0u64;
         let late_tests = !self.early && (self.state.depth.test || self.state.stencil.enabled);
-        let positions =
-            crate::raster::SampleCount::from_count(self.samples).map(|c| c.positions()).unwrap_or(&[(0.5, 0.5)]);
+        let positions = crate::raster::SampleCount::from_count(self.samples)
+            .map(|c| c.positions())
+            .unwrap_or(&[(0.5, 0.5)]);
         for (i, (f, o)) in ins.iter().zip(outs.iter()).enumerate() {
             if o.faulted || o.discarded {
                 continue;
@@ -528,7 +638,13 @@ impl RasterBack<'_> {
             }
             passed_samples += mask.count_ones() as u64;
             if self.targets > 0 {
-                tile.write_outputs(self.state, lx, ly, mask, &colors[i * self.targets..(i + 1) * self.targets]);
+                tile.write_outputs(
+                    self.state,
+                    lx,
+                    ly,
+                    mask,
+                    &colors[i * self.targets..(i + 1) * self.targets],
+                );
             }
         }
         (culled, passed_samples)

@@ -61,7 +61,11 @@ impl Stats {
     }
     /// Total atomic operations (everything but plain loads and stores).
     pub fn atomics(&self) -> u64 {
-        self.ops.iter().filter(|(k, _)| *k != "load" && *k != "store").map(|(_, v)| v).sum()
+        self.ops
+            .iter()
+            .filter(|(k, _)| *k != "load" && *k != "store")
+            .map(|(_, v)| v)
+            .sum()
     }
     /// Adds another pass's counters.
     pub fn merge(&mut self, o: &Stats) {
@@ -79,10 +83,16 @@ impl Stats {
         }
         self.steps += o.steps;
         self.interlock_waits += o.interlock_waits;
-        self.max_steps_per_invocation = self.max_steps_per_invocation.max(o.max_steps_per_invocation);
+        self.max_steps_per_invocation = self
+            .max_steps_per_invocation
+            .max(o.max_steps_per_invocation);
         self.rejected_triangles += o.rejected_triangles;
         for h in &o.hotspots {
-            match self.hotspots.iter_mut().find(|x| x.buffer == h.buffer && x.index == h.index) {
+            match self
+                .hotspots
+                .iter_mut()
+                .find(|x| x.buffer == h.buffer && x.index == h.index)
+            {
                 Some(x) => {
                     x.accesses += h.accesses;
                     x.peak_concurrent = x.peak_concurrent.max(h.peak_concurrent);
@@ -90,7 +100,8 @@ impl Stats {
                 None => self.hotspots.push(h.clone()),
             }
         }
-        self.hotspots.sort_by(|a, b| b.accesses.cmp(&a.accesses).then(a.index.cmp(&b.index)));
+        self.hotspots
+            .sort_by(|a, b| b.accesses.cmp(&a.accesses).then(a.index.cmp(&b.index)));
         self.hotspots.truncate(HOTSPOTS);
     }
 }
@@ -129,9 +140,19 @@ impl ContentionTable {
             bases.push(n);
             n += w as usize;
         }
-        let mk = || (0..n).map(|_| AtomicU32::new(0)).collect::<Box<[AtomicU32]>>();
+        let mk = || {
+            (0..n)
+                .map(|_| AtomicU32::new(0))
+                .collect::<Box<[AtomicU32]>>()
+        };
         let lens = buffer_words.iter().map(|&w| w as usize).collect();
-        ContentionTable { bases, lens, accesses: mk(), inflight: mk(), peak: mk() }
+        ContentionTable {
+            bases,
+            lens,
+            accesses: mk(),
+            inflight: mk(),
+            peak: mk(),
+        }
     }
 
     fn slot(&self, addr: Addr) -> usize {
@@ -143,7 +164,9 @@ impl ContentionTable {
         self.accesses[i].fetch_add(1, Ordering::Relaxed);
         let now = self.inflight[i].fetch_add(1, Ordering::Relaxed) + 1;
         self.peak[i].fetch_max(now, Ordering::Relaxed);
-        ContentionGuard { slot: &self.inflight[i] }
+        ContentionGuard {
+            slot: &self.inflight[i],
+        }
     }
 
     /// The hottest addresses, named.

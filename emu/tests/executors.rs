@@ -2,8 +2,8 @@
 //! pixel, no rasterizer involved).
 
 use fragrace_emu::{
-    Buf, Device, ExecConfig, ExecMode, FaultKind, Format, Frag, FragmentKernel, FragmentState, Framebuffer,
-    KernelInfo, Policy, SampleCount, ScheduleConfig, TargetState,
+    Buf, Device, ExecConfig, ExecMode, FaultKind, Format, Frag, FragmentKernel, FragmentState,
+    Framebuffer, KernelInfo, Policy, SampleCount, ScheduleConfig, TargetState,
 };
 
 fn fb(w: u32, h: u32) -> Framebuffer {
@@ -34,20 +34,36 @@ fn run_counter(exec: &ExecConfig, atomic: bool) -> (u32, fragrace_emu::PassRepor
     let mut dev = Device::new();
     let counter = dev.buffer::<u32>("counter", 1).unwrap();
     let mut fb = fb(16, 16);
-    let r = dev.fullscreen(&mut fb, &FragmentState::new(), &GlobalCounter { counter, atomic }, exec).unwrap();
+    let r = dev
+        .fullscreen(
+            &mut fb,
+            &FragmentState::new(),
+            &GlobalCounter { counter, atomic },
+            exec,
+        )
+        .unwrap();
     (dev.memory.read(counter).unwrap()[0], r)
 }
 
 fn scheduled(policy: Policy, seed: u64) -> ExecConfig {
     ExecConfig {
-        mode: ExecMode::Scheduled(ScheduleConfig { policy, seed, window: 16, record: true }),
+        mode: ExecMode::Scheduled(ScheduleConfig {
+            policy,
+            seed,
+            window: 16,
+            record: true,
+        }),
         ..ExecConfig::default()
     }
 }
 
 #[test]
 fn atomic_counter_is_exact_under_every_executor() {
-    let mut execs = vec![ExecConfig::ordered(), ExecConfig::parallel(2), ExecConfig::parallel(4)];
+    let mut execs = vec![
+        ExecConfig::ordered(),
+        ExecConfig::parallel(2),
+        ExecConfig::parallel(4),
+    ];
     for p in Policy::all() {
         for seed in 0..3 {
             execs.push(scheduled(p.clone(), seed));
@@ -66,7 +82,11 @@ fn atomic_counter_is_exact_under_every_executor() {
 fn plain_counter_loses_updates_and_the_detector_sees_them() {
     let (v, _) = run_counter(&ExecConfig::ordered(), false);
     assert_eq!(v, 256, "ordered is the reference: no loss");
-    for p in [Policy::Random, Policy::Pct { depth: 3 }, Policy::Warp { lanes: 4 }] {
+    for p in [
+        Policy::Random,
+        Policy::Pct { depth: 3 },
+        Policy::Warp { lanes: 4 },
+    ] {
         let (v, r) = run_counter(&scheduled(p.clone(), 7), false);
         assert!(v < 256, "{p}: {v}");
         assert!(r.hazards.lost_updates > 0, "{p}: {:?}", r.hazards);
@@ -84,9 +104,18 @@ fn scheduled_runs_are_bit_identical_per_seed_and_differ_across_seeds() {
     assert_eq!(a.0, b.0);
     assert_eq!(a.1.schedule, b.1.schedule);
     assert_eq!(a.1.hazards, b.1.hazards);
-    let schedules: std::collections::HashSet<_> =
-        (0..8).map(|s| run_counter(&scheduled(Policy::Random, s), false).1.schedule.unwrap()).collect();
-    assert!(schedules.len() > 1, "different seeds should give different schedules");
+    let schedules: std::collections::HashSet<_> = (0..8)
+        .map(|s| {
+            run_counter(&scheduled(Policy::Random, s), false)
+                .1
+                .schedule
+                .unwrap()
+        })
+        .collect();
+    assert!(
+        schedules.len() > 1,
+        "different seeds should give different schedules"
+    );
 }
 
 #[test]
@@ -110,7 +139,15 @@ fn any_byte_string_is_a_valid_schedule() {
 
 #[test]
 fn policies_parse_and_print() {
-    for s in ["random", "pct:3", "warp:32", "reverse", "fifo", "far-first", "bytes:00ff10"] {
+    for s in [
+        "random",
+        "pct:3",
+        "warp:32",
+        "reverse",
+        "fifo",
+        "far-first",
+        "bytes:00ff10",
+    ] {
         let p: Policy = s.parse().unwrap();
         assert_eq!(p.to_string(), s);
     }
@@ -178,10 +215,15 @@ fn out_of_bounds_access_is_a_reported_fault() {
         let mut fb = Framebuffer::new(4, 4, SampleCount::X1, 8, &[Format::RGBA32F]).unwrap();
         let mut st = FragmentState::new();
         st.targets = vec![TargetState::new(Format::RGBA32F)];
-        let r = dev.fullscreen(&mut fb, &st, &OutOfBounds { buf }, &e).unwrap();
+        let r = dev
+            .fullscreen(&mut fb, &st, &OutOfBounds { buf }, &e)
+            .unwrap();
         assert_eq!(r.stats.faulted, 6, "{e:?}"); // pixel indices 10..16 + 10 >= 20
         let f = &r.faults[0];
-        assert!(matches!(&f.kind, FaultKind::OutOfBounds { buffer, len: 20, .. } if buffer == "small"), "{f:?}");
+        assert!(
+            matches!(&f.kind, FaultKind::OutOfBounds { buffer, len: 20, .. } if buffer == "small"),
+            "{f:?}"
+        );
         // A faulted invocation writes nothing: its pixel keeps the clear colour.
         let (x, y) = (f.invocation.x, f.invocation.y);
         assert_eq!(fb.color(0, x, y, 0), [0; 4]);
@@ -194,9 +236,13 @@ fn a_panicking_kernel_is_a_reported_fault() {
     for e in all_execs() {
         let dev = Device::new();
         let mut fb = fb(8, 4);
-        let r = dev.fullscreen(&mut fb, &FragmentState::new(), &Panics, &e).unwrap();
+        let r = dev
+            .fullscreen(&mut fb, &FragmentState::new(), &Panics, &e)
+            .unwrap();
         assert_eq!(r.stats.faulted, 4, "{e:?}");
-        assert!(matches!(&r.faults[0].kind, FaultKind::Panic { message } if message.contains("x=3")));
+        assert!(
+            matches!(&r.faults[0].kind, FaultKind::Panic { message } if message.contains("x=3"))
+        );
         assert_eq!(r.stats.shaded, 32);
     }
 }
@@ -207,9 +253,17 @@ fn a_kernel_that_spins_forever_is_stopped_by_the_watchdog() {
         let mut dev = Device::new();
         let lock = dev.buffer::<u32>("lock", 1).unwrap();
         let mut fb = fb(4, 4);
-        let r = dev.fullscreen(&mut fb, &FragmentState::new(), &SpinsForever { lock }, &e).unwrap();
+        let r = dev
+            .fullscreen(&mut fb, &FragmentState::new(), &SpinsForever { lock }, &e)
+            .unwrap();
         assert!(r.stats.faulted >= 15, "{e:?}: {}", r.stats.faulted);
-        assert!(r.faults.iter().all(|f| matches!(f.kind, FaultKind::Watchdog { .. })), "{:?}", r.faults);
+        assert!(
+            r.faults
+                .iter()
+                .all(|f| matches!(f.kind, FaultKind::Watchdog { .. })),
+            "{:?}",
+            r.faults
+        );
     }
 }
 
@@ -228,7 +282,9 @@ fn interlock_without_declaring_it_is_misuse() {
     for e in all_execs() {
         let dev = Device::new();
         let mut fb = fb(2, 2);
-        let r = dev.fullscreen(&mut fb, &FragmentState::new(), &UndeclaredInterlock, &e).unwrap();
+        let r = dev
+            .fullscreen(&mut fb, &FragmentState::new(), &UndeclaredInterlock, &e)
+            .unwrap();
         assert_eq!(r.stats.faulted, 4);
         assert!(matches!(r.faults[0].kind, FaultKind::Misuse { .. }));
     }
@@ -259,7 +315,14 @@ fn torn_records_are_detected() {
         let mut dev = Device::new();
         let buf = dev.buffer::<u32>("rec", 3).unwrap();
         let mut fb = fb(8, 1);
-        let r = dev.fullscreen(&mut fb, &FragmentState::new(), &Record { buf, write: true }, &scheduled(Policy::Random, seed)).unwrap();
+        let r = dev
+            .fullscreen(
+                &mut fb,
+                &FragmentState::new(),
+                &Record { buf, write: true },
+                &scheduled(Policy::Random, seed),
+            )
+            .unwrap();
         torn += r.hazards.torn;
     }
     assert!(torn > 0);
@@ -267,7 +330,14 @@ fn torn_records_are_detected() {
     let mut dev = Device::new();
     let buf = dev.buffer::<u32>("rec", 3).unwrap();
     let mut fb = fb(8, 1);
-    let r = dev.fullscreen(&mut fb, &FragmentState::new(), &Record { buf, write: false }, &scheduled(Policy::Random, 3)).unwrap();
+    let r = dev
+        .fullscreen(
+            &mut fb,
+            &FragmentState::new(),
+            &Record { buf, write: false },
+            &scheduled(Policy::Random, 3),
+        )
+        .unwrap();
     assert_eq!(r.hazards.total(), 0);
 }
 
@@ -303,7 +373,10 @@ impl FragmentKernel for AllOps {
         assert_eq!(f.load(self.f, 0).await, 2.75);
         assert_eq!(f.atomic_min(self.w, 0, 1 << 40).await, u64::MAX);
         assert_eq!(f.atomic_add(self.w, 0, 1).await, 1 << 40);
-        assert_eq!(f.atomic_compare_exchange(self.w, 0, (1 << 40) + 1, 3).await, Ok((1 << 40) + 1));
+        assert_eq!(
+            f.atomic_compare_exchange(self.w, 0, (1 << 40) + 1, 3).await,
+            Ok((1 << 40) + 1)
+        );
         f.atomic_store(self.w, 0, 9).await;
         f.output(0, [1.0; 4]);
     }
@@ -324,7 +397,9 @@ fn every_operation_on_every_word_type() {
         let mut fb = Framebuffer::new(1, 1, SampleCount::X1, 8, &[Format::R32F]).unwrap();
         let mut st = FragmentState::new();
         st.targets = vec![TargetState::new(Format::R32F)];
-        let r = dev.fullscreen(&mut fb, &st, &AllOps { u, i, f, w }, &e).unwrap();
+        let r = dev
+            .fullscreen(&mut fb, &st, &AllOps { u, i, f, w }, &e)
+            .unwrap();
         assert_eq!(r.stats.faulted, 0, "{:?}", r.faults);
         assert_eq!(dev.memory.read(w).unwrap(), vec![9]);
         assert_eq!(fb.color(0, 0, 0, 0)[0], 1f32.to_bits());
@@ -345,10 +420,26 @@ fn contention_names_the_hottest_address() {
     let mut dev = Device::new();
     let counter = dev.buffer::<u32>("counter", 1).unwrap();
     let mut fb = fb(32, 32);
-    let e = ExecConfig { contention: true, ..ExecConfig::parallel(2) };
-    let r = dev.fullscreen(&mut fb, &FragmentState::new(), &GlobalCounter { counter, atomic: true }, &e).unwrap();
+    let e = ExecConfig {
+        contention: true,
+        ..ExecConfig::parallel(2)
+    };
+    let r = dev
+        .fullscreen(
+            &mut fb,
+            &FragmentState::new(),
+            &GlobalCounter {
+                counter,
+                atomic: true,
+            },
+            &e,
+        )
+        .unwrap();
     let h = &r.stats.hotspots[0];
-    assert_eq!((h.buffer.as_str(), h.index, h.accesses), ("counter", 0, 1024));
+    assert_eq!(
+        (h.buffer.as_str(), h.index, h.accesses),
+        ("counter", 0, 1024)
+    );
     assert!(h.peak_concurrent >= 1);
     // Scheduled runs report contention from the detector.
     let (_, r) = run_counter(&scheduled(Policy::Random, 1), false);

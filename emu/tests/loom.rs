@@ -12,7 +12,16 @@ use fragrace_emu::sync::Arc;
 use fragrace_emu::{Buf, Frag, FragmentKernel, InterlockMode, KernelInfo, Memory};
 
 fn frag(seq: u64, x: u32, ticket: u32) -> FragInput {
-    FragInput { seq, x, y: 0, primitive_id: seq as u32, ticket, tri: u32::MAX, coverage: 1, ..Default::default() }
+    FragInput {
+        seq,
+        x,
+        y: 0,
+        primitive_id: seq as u32,
+        ticket,
+        tri: u32::MAX,
+        coverage: 1,
+        ..Default::default()
+    }
 }
 
 fn model(f: impl Fn() + Sync + Send + 'static) {
@@ -64,7 +73,10 @@ fn loom_finds_the_lost_update_of_a_plain_read_modify_write() {
             LOST.store(true, Relaxed);
         }
     });
-    assert!(LOST.load(Relaxed), "loom must find the interleaving that loses an update");
+    assert!(
+        LOST.load(Relaxed),
+        "loom must find the interleaving that loses an update"
+    );
 }
 
 /// Inside the critical section: a plain read-modify-write of a per-pixel counter plus a
@@ -94,7 +106,14 @@ fn critical(mode: InterlockMode, n: u32) -> (u32, Vec<u32>) {
     let mem = Arc::new(mem);
     // All on pixel (0, 0), tickets in API order.
     let frags = (0..n).map(|i| frag(i as u64, 0, i)).collect();
-    let out = run_on_threads(Arc::new(Critical { count, log, mode }), mem.clone(), frags, 1, 1, 10_000);
+    let out = run_on_threads(
+        Arc::new(Critical { count, log, mode }),
+        mem.clone(),
+        frags,
+        1,
+        1,
+        10_000,
+    );
     assert!(out.iter().all(|o| o.fault.is_none()), "{out:?}");
     (mem.read(count).unwrap()[0], mem.read(log).unwrap())
 }
@@ -160,7 +179,14 @@ fn ordered_interlock_passes_the_turn_of_fragments_that_never_enter() {
         let count = mem.create::<u32>("count", 1).unwrap();
         let mem = Arc::new(mem);
         let frags = (0..2).map(|i| frag(i as u64, 0, i)).collect();
-        let out = run_on_threads(Arc::new(SkipFirst { count }), mem.clone(), frags, 1, 1, 10_000);
+        let out = run_on_threads(
+            Arc::new(SkipFirst { count }),
+            mem.clone(),
+            frags,
+            1,
+            1,
+            10_000,
+        );
         assert!(out.iter().all(|o| o.fault.is_none()));
         assert_eq!(mem.read(count).unwrap()[0], 1);
     });

@@ -3,7 +3,11 @@ use glam::{Mat4, Vec3, Vec4};
 use std::time::Instant;
 
 fn load_obj_gz(path: &str) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-    let out = std::process::Command::new("gzip").arg("-dc").arg(path).output().unwrap();
+    let out = std::process::Command::new("gzip")
+        .arg("-dc")
+        .arg(path)
+        .output()
+        .unwrap();
     let text = String::from_utf8(out.stdout).unwrap();
     let mut v = Vec::new();
     let mut f = Vec::new();
@@ -15,7 +19,10 @@ fn load_obj_gz(path: &str) -> (Vec<Vec3>, Vec<[u32; 3]>) {
                 v.push(Vec3::new(c[0], c[1], c[2]));
             }
             Some("f") => {
-                let c: Vec<u32> = it.take(3).map(|s| s.split('/').next().unwrap().parse::<u32>().unwrap() - 1).collect();
+                let c: Vec<u32> = it
+                    .take(3)
+                    .map(|s| s.split('/').next().unwrap().parse::<u32>().unwrap() - 1)
+                    .collect();
                 f.push([c[0], c[1], c[2]]);
             }
             _ => {}
@@ -29,7 +36,10 @@ fn load_obj_gz(path: &str) -> (Vec<Vec3>, Vec<[u32; 3]>) {
 fn time_dragon() {
     let (v, f) = load_obj_gz("/work/shared/models/dragon.obj.gz");
     let (mut lo, mut hi) = (v[0], v[0]);
-    for p in &v { lo = lo.min(*p); hi = hi.max(*p); }
+    for p in &v {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
     let c = (lo + hi) * 0.5;
     let r = (hi - lo).length() * 0.5;
     let view = Mat4::look_at_rh(c + Vec3::new(0.0, 0.0, 2.2 * r), c, Vec3::Y);
@@ -37,7 +47,10 @@ fn time_dragon() {
     let vp = proj * view;
     let clip: Vec<Vec4> = v.iter().map(|p| vp * p.extend(1.0)).collect();
     let state = RasterState::default();
-    let viewport = Viewport { width: 512, height: 512 };
+    let viewport = Viewport {
+        width: 512,
+        height: 512,
+    };
     for threads in [1, 2] {
         let mut best = (1e9f64, 1e9f64);
         for _ in 0..20 {
@@ -52,8 +65,12 @@ fn time_dragon() {
                         let mut n = 0usize;
                         loop {
                             let t = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                            if t >= b.tile_count() { break; }
-                            b.raster_tile(t, |fr| { n += fr.coverage as usize; });
+                            if t >= b.tile_count() {
+                                break;
+                            }
+                            b.raster_tile(t, |fr| {
+                                n += fr.coverage as usize;
+                            });
                         }
                         total.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
                     });
@@ -62,9 +79,14 @@ fn time_dragon() {
             let t2 = Instant::now();
             best.0 = best.0.min((t1 - t0).as_secs_f64() * 1e3);
             best.1 = best.1.min((t2 - t1).as_secs_f64() * 1e3);
-            if best.0 > 1e8 { println!("{} {}", b.tris.len(), total.into_inner()); }
+            if best.0 > 1e8 {
+                println!("{} {}", b.tris.len(), total.into_inner());
+            }
         }
-        println!("threads {threads}: min bin {:.2} ms, min raster {:.2} ms", best.0, best.1);
+        println!(
+            "threads {threads}: min bin {:.2} ms, min raster {:.2} ms",
+            best.0, best.1
+        );
     }
 }
 
@@ -73,7 +95,10 @@ fn time_dragon() {
 fn prof_dragon() {
     let (v, f) = load_obj_gz("/work/shared/models/dragon.obj.gz");
     let (mut lo, mut hi) = (v[0], v[0]);
-    for p in &v { lo = lo.min(*p); hi = hi.max(*p); }
+    for p in &v {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
     let c = (lo + hi) * 0.5;
     let r = (hi - lo).length() * 0.5;
     let view = Mat4::look_at_rh(c + Vec3::new(0.0, 0.0, 2.2 * r), c, Vec3::Y);
@@ -81,16 +106,31 @@ fn prof_dragon() {
     let vp = proj * view;
     let clip: Vec<Vec4> = v.iter().map(|p| vp * p.extend(1.0)).collect();
     let state = RasterState::default();
-    let viewport = Viewport { width: 512, height: 512 };
-    let ticks = || -> f64 { let st = std::fs::read_to_string("/proc/self/stat").unwrap(); let after = &st[st.rfind(')').unwrap()+2..]; let v: Vec<&str> = after.split_whitespace().collect(); (v[11].parse::<f64>().unwrap() + v[12].parse::<f64>().unwrap()) * 10.0 };
+    let viewport = Viewport {
+        width: 512,
+        height: 512,
+    };
+    let ticks = || -> f64 {
+        let st = std::fs::read_to_string("/proc/self/stat").unwrap();
+        let after = &st[st.rfind(')').unwrap() + 2..];
+        let v: Vec<&str> = after.split_whitespace().collect();
+        (v[11].parse::<f64>().unwrap() + v[12].parse::<f64>().unwrap()) * 10.0
+    };
     let mut n = 0;
     let iters = 60;
     let c0 = ticks();
-    for _ in 0..iters { let b = bin_triangles(&clip, &f, &state, viewport, 1); n += b.tris.len(); }
+    for _ in 0..iters {
+        let b = bin_triangles(&clip, &f, &state, viewport, 1);
+        n += b.tris.len();
+    }
     let c1 = ticks();
     let b = bin_triangles(&clip, &f, &state, viewport, 1);
     let c2 = ticks();
-    for _ in 0..iters { for t in 0..b.tile_count() { b.raster_tile(t, |fr| n += fr.coverage as usize); } }
+    for _ in 0..iters {
+        for t in 0..b.tile_count() {
+            b.raster_tile(t, |fr| n += fr.coverage as usize);
+        }
+    }
     let c3 = ticks();
     let (tb, tr) = ((c1 - c0) / iters as f64, (c3 - c2) / iters as f64);
     println!("{n} cpu: bin {tb:.2} ms raster {tr:.2} ms");

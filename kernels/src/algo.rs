@@ -120,14 +120,23 @@ pub struct CapturedFrag {
 
 impl Capture {
     /// Builds a capture from per-pixel lists.
-    pub fn from_lists(width: u32, height: u32, lists: impl IntoIterator<Item = Vec<CapturedFrag>>) -> Capture {
+    pub fn from_lists(
+        width: u32,
+        height: u32,
+        lists: impl IntoIterator<Item = Vec<CapturedFrag>>,
+    ) -> Capture {
         let mut offsets = vec![0u32];
         let mut frags = Vec::new();
         for l in lists {
             frags.extend(l);
             offsets.push(frags.len() as u32);
         }
-        Capture { width, height, offsets, frags }
+        Capture {
+            width,
+            height,
+            offsets,
+            frags,
+        }
     }
     pub fn pixel(&self, p: usize) -> &[CapturedFrag] {
         &self.frags[self.offsets[p] as usize..self.offsets[p + 1] as usize]
@@ -148,7 +157,11 @@ pub struct Check {
 
 impl Check {
     pub fn new(name: impl Into<String>, passed: bool, detail: impl Into<String>) -> Check {
-        Check { name: name.into(), passed, detail: detail.into() }
+        Check {
+            name: name.into(),
+            passed,
+            detail: detail.into(),
+        }
     }
 }
 
@@ -189,7 +202,12 @@ pub enum AlgoError {
 pub trait Algorithm: Send + Sync {
     fn info(&self) -> AlgoInfo;
     /// Runs every pass of the algorithm on a fresh device, shading with `exec`, and resolves.
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError>;
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError>;
 }
 
 /// Runs with a fresh device (helper for implementations).

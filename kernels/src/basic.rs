@@ -2,9 +2,15 @@
 //! kernel), the nearest surface (`opaque`), and `truth`, the exact A-buffer every other
 //! algorithm is checked against.
 
-use fragrace_emu::{Buf, CompareFunc, DepthState, ExecConfig, Format, Frag, FragmentKernel, KernelInfo, SampleCount, TargetState};
+use fragrace_emu::{
+    Buf, CompareFunc, DepthState, ExecConfig, Format, Frag, FragmentKernel, KernelInfo,
+    SampleCount, TargetState,
+};
 
-use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame, HazardClass, Params};
+use crate::algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
+    HazardClass, Params,
+};
 use crate::common::{self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments};
 
 /// Per-pixel fragment count with an atomic add (depth complexity).
@@ -48,9 +54,23 @@ fn run_count(frame: &Frame<'_>, exec: &ExecConfig, plain: bool) -> Result<AlgoRe
     let counts = device.buffer::<u32>("counts", pixels(frame) as u64)?;
     let mut fb = framebuffer(frame, SampleCount::X1, &[])?;
     let report = if plain {
-        geometry_pass(&device, &mut fb, frame, &capture_state(), &CountPlainKernel { counts }, exec)?
+        geometry_pass(
+            &device,
+            &mut fb,
+            frame,
+            &capture_state(),
+            &CountPlainKernel { counts },
+            exec,
+        )?
     } else {
-        geometry_pass(&device, &mut fb, frame, &capture_state(), &CountKernel { counts }, exec)?
+        geometry_pass(
+            &device,
+            &mut fb,
+            frame,
+            &capture_state(),
+            &CountKernel { counts },
+            exec,
+        )?
     };
     let values = device.memory.read(counts)?;
     let total: u64 = values.iter().map(|&c| c as u64).sum();
@@ -76,14 +96,20 @@ impl Algorithm for Count {
             name: "count",
             family: "basic",
             summary: "depth complexity: atomic add of 1 per fragment into a per-pixel counter",
-            source: "llvmpipe peer `--algo count`; depth complexity as in every seed's results section",
+            source:
+                "llvmpipe peer `--algo count`; depth complexity as in every seed's results section",
             passes: "1 geometry",
             memory: "4 bytes",
             hazard: HazardClass::HazardFree,
             capacity: Capacity::Count,
         }
     }
-    fn run(&self, frame: &Frame<'_>, _params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        _params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         run_count(frame, exec, false)
     }
 }
@@ -101,7 +127,12 @@ impl Algorithm for CountPlain {
             capacity: Capacity::Count,
         }
     }
-    fn run(&self, frame: &Frame<'_>, _params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        _params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut r = run_count(frame, exec, true)?;
         // For a racy kernel, losing counts is the expected outcome, not a broken invariant:
         // keep the figure, but as information.
@@ -145,26 +176,51 @@ impl Algorithm for Opaque {
             capacity: Capacity::Nearest,
         }
     }
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let device = common::fresh();
         let mut fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA8, Format::RG32F])?;
         let bg = params.background;
-        fb.clear_color(0, [bg[0].to_bits(), bg[1].to_bits(), bg[2].to_bits(), 0f32.to_bits()]);
+        fb.clear_color(
+            0,
+            [
+                bg[0].to_bits(),
+                bg[1].to_bits(),
+                bg[2].to_bits(),
+                0f32.to_bits(),
+            ],
+        );
         fb.clear_color(1, [1f32.to_bits(), u32::MAX, 0, 0]);
         let mut state = capture_state();
-        state.fragment.depth = DepthState { test: true, func: CompareFunc::Less, write: true };
-        state.fragment.targets = vec![TargetState::new(Format::RGBA8), TargetState::new(Format::RG32F)];
+        state.fragment.depth = DepthState {
+            test: true,
+            func: CompareFunc::Less,
+            write: true,
+        };
+        state.fragment.targets = vec![
+            TargetState::new(Format::RGBA8),
+            TargetState::new(Format::RG32F),
+        ];
         let report = geometry_pass(&device, &mut fb, frame, &state, &OpaqueKernel, exec)?;
         let colors = fb.image(0);
         let ids = fb.image(1);
         let n = pixels(frame);
-        let image: Vec<[f32; 4]> = (0..n).map(|p| colors.texels[p].map(f32::from_bits)).collect();
+        let image: Vec<[f32; 4]> = (0..n)
+            .map(|p| colors.texels[p].map(f32::from_bits))
+            .collect();
         let lists = (0..n).map(|p| {
             let t = ids.texels[p];
             if t[1] == u32::MAX {
                 vec![]
             } else {
-                vec![CapturedFrag { depth: f32::from_bits(t[0]), prim: t[1] }]
+                vec![CapturedFrag {
+                    depth: f32::from_bits(t[0]),
+                    prim: t[1],
+                }]
             }
         });
         let capture = Capture::from_lists(frame.width, frame.height, lists);
@@ -207,7 +263,10 @@ pub struct Truth;
 impl Truth {
     /// Runs truth on a frame (ordered executor, `threads` for the rasterizer).
     pub fn capture(frame: &Frame<'_>, threads: usize) -> Result<AlgoResult, AlgoError> {
-        let exec = ExecConfig { threads, ..ExecConfig::ordered() };
+        let exec = ExecConfig {
+            threads,
+            ..ExecConfig::ordered()
+        };
         let n = pixels(frame);
         let counted = run_count(frame, &exec, false)?;
         let counts = counted.counts.clone().unwrap_or_default();
@@ -225,13 +284,28 @@ impl Truth {
         let depth = device.buffer::<f32>("depth", total as u64)?;
         let prim = device.buffer::<u32>("prim", total as u64)?;
         let mut fb = framebuffer(frame, SampleCount::X1, &[])?;
-        let store = TruthStore { offsets: off_buf, fill, depth, prim };
+        let store = TruthStore {
+            offsets: off_buf,
+            fill,
+            depth,
+            prim,
+        };
         let mut report = counted.report.clone();
-        report.merge(&geometry_pass(&device, &mut fb, frame, &capture_state(), &store, &exec)?);
+        report.merge(&geometry_pass(
+            &device,
+            &mut fb,
+            frame,
+            &capture_state(),
+            &store,
+            &exec,
+        )?);
         let depths = device.memory.read(depth)?;
         let prims = device.memory.read(prim)?;
-        let mut frags: Vec<CapturedFrag> =
-            depths.iter().zip(&prims).map(|(&depth, &prim)| CapturedFrag { depth, prim }).collect();
+        let mut frags: Vec<CapturedFrag> = depths
+            .iter()
+            .zip(&prims)
+            .map(|(&depth, &prim)| CapturedFrag { depth, prim })
+            .collect();
         for p in 0..n {
             sort_fragments(&mut frags[offsets[p] as usize..offsets[p + 1] as usize]);
         }
@@ -242,7 +316,12 @@ impl Truth {
             format!("{} pixels", n),
         )];
         Ok(AlgoResult {
-            capture: Some(Capture { width: frame.width, height: frame.height, offsets, frags }),
+            capture: Some(Capture {
+                width: frame.width,
+                height: frame.height,
+                offsets,
+                frags,
+            }),
             counts: Some(counts),
             storage_bytes: device.memory.bytes(),
             report,
@@ -265,11 +344,18 @@ impl Algorithm for Truth {
             capacity: Capacity::All,
         }
     }
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut r = Truth::capture(frame, exec.threads)?;
         if let Some(c) = &r.capture {
             r.image = Some(
-                (0..c.pixels()).map(|p| common::composite_frags(c.pixel(p), params.alpha, params.background)).collect(),
+                (0..c.pixels())
+                    .map(|p| common::composite_frags(c.pixel(p), params.alpha, params.background))
+                    .collect(),
             );
         }
         Ok(r)

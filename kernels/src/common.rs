@@ -2,8 +2,8 @@
 //! state that captures every fragment, and depth-order sorting.
 
 use fragrace_emu::{
-    Device, Draw, ExecConfig, FragmentKernel, FragmentState, Framebuffer, PassReport, PassState, RasterState,
-    SampleCount,
+    Device, Draw, ExecConfig, FragmentKernel, FragmentState, Framebuffer, PassReport, PassState,
+    RasterState, SampleCount,
 };
 
 use crate::algo::{AlgoError, CapturedFrag, Frame};
@@ -44,7 +44,11 @@ pub fn unpack_color(c: u32) -> [f32; 4] {
 
 /// Front-to-back "over" of `colors` (nearest first), each with opacity `alpha`, onto
 /// `background`: `C = sum_i c_i a prod_{j<i} (1 - a) + bg prod (1 - a)`.
-pub fn composite(colors: impl IntoIterator<Item = [f32; 3]>, alpha: f32, background: [f32; 3]) -> [f32; 4] {
+pub fn composite(
+    colors: impl IntoIterator<Item = [f32; 3]>,
+    alpha: f32,
+    background: [f32; 3],
+) -> [f32; 4] {
     let mut acc = [0.0f32; 3];
     let mut t = 1.0f32;
     for c in colors {
@@ -53,7 +57,12 @@ pub fn composite(colors: impl IntoIterator<Item = [f32; 3]>, alpha: f32, backgro
         }
         t *= 1.0 - alpha;
     }
-    [acc[0] + background[0] * t, acc[1] + background[1] * t, acc[2] + background[2] * t, 1.0 - t]
+    [
+        acc[0] + background[0] * t,
+        acc[1] + background[1] * t,
+        acc[2] + background[2] * t,
+        1.0 - t,
+    ]
 }
 
 /// Composites captured fragments (already in front-to-back order) by primitive colour.
@@ -109,12 +118,26 @@ pub fn sort_fragments(v: &mut [CapturedFrag]) {
 /// Pass state that lets every fragment through: no culling, no depth test, no targets
 /// (the capture passes of the A-buffers, k-buffers and the peer's shaders).
 pub fn capture_state() -> PassState {
-    PassState { raster: RasterState::default(), fragment: FragmentState::new(), condition: None }
+    PassState {
+        raster: RasterState::default(),
+        fragment: FragmentState::new(),
+        condition: None,
+    }
 }
 
 /// A framebuffer for a frame with the given targets and samples.
-pub fn framebuffer(frame: &Frame<'_>, samples: SampleCount, formats: &[fragrace_emu::Format]) -> Result<Framebuffer, AlgoError> {
-    Ok(Framebuffer::new(frame.width, frame.height, samples, 64, formats)?)
+pub fn framebuffer(
+    frame: &Frame<'_>,
+    samples: SampleCount,
+    formats: &[fragrace_emu::Format],
+) -> Result<Framebuffer, AlgoError> {
+    Ok(Framebuffer::new(
+        frame.width,
+        frame.height,
+        samples,
+        64,
+        formats,
+    )?)
 }
 
 /// Runs one geometry pass of `frame` with `kernel`.

@@ -17,5 +17,8 @@ pub mod kbuffer;
 pub mod oracle;
 pub mod registry;
 
-pub use algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, Check, Frame, HazardClass, Params};
+pub use algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, Check, Frame, HazardClass,
+    Params,
+};
 pub use registry::{algorithm, algorithms, names};

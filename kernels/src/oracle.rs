@@ -42,10 +42,18 @@ pub const IMAGE_TOLERANCE: f32 = 1.0 / 255.0;
 
 /// Compares `result` of the algorithm described by `info` with `truth` (from
 /// [`crate::basic::Truth::capture`] on the same frame).
-pub fn compare(info: &AlgoInfo, result: &AlgoResult, truth: &AlgoResult, params: &Params) -> Metrics {
+pub fn compare(
+    info: &AlgoInfo,
+    result: &AlgoResult,
+    truth: &AlgoResult,
+    params: &Params,
+) -> Metrics {
     let t = truth.capture.as_ref().expect("truth always captures");
     let n = t.pixels();
-    let mut m = Metrics { error_mask: vec![false; n], ..Default::default() };
+    let mut m = Metrics {
+        error_mask: vec![false; n],
+        ..Default::default()
+    };
     let k = params.k.max(1) as usize;
     for p in 0..n {
         let tp = t.pixel(p);
@@ -70,7 +78,8 @@ pub fn compare(info: &AlgoInfo, result: &AlgoResult, truth: &AlgoResult, params:
             Capacity::KNearest => {
                 let mine = sorted(result, p);
                 let want = k.min(tp.len());
-                let wrong = mine.len() != want || mine.iter().zip(tp).any(|(a, b)| a.depth != b.depth);
+                let wrong =
+                    mine.len() != want || mine.iter().zip(tp).any(|(a, b)| a.depth != b.depth);
                 (wrong, mine.len().min(want), want)
             }
             Capacity::Nearest => {
@@ -99,16 +108,27 @@ pub fn compare(info: &AlgoInfo, result: &AlgoResult, truth: &AlgoResult, params:
         m.epr = m.error_pixels as f64 / m.covered_pixels as f64;
         m.coplanarity /= m.covered_pixels as f64;
     }
-    m.robustness = if m.expected > 0 { m.captured as f64 / m.expected as f64 } else { 1.0 };
+    m.robustness = if m.expected > 0 {
+        m.captured as f64 / m.expected as f64
+    } else {
+        1.0
+    };
     m
 }
 
 fn sorted(result: &AlgoResult, p: usize) -> Vec<CapturedFrag> {
-    let mut v = result.capture.as_ref().map(|c| c.pixel(p).to_vec()).unwrap_or_default();
+    let mut v = result
+        .capture
+        .as_ref()
+        .map(|c| c.pixel(p).to_vec())
+        .unwrap_or_default();
     v.sort_by(depth_order);
     v
 }
 
 fn same_frags(a: &[CapturedFrag], b: &[CapturedFrag]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.depth == y.depth && x.prim == y.prim)
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(x, y)| x.depth == y.depth && x.prim == y.prim)
 }

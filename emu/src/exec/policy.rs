@@ -53,7 +53,9 @@ impl fmt::Display for Policy {
 
 /// A policy string that does not parse.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
-#[error("unknown policy `{0}`: expected random, pct:D, warp:N, reverse, fifo, far-first or bytes:HEX")]
+#[error(
+    "unknown policy `{0}`: expected random, pct:D, warp:N, reverse, fifo, far-first or bytes:HEX"
+)]
 pub struct PolicyParseError(pub String);
 
 impl FromStr for Policy {

@@ -43,11 +43,19 @@ pub(crate) struct ShadeOutcome {
 const KEEP_FAULTS: usize = 64;
 
 fn id_of(i: &FragInput) -> InvocationId {
-    InvocationId { seq: i.seq, primitive: i.primitive_id, x: i.x, y: i.y }
+    InvocationId {
+        seq: i.seq,
+        primitive: i.primitive_id,
+        x: i.x,
+        y: i.y,
+    }
 }
 
 /// One invocation's whole life: the kernel, then the hand-over of an interlock turn.
-fn invocation<'a, K: FragmentKernel>(kernel: &'a K, frag: Frag<'a>) -> impl Future<Output = ()> + 'a {
+fn invocation<'a, K: FragmentKernel>(
+    kernel: &'a K,
+    frag: Frag<'a>,
+) -> impl Future<Output = ()> + 'a {
     async move {
         kernel.shade(frag).await;
         frag.retire().await;
@@ -60,8 +68,14 @@ enum Polled {
 }
 
 /// Polls the future in `slot`, turning a panic into a fault.
-fn poll_slot<F: Future<Output = ()>>(slot: &mut Option<F>, inv: &Invocation, cx: &mut Context<'_>) -> Polled {
-    let Some(fut) = slot.as_mut() else { return Polled::Done };
+fn poll_slot<F: Future<Output = ()>>(
+    slot: &mut Option<F>,
+    inv: &Invocation,
+    cx: &mut Context<'_>,
+) -> Polled {
+    let Some(fut) = slot.as_mut() else {
+        return Polled::Done;
+    };
     // SAFETY: the future lives in a slot of a Vec that is never resized or moved while any
     // future is in it (allocated once per worker with its final length), and a future is
     // only ever dropped in place (`*slot = None`), so it is never moved after this pin.
@@ -124,7 +138,10 @@ impl Acc {
         if let Some(kind) = fault {
             s.faulted += 1;
             if self.faults.len() < KEEP_FAULTS {
-                self.faults.push(Fault { invocation: id_of(&input), kind });
+                self.faults.push(Fault {
+                    invocation: id_of(&input),
+                    kind,
+                });
             }
         }
     }
@@ -152,11 +169,32 @@ pub(crate) fn shade<K: FragmentKernel>(
     match &cfg.mode {
         ExecMode::Ordered => {
             let mut acc = Acc::default();
-            run_direct(kernel, env, inputs, outs, colors, targets, 1, false, &mut acc);
+            run_direct(
+                kernel, env, inputs, outs, colors, targets, 1, false, &mut acc,
+            );
             acc.finish(&mut outcome);
         }
-        ExecMode::Parallel => run_parallel(kernel, env, cfg, inputs, outs, colors, targets, &mut outcome),
-        ExecMode::Scheduled(sc) => run_scheduled(kernel, env, sc, cfg.max_steps, inputs, outs, colors, targets, &mut outcome),
+        ExecMode::Parallel => run_parallel(
+            kernel,
+            env,
+            cfg,
+            inputs,
+            outs,
+            colors,
+            targets,
+            &mut outcome,
+        ),
+        ExecMode::Scheduled(sc) => run_scheduled(
+            kernel,
+            env,
+            sc,
+            cfg.max_steps,
+            inputs,
+            outs,
+            colors,
+            targets,
+            &mut outcome,
+        ),
     }
     outcome
 }
@@ -185,7 +223,13 @@ fn run_direct<K: FragmentKernel>(
         let n = width.min(inputs.len() - base);
         for lane in 0..n {
             slots[lane].reset(inputs[base + lane]);
-            futs[lane] = Some(invocation(kernel, Frag { inv: &slots[lane], env }));
+            futs[lane] = Some(invocation(
+                kernel,
+                Frag {
+                    inv: &slots[lane],
+                    env,
+                },
+            ));
         }
         let mut left = n;
         while left > 0 {
@@ -198,7 +242,11 @@ fn run_direct<K: FragmentKernel>(
                         Polled::Done => {
                             futs[lane] = None;
                             let i = base + lane;
-                            acc.harvest(&slots[lane], &mut outs[i], &mut colors[i * targets..(i + 1) * targets]);
+                            acc.harvest(
+                                &slots[lane],
+                                &mut outs[i],
+                                &mut colors[i * targets..(i + 1) * targets],
+                            );
                             left -= 1;
                             break;
                         }
@@ -252,13 +300,26 @@ fn run_parallel<K: FragmentKernel>(
                     loop {
                         let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
                         let Some((ins, o, c)) = next else { break };
-                        run_direct(kernel, env, ins, o, c, targets, batch, cfg.lockstep, &mut acc);
+                        run_direct(
+                            kernel,
+                            env,
+                            ins,
+                            o,
+                            c,
+                            targets,
+                            batch,
+                            cfg.lockstep,
+                            &mut acc,
+                        );
                     }
                     acc
                 })
             })
             .collect();
-        handles.into_iter().map(|h| h.join().unwrap_or_default()).collect()
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_default())
+            .collect()
     });
     for acc in accs {
         acc.finish(outcome);
@@ -278,7 +339,9 @@ fn run_scheduled<K: FragmentKernel>(
     outcome: &mut ShadeOutcome,
 ) {
     let width = sc.window.max(1);
-    let names = (0..env.memory.buffer_sizes().len() as u32).map(|b| env.memory.buffer_name(b).to_string()).collect();
+    let names = (0..env.memory.buffer_sizes().len() as u32)
+        .map(|b| env.memory.buffer_name(b).to_string())
+        .collect();
     let mut detector = Detector::new(env.width, env.height, names);
     let mut chooser = Chooser::new(&sc.policy, sc.seed, inputs.len() as u64 * 4);
     let mut record = sc.record.then(Vec::new);
@@ -301,7 +364,11 @@ fn run_scheduled<K: FragmentKernel>(
             futs[s] = None;
             let i = which[s];
             let seq = inputs[i].seq;
-            acc.harvest(&slots[s], &mut outs[i], &mut colors[i * targets..(i + 1) * targets]);
+            acc.harvest(
+                &slots[s],
+                &mut outs[i],
+                &mut colors[i * targets..(i + 1) * targets],
+            );
             detector.finish(seq, step);
             chooser.retire(seq);
             inflight.retain(|&x| x != s);
@@ -315,7 +382,13 @@ fn run_scheduled<K: FragmentKernel>(
             let Some(s) = free.pop() else { break };
             slots[s].reset(inputs[next]);
             which[s] = next;
-            futs[s] = Some(invocation(kernel, Frag { inv: &slots[s], env }));
+            futs[s] = Some(invocation(
+                kernel,
+                Frag {
+                    inv: &slots[s],
+                    env,
+                },
+            ));
             detector.start(id_of(&inputs[next]), step);
             chooser.admit(inputs[next].seq);
             inflight.push(s);
@@ -352,7 +425,10 @@ fn run_scheduled<K: FragmentKernel>(
             };
             if runnable {
                 let i = inv.input.get();
-                cands.push(Candidate { seq: i.seq, depth: i.depth });
+                cands.push(Candidate {
+                    seq: i.seq,
+                    depth: i.depth,
+                });
                 cand_slots.push(s);
             }
         }
@@ -373,18 +449,32 @@ fn run_scheduled<K: FragmentKernel>(
         let s = cand_slots[k];
         let inv = &slots[s];
         let input = inv.input.get();
-        if let Some(StepKind::Mem { addr, op, record: rec }) = inv.pending.get() {
+        if let Some(StepKind::Mem {
+            addr,
+            op,
+            record: rec,
+        }) = inv.pending.get()
+        {
             let lock = match env.interlock {
                 Some(l) if inv.in_interlock.get() => Some(l.key(input.x, input.y)),
                 _ => None,
             };
-            detector.access(input.seq, addr, op, step, lock, rec.map(|r| (r.base, r.len, r.word)));
+            detector.access(
+                input.seq,
+                addr,
+                op,
+                step,
+                lock,
+                rec.map(|r| (r.base, r.len, r.word)),
+            );
         }
         inv.granted.set(true);
         step += 1;
         let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
         if !done && inv.steps.get() > max_steps {
-            *inv.fault.borrow_mut() = Some(FaultKind::Watchdog { steps: inv.steps.get() });
+            *inv.fault.borrow_mut() = Some(FaultKind::Watchdog {
+                steps: inv.steps.get(),
+            });
             retire!(s);
         } else if done {
             retire!(s);

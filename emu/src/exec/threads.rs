@@ -56,7 +56,10 @@ pub fn run_on_threads<K: FragmentKernel + Send + 'static>(
                 };
                 let inv = Invocation::new();
                 inv.reset(input);
-                let frag = Frag { inv: &inv, env: &env };
+                let frag = Frag {
+                    inv: &inv,
+                    env: &env,
+                };
                 let mut fut = pin!(async move {
                     kernel.shade(frag).await;
                     frag.retire().await;
@@ -80,5 +83,11 @@ pub fn run_on_threads<K: FragmentKernel + Send + 'static>(
             })
         })
         .collect();
-    handles.into_iter().map(|h| h.join().expect("invocation threads catch nothing; a panic is a kernel bug")).collect()
+    handles
+        .into_iter()
+        .map(|h| {
+            h.join()
+                .expect("invocation threads catch nothing; a panic is a kernel bug")
+        })
+        .collect()
 }

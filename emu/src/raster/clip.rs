@@ -124,7 +124,10 @@ fn lerp(a: &ClipVert, b: &ClipVert, t: f64) -> ClipVert {
 /// Sutherland-Hodgman clipping of a triangle against the planes in `mask` (bit per plane).
 /// Returns the clipped convex polygon (fewer than 3 vertices if nothing is left).
 pub(crate) fn clip_triangle(planes: &Planes, tri: [ClipVert; 3], mask: u32) -> Poly {
-    let mut cur = Poly { v: [ClipVert::default(); MAX_POLY + 1], n: 0 };
+    let mut cur = Poly {
+        v: [ClipVert::default(); MAX_POLY + 1],
+        n: 0,
+    };
     for c in tri {
         cur.push(c);
     }
@@ -132,7 +135,10 @@ pub(crate) fn clip_triangle(planes: &Planes, tri: [ClipVert; 3], mask: u32) -> P
         if mask & (1 << i) == 0 {
             continue;
         }
-        let mut next = Poly { v: [ClipVert::default(); MAX_POLY + 1], n: 0 };
+        let mut next = Poly {
+            v: [ClipVert::default(); MAX_POLY + 1],
+            n: 0,
+        };
         let n = cur.n;
         for j in 0..n {
             let a = &cur.v[j];
@@ -146,7 +152,11 @@ pub(crate) fn clip_triangle(planes: &Planes, tri: [ClipVert; 3], mask: u32) -> P
                 // From the inside vertex to the outside one (see the module docs). When the
                 // inside vertex lies on the plane (d == 0) it is the intersection itself and
                 // is (or will be) in the polygon already.
-                let (pin, din, pout, dout) = if da >= 0.0 { (a, da, b, db) } else { (b, db, a, da) };
+                let (pin, din, pout, dout) = if da >= 0.0 {
+                    (a, da, b, db)
+                } else {
+                    (b, db, a, da)
+                };
                 if din > 0.0 {
                     next.push(lerp(pin, pout, din / (din - dout)));
                 }
@@ -223,7 +233,9 @@ mod tests {
         let pl = Planes::new(640, 480);
         let mut seed = 12345u64;
         let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0
         };
         for _ in 0..10000 {
@@ -241,7 +253,11 @@ mod tests {
     fn near_plane_clip_keeps_inside_part() {
         let pl = Planes::new(100, 100);
         // One vertex behind the near plane (z < -w).
-        let t = [cv(0.0, 0.0, -2.0, 1.0, 0), cv(1.0, 0.0, 0.0, 1.0, 1), cv(0.0, 1.0, 0.0, 1.0, 2)];
+        let t = [
+            cv(0.0, 0.0, -2.0, 1.0, 0),
+            cv(1.0, 0.0, 0.0, 1.0, 1),
+            cv(0.0, 1.0, 0.0, 1.0, 2),
+        ];
         let p = clip_triangle(&pl, t, 0b10);
         assert_eq!(p.n, 4);
         for v in &p.v[..p.n] {
@@ -261,7 +277,11 @@ mod tests {
         let p1 = clip_triangle(&pl, [a, b, c1], 0b10);
         let p2 = clip_triangle(&pl, [b, a, c2], 0b10);
         let find = |p: &Poly| {
-            p.v[..p.n].iter().filter(|v| v.b[0] != 1.0 && v.b[1] != 0.0 && v.b[2] == 0.0).map(|v| v.p).collect::<Vec<_>>()
+            p.v[..p.n]
+                .iter()
+                .filter(|v| v.b[0] != 1.0 && v.b[1] != 0.0 && v.b[2] == 0.0)
+                .map(|v| v.p)
+                .collect::<Vec<_>>()
         };
         let i1 = find(&p1);
         let i2 = find(&p2);
@@ -271,7 +291,15 @@ mod tests {
 
     #[test]
     fn hull_drops_collinear_and_reflex() {
-        let pts = [[0, 0], [10, 0], [20, 0], [20, 20], [10, 11], [10, 9], [0, 20]];
+        let pts = [
+            [0, 0],
+            [10, 0],
+            [20, 0],
+            [20, 20],
+            [10, 11],
+            [10, 9],
+            [0, 20],
+        ];
         let mut out = [0; MAX_POLY + 1];
         let m = convex_hull(&pts, &mut out);
         let mut got: Vec<usize> = out[..m].to_vec();

@@ -45,7 +45,12 @@ static FIXED_8: [(i32, i32); 8] = fixed(OFFSETS_8);
 // The same positions in pixels from the top-left corner: (8 + o) / 16, written out (exact in f32).
 static POS_1: [(f32, f32); 1] = [(0.5, 0.5)];
 static POS_2: [(f32, f32); 2] = [(0.75, 0.75), (0.25, 0.25)];
-static POS_4: [(f32, f32); 4] = [(0.375, 0.125), (0.875, 0.375), (0.125, 0.625), (0.625, 0.875)];
+static POS_4: [(f32, f32); 4] = [
+    (0.375, 0.125),
+    (0.875, 0.375),
+    (0.125, 0.625),
+    (0.625, 0.875),
+];
 static POS_8: [(f32, f32); 8] = [
     (0.5625, 0.3125),
     (0.4375, 0.6875),
@@ -90,7 +95,13 @@ pub(crate) struct SampleInfo {
 impl SampleInfo {
     pub fn new(s: SampleCount) -> SampleInfo {
         let offs = sample_offsets_fixed(s);
-        let mut si = SampleInfo { offs, min_x: ONE, max_x: 0, min_y: ONE, max_y: 0 };
+        let mut si = SampleInfo {
+            offs,
+            min_x: ONE,
+            max_x: 0,
+            min_y: ONE,
+            max_y: 0,
+        };
         for &(x, y) in offs {
             si.min_x = si.min_x.min(x);
             si.max_x = si.max_x.max(x);
@@ -166,7 +177,11 @@ pub(crate) struct Edges {
 impl Edges {
     #[inline]
     pub fn new(v: &[[i32; 2]; 3]) -> Edges {
-        let mut e = Edges { a: [0; 3], b: [0; 3], c: [0; 3] };
+        let mut e = Edges {
+            a: [0; 3],
+            b: [0; 3],
+            c: [0; 3],
+        };
         for i in 0..3 {
             let p = v[i];
             let q = v[(i + 1) % 3];
@@ -213,14 +228,54 @@ impl Edges {
     }
 }
 
+/// Coverage mask of pixel `(px, py)` for a positively oriented triangle: the same edge
+/// functions and fill rule as [`Edges`], evaluated relative to the pixel corner without
+/// building the edge constants (the common case of a triangle whose box reaches one pixel).
+#[inline]
+pub(crate) fn pixel_mask(v: &[[i32; 2]; 3], si: &SampleInfo, px: i32, py: i32) -> u8 {
+    let (ox, oy) = ((px as i64) << SUBPIXEL_BITS, (py as i64) << SUBPIXEL_BITS);
+    let mut x = [0i64; 3];
+    let mut y = [0i64; 3];
+    for i in 0..3 {
+        x[i] = v[i][0] as i64 - ox;
+        y[i] = v[i][1] as i64 - oy;
+    }
+    let mut dx = [0i64; 3];
+    let mut dy = [0i64; 3];
+    let mut bias = [0i64; 3];
+    for i in 0..3 {
+        let j = (i + 1) % 3;
+        dx[i] = x[j] - x[i];
+        dy[i] = y[j] - y[i];
+        bias[i] = i64::from(is_top_left(dx[i], dy[i])) - 1;
+    }
+    let mut m = 0u8;
+    for (s, &(sx, sy)) in si.offs.iter().enumerate() {
+        let (sx, sy) = (sx as i64, sy as i64);
+        let e0 = dx[0] * (sy - y[0]) - dy[0] * (sx - x[0]) + bias[0];
+        let e1 = dx[1] * (sy - y[1]) - dy[1] * (sx - x[1]) + bias[1];
+        let e2 = dx[2] * (sy - y[2]) - dy[2] * (sx - x[2]) + bias[2];
+        m |= u8::from((e0 | e1 | e2) >= 0) << s;
+    }
+    m
+}
+
 /// Calls `f(x, y, mask)` for every pixel of the inclusive pixel rectangle `r` with at least
 /// one covered sample, in row-major order. Edge functions are stepped incrementally (exact
 /// integer additions, so stepping gives the same values as direct evaluation).
 #[inline]
 pub(crate) fn raster(e: &Edges, si: &SampleInfo, r: [i32; 4], mut f: impl FnMut(u32, u32, u8)) {
     let [x0, y0, x1, y1] = r;
-    let step_x = [e.a[0] << SUBPIXEL_BITS, e.a[1] << SUBPIXEL_BITS, e.a[2] << SUBPIXEL_BITS];
-    let step_y = [e.b[0] << SUBPIXEL_BITS, e.b[1] << SUBPIXEL_BITS, e.b[2] << SUBPIXEL_BITS];
+    let step_x = [
+        e.a[0] << SUBPIXEL_BITS,
+        e.a[1] << SUBPIXEL_BITS,
+        e.a[2] << SUBPIXEL_BITS,
+    ];
+    let step_y = [
+        e.b[0] << SUBPIXEL_BITS,
+        e.b[1] << SUBPIXEL_BITS,
+        e.b[2] << SUBPIXEL_BITS,
+    ];
     let bx = (x0 as i64) << SUBPIXEL_BITS;
     let by = (y0 as i64) << SUBPIXEL_BITS;
     if si.offs.len() == 1 {
@@ -278,7 +333,12 @@ mod tests {
 
     #[test]
     fn fixed_offsets_match_float_positions() {
-        for s in [SampleCount::X1, SampleCount::X2, SampleCount::X4, SampleCount::X8] {
+        for s in [
+            SampleCount::X1,
+            SampleCount::X2,
+            SampleCount::X4,
+            SampleCount::X8,
+        ] {
             let f = sample_offsets_fixed(s);
             let p = sample_positions(s);
             assert_eq!(f.len(), s.count());
@@ -298,7 +358,10 @@ mod tests {
         assert!(is_top_left(ONE as i64, 0));
         assert!(!is_top_left(-ONE as i64, ONE as i64));
         assert!(is_top_left(0, -ONE as i64));
-        assert!(!is_top_left(-(ONE as i64), 0), "a bottom edge is not top-left");
+        assert!(
+            !is_top_left(-(ONE as i64), 0),
+            "a bottom edge is not top-left"
+        );
         assert!(!is_top_left(0, ONE as i64), "a right edge is not top-left");
     }
 
@@ -316,13 +379,61 @@ mod tests {
     }
 
     #[test]
+    fn pixel_mask_matches_edges() {
+        let mut seed = 7u64;
+        let mut rnd = |n: i32| {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 33) % n as u64) as i32
+        };
+        for s in [SampleCount::X1, SampleCount::X4, SampleCount::X8] {
+            let si = SampleInfo::new(s);
+            for _ in 0..20000 {
+                // Small triangles near pixel (3, 5), with coordinates often on the sample grid.
+                let c = |r: &mut dyn FnMut(i32) -> i32| {
+                    [
+                        3 * ONE + r(3 * ONE / 16) * 16 - ONE,
+                        5 * ONE + r(3 * ONE / 16) * 16 - ONE,
+                    ]
+                };
+                let mut v = [c(&mut rnd), c(&mut rnd), c(&mut rnd)];
+                let a = area2(&v);
+                if a == 0 {
+                    continue;
+                }
+                if a < 0 {
+                    v.swap(1, 2);
+                }
+                let e = Edges::new(&v);
+                for (px, py) in [(2, 4), (3, 5), (3, 4), (2, 5)] {
+                    assert_eq!(
+                        pixel_mask(&v, &si, px, py),
+                        e.mask_at(&si, (px as i64) << 8, (py as i64) << 8),
+                        "{v:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
     fn pixel_rect_rejects_between_centres() {
         let si = SampleInfo::new(SampleCount::X1);
         // A box strictly between centres 0.5 and 1.5.
-        assert_eq!(si.pixel_rect([ONE / 2 + 1, 0, ONE + ONE / 2 - 1, ONE], 10, 10), None);
+        assert_eq!(
+            si.pixel_rect([ONE / 2 + 1, 0, ONE + ONE / 2 - 1, ONE], 10, 10),
+            None
+        );
         // A box touching a centre includes it (the fill rule decides later).
-        assert_eq!(si.pixel_rect([ONE / 2, ONE / 2, ONE / 2, ONE / 2], 10, 10), Some([0, 0, 0, 0]));
+        assert_eq!(
+            si.pixel_rect([ONE / 2, ONE / 2, ONE / 2, ONE / 2], 10, 10),
+            Some([0, 0, 0, 0])
+        );
         // Negative coordinates round correctly.
-        assert_eq!(si.pixel_rect([-ONE, -ONE, ONE / 2, ONE / 2], 10, 10), Some([0, 0, 0, 0]));
+        assert_eq!(
+            si.pixel_rect([-ONE, -ONE, ONE / 2, ONE / 2], 10, 10),
+            Some([0, 0, 0, 0])
+        );
     }
 }

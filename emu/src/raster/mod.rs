@@ -19,13 +19,15 @@ mod coverage;
 mod pool;
 mod setup;
 
-pub use setup::{bin_triangles, Binned, SetupTriangle};
+pub use setup::{bin_triangles, effective_tile_size, Binned, SetupTriangle, MAX_TILE, MIN_TILE};
 
 /// Sub-pixel precision of snapped vertex positions.
 pub const SUBPIXEL_BITS: u32 = 8;
 
 /// Number of samples per pixel.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
 pub enum SampleCount {
     #[default]
     X1,
@@ -83,7 +85,8 @@ pub struct RasterState {
     pub cull: CullMode,
     pub front_face: FrontFace,
     pub samples: SampleCount,
-    /// Tile edge in pixels (a power of two from 8 to 256).
+    /// Tile edge in pixels (a power of two from 8 to 256; other values are rounded up to one,
+    /// see [`effective_tile_size`]).
     pub tile_size: u32,
 }
 

@@ -21,7 +21,9 @@ pub(crate) struct Pool<T> {
 
 impl<T> Pool<T> {
     pub const fn new() -> Pool<T> {
-        Pool { free: Mutex::new(Vec::new()) }
+        Pool {
+            free: Mutex::new(Vec::new()),
+        }
     }
 
     /// An empty buffer, with the capacity of a previously returned one when available.

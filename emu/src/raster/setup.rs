@@ -12,8 +12,8 @@
 //!    chunk keeps its own per-tile lists (a stable counting sort done by its worker), and
 //!    [`Binned::raster_tile`] walks the chunks in order.
 use super::clip::{self, ClipVert, Planes, MAX_POLY, NON_FINITE};
-use super::pool::Pool;
 use super::coverage::{self, area2, bbox, Edges, SampleInfo, ONE};
+use super::pool::Pool;
 use super::{CullMode, Fragment, FrontFace, RasterState, SampleCount, Viewport, SUBPIXEL_BITS};
 use glam::Vec4;
 
@@ -27,81 +27,63 @@ const MAX_VIEWPORT: u32 = 1 << 20;
 
 /// A triangle after clipping and snapping, ready to rasterize.
 ///
-/// 80 bytes, no heap: the snapped vertices (edge functions are rebuilt from them in a few
-/// integer operations when rasterizing), the depth plane, and the per-vertex values that make
-/// barycentrics perspective-correct and relative to the *source* triangle.
+/// 64 bytes (one cache line), no heap: the depth plane and three barycentric planes, each
+/// relative to a reference pixel inside the viewport. The snapped vertices, needed only to
+/// rasterize triangles larger than a pixel, live in the tile bins instead.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SetupTriangle {
     /// Index of the input triangle (into `indices`) this comes from (several setup triangles share one
     /// source when clipping split it).
     pub source: u32,
     pub front_facing: bool,
-    /// Index into `v` of the depth plane's reference vertex.
-    zref: u8,
-    /// Snapped window positions (sub-pixel units, y down), positively oriented
-    /// ([`coverage::area2`] > 0).
-    v: [[i32; 2]; 3],
-    /// Depth plane: `z(x, y) = depth[0] + depth[1] (x - xr) + depth[2] (y - yr)`, pixels.
+    /// Reference pixel of the planes: the top-left corner of the pixels the triangle's
+    /// bounding box reaches (clamped to the viewport), so plane evaluations stay short-range.
+    rx: i32,
+    ry: i32,
+    /// Depth plane: `z(x, y) = depth[0] + depth[1] (x - rx) + depth[2] (y - ry)`, pixels.
     depth: [f32; 3],
-    /// `q[i][k]` = weight of source vertex `k` at vertex `i`, divided by that vertex's clip `w`.
-    /// Interpolated linearly in screen space and normalised, they give perspective-correct
-    /// barycentrics of the source triangle (for unclipped triangles `q[i]` is `1/w` on one axis).
-    q: [[f32; 3]; 3],
+    /// Planes (same form) of `b_k / w`: the weight of source vertex `k` divided by clip `w`.
+    /// Both are linear in screen space; normalising them gives perspective-correct
+    /// barycentrics of the *source* triangle, also for the pieces of a clipped one.
+    bary: [[f32; 3]; 3],
 }
 
 impl SetupTriangle {
     /// Window depth in [0,1] at a screen position (pixels, y down), linear in screen space.
     ///
     /// The plane is computed from the snapped vertices taken in a canonical order (sorted by
-    /// position), so triangles with identical vertices give bit-identical depths whatever their
-    /// vertex order or winding.
+    /// position) and referred to a pixel that depends only on them, so triangles with
+    /// identical vertices give bit-identical depths whatever their vertex order or winding.
+    #[inline]
     pub fn depth_at(&self, x: f32, y: f32) -> f32 {
-        let r = self.v[self.zref as usize];
-        let scale = 1.0 / ONE as f64;
-        let dx = x as f64 - r[0] as f64 * scale;
-        let dy = y as f64 - r[1] as f64 * scale;
-        let z = self.depth[0] as f64 + self.depth[1] as f64 * dx + self.depth[2] as f64 * dy;
+        let z = eval(
+            &self.depth,
+            x as f64 - self.rx as f64,
+            y as f64 - self.ry as f64,
+        );
         z.clamp(0.0, 1.0) as f32
     }
 
     /// Perspective-correct barycentrics of the *source* triangle's vertices at a screen position.
+    #[inline]
     pub fn bary_at(&self, x: f32, y: f32) -> [f32; 3] {
-        let px = x as f64 * ONE as f64;
-        let py = y as f64 * ONE as f64;
-        // Screen-space weight of vertex k = edge function of the opposite edge (unnormalised).
-        let mut l = [0.0f64; 3];
-        for (k, lk) in l.iter_mut().enumerate() {
-            let p = self.v[(k + 1) % 3];
-            let q = self.v[(k + 2) % 3];
-            let (p0, p1) = (p[0] as f64, p[1] as f64);
-            *lk = (q[0] as f64 - p0) * (py - p1) - (q[1] as f64 - p1) * (px - p0);
-        }
-        let mut num = [0.0f64; 3];
-        for (k, lk) in l.iter().enumerate() {
-            for (j, n) in num.iter_mut().enumerate() {
-                *n += lk * self.q[k][j] as f64;
-            }
-        }
-        let s = num[0] + num[1] + num[2];
+        let (dx, dy) = (x as f64 - self.rx as f64, y as f64 - self.ry as f64);
+        let b = [
+            eval(&self.bary[0], dx, dy),
+            eval(&self.bary[1], dx, dy),
+            eval(&self.bary[2], dx, dy),
+        ];
+        let s = b[0] + b[1] + b[2];
         if s == 0.0 || !s.is_finite() {
             return [1.0 / 3.0; 3];
         }
-        [(num[0] / s) as f32, (num[1] / s) as f32, (num[2] / s) as f32]
+        [(b[0] / s) as f32, (b[1] / s) as f32, (b[2] / s) as f32]
     }
+}
 
-    /// Snapped vertex positions in sub-pixel units ([`super::SUBPIXEL_BITS`] fractional bits,
-    /// y down), oriented so that the interior is on the positive side of every edge (clockwise
-    /// on screen). Useful to tests and debugging tools.
-    pub fn fixed_vertices(&self) -> [[i32; 2]; 3] {
-        self.v
-    }
-
-    /// Coverage mask of pixel `(x, y)` for `samples`, evaluated exactly as the rasterizer does
-    /// (without the viewport/tile scissor).
-    pub fn coverage(&self, x: u32, y: u32, samples: SampleCount) -> u8 {
-        let si = SampleInfo::new(samples);
-        Edges::new(&self.v).mask_at(&si, (x as i64) << SUBPIXEL_BITS, (y as i64) << SUBPIXEL_BITS)
-    }
+#[inline]
+fn eval(p: &[f32; 3], dx: f64, dy: f64) -> f64 {
+    p[0] as f64 + p[1] as f64 * dx + p[2] as f64 * dy
 }
 
 /// Triangles set up and binned into tiles.
@@ -128,16 +110,23 @@ struct ChunkBins {
     base: u32,
     tile_start: Vec<u32>,
     entries: Vec<BinEntry>,
+    /// Snapped vertices (sub-pixel units, y down, positively oriented: see
+    /// [`coverage::area2`]) of the chunk's triangles that are rasterized in the tiles.
+    verts: Vec<[[i32; 2]; 3]>,
 }
 
-/// One triangle in one tile: its setup index relative to the chunk, and for triangles whose
-/// coverage is a single pixel (most triangles of a dense mesh) that pixel and mask, already
-/// computed at setup: `mask << 16 | dy << 8 | dx` relative to the tile origin, or 0.
+/// One triangle in one tile: its setup index relative to the chunk, and `info`: for a
+/// triangle whose coverage is a single pixel (most triangles of a dense mesh) that pixel and
+/// mask, computed at setup, as `SINGLE | mask << 16 | dy << 8 | dx` relative to the tile
+/// origin; otherwise the index of its vertices in [`ChunkBins::verts`].
 #[derive(Clone, Copy, Debug, Default)]
 struct BinEntry {
     tri: u32,
-    single: u32,
+    info: u32,
 }
+
+/// Flag of a precomputed single-pixel [`BinEntry`].
+const SINGLE: u32 = 1 << 31;
 
 impl Binned {
     pub fn tile_count(&self) -> usize {
@@ -186,25 +175,32 @@ impl Binned {
             let list = &c.entries[c.tile_start[tile] as usize..c.tile_start[tile + 1] as usize];
             for e in list {
                 let tri = c.base + e.tri;
-                if e.single != 0 {
+                if e.info & SINGLE != 0 {
                     emit(Fragment {
-                        x: x0 + (e.single & 0xff),
-                        y: y0 + ((e.single >> 8) & 0xff),
+                        x: x0 + (e.info & 0xff),
+                        y: y0 + ((e.info >> 8) & 0xff),
                         tri,
-                        coverage: (e.single >> 16) as u8,
+                        coverage: (e.info >> 16) as u8,
                     });
                     continue;
                 }
-                let t = &self.tris[tri as usize];
+                let v = &c.verts[e.info as usize];
                 let (x0, y0, x1, y1) = (x0 as i32, y0 as i32, x1 as i32, y1 as i32);
-                let Some(r) = si.pixel_rect(bbox(&t.v), x1, y1) else { continue };
+                let Some(r) = si.pixel_rect(bbox(v), x1, y1) else {
+                    continue;
+                };
                 let r = [r[0].max(x0), r[1].max(y0), r[2], r[3]];
                 if r[0] > r[2] || r[1] > r[3] {
                     continue;
                 }
-                let edges = Edges::new(&t.v);
+                let edges = Edges::new(v);
                 coverage::raster(&edges, &si, r, |x, y, coverage| {
-                    emit(Fragment { x, y, tri, coverage })
+                    emit(Fragment {
+                        x,
+                        y,
+                        tri,
+                        coverage,
+                    })
                 });
             }
         }
@@ -218,6 +214,7 @@ static TRIS: Pool<SetupTriangle> = Pool::new();
 static PAIRS: Pool<(u32, BinEntry)> = Pool::new();
 static ENTRIES: Pool<BinEntry> = Pool::new();
 static STARTS: Pool<u32> = Pool::new();
+static VERTS: Pool<[[i32; 2]; 3]> = Pool::new();
 
 impl Drop for Binned {
     /// Hands the big buffers back to the pool for the next frame.
@@ -226,6 +223,7 @@ impl Drop for Binned {
         for c in self.chunks.drain(..) {
             ENTRIES.give(c.entries);
             STARTS.give(c.tile_start);
+            VERTS.give(c.verts);
         }
     }
 }
@@ -270,7 +268,11 @@ impl Xform {
 #[inline]
 fn round_fixed(v: f64) -> i32 {
     const BIAS: f64 = 2_147_483_648.0;
-    let c = if v.is_nan() { 0.0 } else { v.clamp(-COORD_LIMIT, COORD_LIMIT) };
+    let c = if v.is_nan() {
+        0.0
+    } else {
+        v.clamp(-COORD_LIMIT, COORD_LIMIT)
+    };
     ((c + (0.5 + BIAS)) as i64 - BIAS as i64) as i32
 }
 
@@ -279,10 +281,19 @@ fn vec4_f64(p: Vec4) -> [f64; 4] {
     [p.x as f64, p.y as f64, p.z as f64, p.w as f64]
 }
 
-/// Depth plane through the three vertices taken in canonical (sorted by y then x) order:
-/// returns the reference vertex index and `[z_ref, dz/dx, dz/dy]` per pixel.
+/// Depth plane and barycentric planes of a positively oriented snapped triangle, referred to
+/// pixel `(rx, ry)`. `zw` is the window depth and `q[i][k]` the value of `b_k / w` at vertex `i`.
+///
+/// The vertices are taken in canonical order (sorted by y, then x) so that the same three
+/// vertices give bit-identical planes whatever their order.
 #[inline]
-fn depth_plane(v: &[[i32; 2]; 3], zw: &[f32; 3]) -> (u8, [f32; 3]) {
+fn planes(
+    v: &[[i32; 2]; 3],
+    zw: &[f32; 3],
+    q: &[[f32; 3]; 3],
+    rx: i32,
+    ry: i32,
+) -> ([f32; 3], [[f32; 3]; 3]) {
     let key = |i: usize| (v[i][1], v[i][0]);
     let mut o = [0usize, 1, 2];
     if key(o[1]) < key(o[0]) {
@@ -295,16 +306,23 @@ fn depth_plane(v: &[[i32; 2]; 3], zw: &[f32; 3]) -> (u8, [f32; 3]) {
         o.swap(0, 1);
     }
     let s = 1.0 / ONE as f64;
-    let p = |i: usize| (v[i][0] as f64 * s, v[i][1] as f64 * s, zw[i] as f64);
-    let (x0, y0, z0) = p(o[0]);
-    let (x1, y1, z1) = p(o[1]);
-    let (x2, y2, z2) = p(o[2]);
-    let (dx1, dy1, dz1) = (x1 - x0, y1 - y0, z1 - z0);
-    let (dx2, dy2, dz2) = (x2 - x0, y2 - y0, z2 - z0);
+    let p = |i: usize| (v[i][0] as f64 * s, v[i][1] as f64 * s);
+    let (x0, y0) = p(o[0]);
+    let (x1, y1) = p(o[1]);
+    let (x2, y2) = p(o[2]);
+    let (dx1, dy1, dx2, dy2) = (x1 - x0, y1 - y0, x2 - x0, y2 - y0);
     let inv_d = 1.0 / (dx1 * dy2 - dx2 * dy1);
-    let zx = (dz1 * dy2 - dz2 * dy1) * inv_d;
-    let zy = (dx1 * dz2 - dx2 * dz1) * inv_d;
-    (o[0] as u8, [zw[o[0]], zx as f32, zy as f32])
+    // Offset of the reference pixel from the canonical first vertex.
+    let (ox, oy) = (rx as f64 - x0, ry as f64 - y0);
+    let plane = |a: [f64; 3]| -> [f32; 3] {
+        let (da1, da2) = (a[1] - a[0], a[2] - a[0]);
+        let gx = (da1 * dy2 - da2 * dy1) * inv_d;
+        let gy = (dx1 * da2 - dx2 * da1) * inv_d;
+        [(a[0] + gx * ox + gy * oy) as f32, gx as f32, gy as f32]
+    };
+    let depth = plane(o.map(|i| zw[i] as f64));
+    let bary = [0, 1, 2].map(|k| plane(o.map(|i| q[i][k] as f64)));
+    (depth, bary)
 }
 
 /// Everything a worker needs, shared read-only.
@@ -322,7 +340,8 @@ struct Ctx<'a> {
     /// Viewport in pixels (clamped to [`MAX_VIEWPORT`]).
     w: i32,
     h: i32,
-    tile_size: i32,
+    /// log2 of the tile size.
+    tile_shift: u32,
     tiles_x: u32,
     ntiles: usize,
     cull: CullMode,
@@ -336,6 +355,7 @@ const BATCH: usize = 256;
 /// What one chunk of triangles produced.
 struct ChunkOut {
     tris: Vec<SetupTriangle>,
+    verts: Vec<[[i32; 2]; 3]>,
     /// `(tile, entry)` in triangle order.
     bins: Vec<(u32, BinEntry)>,
     rejected: u64,
@@ -369,7 +389,11 @@ impl Ctx<'_> {
         let mut found = Tiny::Empty;
         for y in r[1]..=r[3] {
             for x in r[0]..=r[2] {
-                let m = e.mask_at(&self.si, (x as i64) << SUBPIXEL_BITS, (y as i64) << SUBPIXEL_BITS);
+                let m = e.mask_at(
+                    &self.si,
+                    (x as i64) << SUBPIXEL_BITS,
+                    (y as i64) << SUBPIXEL_BITS,
+                );
                 if m != 0 {
                     if let Tiny::Single(..) = found {
                         return Tiny::Several;
@@ -388,7 +412,11 @@ impl Ctx<'_> {
         let mut t = range.start;
         while t < range.end {
             let end = (t + BATCH).min(range.end);
-            let n = if self.xy.is_empty() { 0 } else { self.reject(t..end, &mut keep) };
+            let n = if self.xy.is_empty() {
+                0
+            } else {
+                self.reject(t..end, &mut keep)
+            };
             if self.xy.is_empty() {
                 out.rejected += (end - t) as u64; // every index is out of range
             }
@@ -436,9 +464,11 @@ impl Ctx<'_> {
     /// Full setup of one triangle that passed [`Ctx::reject`].
     fn setup(&self, t: usize, out: &mut ChunkOut) {
         let [ia, ib, ic] = self.indices[t];
-        let (Some(&a), Some(&b), Some(&c)) =
-            (self.xy.get(ia as usize), self.xy.get(ib as usize), self.xy.get(ic as usize))
-        else {
+        let (Some(&a), Some(&b), Some(&c)) = (
+            self.xy.get(ia as usize),
+            self.xy.get(ib as usize),
+            self.xy.get(ic as usize),
+        ) else {
             out.rejected += 1;
             return;
         };
@@ -447,12 +477,16 @@ impl Ctx<'_> {
             return;
         }
         let v = [a, b, c];
-        let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else { return };
+        let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else {
+            return;
+        };
         let a2 = area2(&v);
         if a2 == 0 {
             return;
         }
-        let Some(front) = self.facing(a2 < 0) else { return };
+        let Some(front) = self.facing(a2 < 0) else {
+            return;
+        };
         let idx = if a2 > 0 { [ia, ib, ic] } else { [ia, ic, ib] };
         let perm = if a2 > 0 { [0, 1, 2] } else { [0, 2, 1] };
         let v = idx.map(|i| self.xy[i as usize]);
@@ -478,7 +512,10 @@ impl Ctx<'_> {
         let tri = [0, 1, 2].map(|k| {
             let mut b = [0.0; 3];
             b[k] = 1.0;
-            ClipVert { p: vec4_f64(self.positions[idx[k] as usize]), b }
+            ClipVert {
+                p: vec4_f64(self.positions[idx[k] as usize]),
+                b,
+            }
         });
         let poly = clip::clip_triangle(&self.planes, tri, oc[0] | oc[1] | oc[2]);
         let n = poly.n;
@@ -500,13 +537,17 @@ impl Ctx<'_> {
         if a2 == 0 {
             return;
         }
-        let Some(front) = self.facing(a2 < 0) else { return };
+        let Some(front) = self.facing(a2 < 0) else {
+            return;
+        };
         let mut hull = [0usize; MAX_POLY + 1];
         let m = clip::convex_hull(&pts[..n], &mut hull);
         for i in 1..m.saturating_sub(1) {
             let h = [hull[0], hull[i], hull[i + 1]];
             let v = h.map(|j| [proj[j].x, proj[j].y]);
-            let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else { continue };
+            let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else {
+                continue;
+            };
             if area2(&v) <= 0 {
                 continue;
             }
@@ -535,26 +576,55 @@ impl Ctx<'_> {
         zw: [f32; 3],
         q: [[f32; 3]; 3],
     ) {
-        let e = Edges::new(&v);
-        let ts = self.tile_size;
-        let mut single = 0;
-        if r[2] - r[0] <= 1 && r[3] - r[1] <= 1 {
-            match self.tiny(&e, r) {
+        let sh = self.tile_shift;
+        let tmask = (1 << sh) - 1;
+        let mut single = None;
+        if r[0] == r[2] && r[1] == r[3] {
+            let m = coverage::pixel_mask(&v, &self.si, r[0], r[1]);
+            if m == 0 {
+                return;
+            }
+            single = Some(
+                SINGLE | (m as u32) << 16 | ((r[1] & tmask) as u32) << 8 | (r[0] & tmask) as u32,
+            );
+        } else if r[2] - r[0] <= 1 && r[3] - r[1] <= 1 {
+            match self.tiny(&Edges::new(&v), r) {
                 Tiny::Empty => return,
-                Tiny::Single(x, y, m) if ts <= 256 => {
-                    single = (m as u32) << 16 | ((y % ts) as u32) << 8 | (x % ts) as u32;
+                Tiny::Single(x, y, m) => {
+                    single = Some(
+                        SINGLE | (m as u32) << 16 | ((y & tmask) as u32) << 8 | (x & tmask) as u32,
+                    );
                 }
-                _ => {}
+                Tiny::Several => {}
             }
         }
-        let (zref, depth) = depth_plane(&v, &zw);
+        let (depth, bary) = planes(&v, &zw, &q, r[0], r[1]);
         let tri = out.tris.len() as u32;
-        out.tris.push(SetupTriangle { source, front_facing, zref, v, depth, q });
-        let (tx0, ty0, tx1, ty1) = (r[0] / ts, r[1] / ts, r[2] / ts, r[3] / ts);
+        out.tris.push(SetupTriangle {
+            source,
+            front_facing,
+            rx: r[0],
+            ry: r[1],
+            depth,
+            bary,
+        });
+        let info = match single {
+            Some(info) => info,
+            None => {
+                out.verts.push(v);
+                out.verts.len() as u32 - 1
+            }
+        };
+        let (tx0, ty0, tx1, ty1) = (r[0] >> sh, r[1] >> sh, r[2] >> sh, r[3] >> sh);
         if tx0 == tx1 && ty0 == ty1 {
-            out.bins.push((ty0 as u32 * self.tiles_x + tx0 as u32, BinEntry { tri, single }));
+            out.bins.push((
+                ty0 as u32 * self.tiles_x + tx0 as u32,
+                BinEntry { tri, info },
+            ));
             return;
         }
+        let e = Edges::new(&v);
+        let ts = 1 << sh;
         let one = ONE as i64;
         for ty in ty0..=ty1 {
             let y0 = (ty * ts) as i64 * one;
@@ -563,7 +633,8 @@ impl Ctx<'_> {
                 let x0 = (tx * ts) as i64 * one;
                 let x1 = ((tx + 1) * ts).min(self.w) as i64 * one;
                 if !e.rect_outside(x0, y0, x1, y1) {
-                    out.bins.push((ty as u32 * self.tiles_x + tx as u32, BinEntry { tri, single: 0 }));
+                    out.bins
+                        .push((ty as u32 * self.tiles_x + tx as u32, BinEntry { tri, info }));
                 }
             }
         }
@@ -571,7 +642,12 @@ impl Ctx<'_> {
 
     /// Sets up one chunk of triangles and sorts its bin entries by tile (stable).
     fn chunk(&self, range: std::ops::Range<usize>) -> (Vec<SetupTriangle>, ChunkBins, u64) {
-        let mut out = ChunkOut { tris: TRIS.take(), bins: PAIRS.take(), rejected: 0 };
+        let mut out = ChunkOut {
+            tris: TRIS.take(),
+            verts: VERTS.take(),
+            bins: PAIRS.take(),
+            rejected: 0,
+        };
         self.run(range, &mut out);
         let mut tile_start = STARTS.take();
         tile_start.resize(self.ntiles + 1, 0);
@@ -590,7 +666,16 @@ impl Ctx<'_> {
             *k += 1;
         }
         PAIRS.give(out.bins);
-        (out.tris, ChunkBins { base: 0, tile_start, entries }, out.rejected)
+        (
+            out.tris,
+            ChunkBins {
+                base: 0,
+                tile_start,
+                entries,
+                verts: out.verts,
+            },
+            out.rejected,
+        )
     }
 }
 
@@ -602,11 +687,20 @@ fn par_map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> 
         return (0..n).map(f).collect();
     }
     let f = &f;
-    let work = move |k: usize| (k..n).step_by(threads).map(|i| (i, f(i))).collect::<Vec<_>>();
+    let work = move |k: usize| {
+        (k..n)
+            .step_by(threads)
+            .map(|i| (i, f(i)))
+            .collect::<Vec<_>>()
+    };
     let mut parts: Vec<Vec<(usize, T)>> = std::thread::scope(|s| {
         let handles: Vec<_> = (1..threads).map(|k| s.spawn(move || work(k))).collect();
         let mut parts = vec![work(0)];
-        parts.extend(handles.into_iter().map(|h| h.join().expect("raster worker panicked")));
+        parts.extend(
+            handles
+                .into_iter()
+                .map(|h| h.join().expect("raster worker panicked")),
+        );
         parts
     });
     let mut slots: Vec<Option<T>> = (0..n).map(|_| None).collect();
@@ -615,11 +709,20 @@ fn par_map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> 
             slots[i] = Some(t);
         }
     }
-    slots.into_iter().map(|t| t.expect("every item computed")).collect()
+    slots
+        .into_iter()
+        .map(|t| t.expect("every item computed"))
+        .collect()
 }
 
 /// Step 1 for a slice of vertices.
-fn project_vertices(planes: &Planes, xf: &Xform, src: &[Vec4], xy: &mut [[i32; 2]], zw: &mut [[f32; 2]]) {
+fn project_vertices(
+    planes: &Planes,
+    xf: &Xform,
+    src: &[Vec4],
+    xy: &mut [[i32; 2]],
+    zw: &mut [[f32; 2]],
+) {
     for ((xy, zw), &p) in xy.iter_mut().zip(zw.iter_mut()).zip(src) {
         let p = vec4_f64(p);
         let oc = planes.outcode(&p);
@@ -633,6 +736,18 @@ fn project_vertices(planes: &Planes, xf: &Xform, src: &[Vec4], xy: &mut [[i32; 2
     }
 }
 
+/// The tile size used for a requested one: rounded up to a power of two within
+/// [`MIN_TILE`]..=[`MAX_TILE`] (so tile coordinates are shifts, and a pixel's position in its
+/// tile fits in a byte of a bin entry).
+pub fn effective_tile_size(requested: u32) -> u32 {
+    requested.clamp(MIN_TILE, MAX_TILE).next_power_of_two()
+}
+
+/// Smallest tile size.
+pub const MIN_TILE: u32 = 8;
+/// Largest tile size.
+pub const MAX_TILE: u32 = 256;
+
 /// Clips, culls, snaps and bins triangles. Uses up to `threads` threads.
 /// `positions` are clip-space vertex positions, `indices` the triangles in API order.
 /// Triangles with a NaN or infinite coordinate are dropped (and counted in [`Binned::rejected`]),
@@ -645,7 +760,7 @@ pub fn bin_triangles(
     threads: usize,
 ) -> Binned {
     let threads = threads.max(1);
-    let tile_size = state.tile_size.max(1);
+    let tile_size = effective_tile_size(state.tile_size);
     let tiles_x = viewport.width.div_ceil(tile_size);
     let tiles_y = viewport.height.div_ceil(tile_size);
     let ntiles = tiles_x as usize * tiles_y as usize;
@@ -657,7 +772,16 @@ pub fn bin_triangles(
         sy: viewport.height as f64 * (ONE / 2) as f64,
     };
 
-    let cpu = || -> f64 { std::fs::read_to_string("/proc/thread-self/schedstat").unwrap().split_whitespace().next().unwrap().parse::<f64>().unwrap() / 1e6 };
+    let cpu = || -> f64 {
+        std::fs::read_to_string("/proc/thread-self/schedstat")
+            .unwrap()
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .parse::<f64>()
+            .unwrap()
+            / 1e6
+    };
     let _t0 = cpu();
     // 1. Vertices, in parallel slices of one array.
     let mut xy = XY.take();
@@ -670,7 +794,10 @@ pub fn bin_triangles(
     } else {
         let per = positions.len().div_ceil(vthreads);
         std::thread::scope(|s| {
-            let mut parts = xy.chunks_mut(per).zip(zw.chunks_mut(per)).zip(positions.chunks(per));
+            let mut parts = xy
+                .chunks_mut(per)
+                .zip(zw.chunks_mut(per))
+                .zip(positions.chunks(per));
             let first = parts.next();
             for ((xy, zw), src) in parts {
                 s.spawn(|| project_vertices(&planes, &xf, src, xy, zw));
@@ -693,7 +820,7 @@ pub fn bin_triangles(
         si: SampleInfo::new(state.samples),
         w: w as i32,
         h: h as i32,
-        tile_size: tile_size.min(MAX_VIEWPORT) as i32,
+        tile_shift: tile_size.trailing_zeros(),
         tiles_x,
         ntiles,
         cull: state.cull,
@@ -702,18 +829,32 @@ pub fn bin_triangles(
     let n = indices.len();
     // A few chunks per thread balance the load; few enough that the per-chunk tile tables
     // (ntiles + 1 words each) stay small even for many tiles.
-    let target = (threads * 4).min((1usize << 22) / (ntiles + 1)).max(threads).max(1);
+    let target = (threads * 4)
+        .min((1usize << 22) / (ntiles + 1))
+        .max(threads)
+        .max(1);
     let chunk = n.div_ceil(target).max(4096);
     let nchunks = n.div_ceil(chunk);
     let mut parts: Vec<(Vec<SetupTriangle>, ChunkBins, u64)> = if ntiles == 0 {
         // Empty viewport: nothing is drawn, but bad input is still counted.
         let bad = indices
             .iter()
-            .filter(|t| t.iter().any(|&i| !matches!(positions.get(i as usize), Some(p) if p.is_finite())))
+            .filter(|t| {
+                t.iter()
+                    .any(|&i| !matches!(positions.get(i as usize), Some(p) if p.is_finite()))
+            })
             .count();
-        vec![(Vec::new(), ChunkBins { base: 0, tile_start: vec![0], entries: Vec::new() }, bad as u64)]
+        let bins = ChunkBins {
+            base: 0,
+            tile_start: vec![0],
+            entries: Vec::new(),
+            verts: Vec::new(),
+        };
+        vec![(Vec::new(), bins, bad as u64)]
     } else {
-        par_map(nchunks, threads, |c| ctx.chunk(c * chunk..((c + 1) * chunk).min(n)))
+        par_map(nchunks, threads, |c| {
+            ctx.chunk(c * chunk..((c + 1) * chunk).min(n))
+        })
     };
 
     let _t2 = cpu();
@@ -737,7 +878,14 @@ pub fn bin_triangles(
         }
         tris
     };
-    if std::env::var_os("RT").is_some() { eprintln!("TIMING v {:.2} t {:.2} m {:.2}", _t1-_t0, _t2-_t1, cpu()-_t2); }
+    if std::env::var_os("RT").is_some() {
+        eprintln!(
+            "TIMING v {:.2} t {:.2} m {:.2}",
+            _t1 - _t0,
+            _t2 - _t1,
+            cpu() - _t2
+        );
+    }
     Binned {
         tris,
         tiles_x,
@@ -767,19 +915,23 @@ mod tests {
     }
 
     #[test]
-    fn depth_plane_is_order_independent() {
+    fn planes_are_order_independent() {
         let v = [[100, 7], [900, 300], [-50, 800]];
         let z = [0.25f32, 0.75, 0.5];
-        let a = depth_plane(&v, &z);
-        let v2 = [v[2], v[0], v[1]];
-        let z2 = [z[2], z[0], z[1]];
-        let b = depth_plane(&v2, &z2);
-        assert_eq!(a.1, b.1);
-        assert_eq!(v[a.0 as usize], v2[b.0 as usize]);
+        let q = [[1.0f32, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 2.0]];
+        let a = planes(&v, &z, &q, 0, 0);
+        let b = planes(
+            &[v[2], v[0], v[1]],
+            &[z[2], z[0], z[1]],
+            &[q[2], q[0], q[1]],
+            0,
+            0,
+        );
+        assert_eq!(a, b);
     }
 
     #[test]
     fn setup_triangle_is_compact() {
-        assert!(std::mem::size_of::<SetupTriangle>() <= 80);
+        assert_eq!(std::mem::size_of::<SetupTriangle>(), 64);
     }
 }

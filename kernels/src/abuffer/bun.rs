@@ -1,5 +1,5 @@
 //! `bun-ll`: uniform buckets combined with linked lists (depth-fighting paper, section 3.1.4
-//! "Combining BUN with LL"; BUN is Liu et al.'s uniform bucket peeling, its ref [14]).
+//! "Combining BUN with LL"; BUN is Liu et al.'s uniform bucket peeling, its ref \[14\]).
 //!
 //! "We uniformly split the depth range ... and assign each subdivision to one bucket. Then,
 //! we concurrently store all fragment information in each bucket using linked lists. ... A
@@ -24,9 +24,14 @@
 
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
-use super::dfb::{duplicate_check, fault_check, image_check, read_image, resolve_framebuffer, resolve_state, sorted_check, storage};
+use super::dfb::{
+    duplicate_check, fault_check, image_check, read_image, resolve_framebuffer, resolve_state,
+    sorted_check, storage,
+};
 use super::ll::{insert, pool_from_params, ListPool, ListResolve, Walk, MAX_POOL_NODES};
-use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params};
+use crate::algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+};
 use crate::common::{self, capture_state, geometry_pass, pixels};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -39,7 +44,7 @@ pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
 /// the host checks call this same function.
 pub(super) fn bucket_of(d: f32, zmin: f32, zmax: f32, buckets: u32) -> u32 {
     let range = zmax - zmin;
-    if !(range > 0.0) {
+    if range.is_nan() || range <= 0.0 {
         return 0;
     }
     let t = ((d - zmin) / range * buckets as f32).floor();
@@ -132,7 +137,12 @@ impl Algorithm for BunLl {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let n = pixels(frame);
         let buckets = params.buckets.max(1);
         let mut device = common::fresh();
@@ -141,15 +151,34 @@ impl Algorithm for BunLl {
         let zmax = device.buffer::<f32>("bun-ll-zmax", n as u64)?;
         device.memory.fill(zmin, f32::INFINITY)?;
         device.memory.fill(zmax, f32::NEG_INFINITY)?;
-        let mut report = geometry_pass(&device, &mut fb, frame, &capture_state(), &RangeKernel { zmin, zmax }, exec)?;
+        let mut report = geometry_pass(
+            &device,
+            &mut fb,
+            frame,
+            &capture_state(),
+            &RangeKernel { zmin, zmax },
+            exec,
+        )?;
 
         let mut counted = None;
         let region = match params.pool_per_pixel {
             Some(per_pixel) => pool_from_params(per_pixel, n) / buckets as u64,
             None => {
                 let counts = device.buffer::<u32>("bun-ll-bucket-counts", buckets as u64)?;
-                let k = BucketCount { zmin, zmax, counts, buckets };
-                report.merge(&geometry_pass(&device, &mut fb, frame, &capture_state(), &k, exec)?);
+                let k = BucketCount {
+                    zmin,
+                    zmax,
+                    counts,
+                    buckets,
+                };
+                report.merge(&geometry_pass(
+                    &device,
+                    &mut fb,
+                    frame,
+                    &capture_state(),
+                    &k,
+                    exec,
+                )?);
                 let c = device.memory.read(counts)?;
                 let max = c.iter().copied().max().unwrap_or(0) as u64;
                 counted = Some(c);
@@ -158,13 +187,27 @@ impl Algorithm for BunLl {
         };
         let pool_nodes = region * buckets as u64;
         if pool_nodes > MAX_POOL_NODES {
-            return Err(AlgoError::Invalid(format!("bun-ll: a pool of {pool_nodes} nodes is larger than a buffer can hold")));
+            return Err(AlgoError::Invalid(format!(
+                "bun-ll: a pool of {pool_nodes} nodes is larger than a buffer can hold"
+            )));
         }
         let region = region as u32;
-        let pool = ListPool::new(&mut device, "bun-ll", n as u64 * buckets as u64, pool_nodes, buckets as u64)?;
+        let pool = ListPool::new(
+            &mut device,
+            "bun-ll",
+            n as u64 * buckets as u64,
+            pool_nodes,
+            buckets as u64,
+        )?;
         let faults = device.buffer::<u32>("bun-ll-resolve-faults", 2)?;
 
-        let store = BunInsert { zmin, zmax, pool, buckets, region };
+        let store = BunInsert {
+            zmin,
+            zmax,
+            pool,
+            buckets,
+            region,
+        };
         let store_report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
         let generated = store_report.stats.fragments_generated;
         report.merge(&store_report);
@@ -180,18 +223,37 @@ impl Algorithm for BunLl {
 
         let counters = device.memory.read(pool.counters)?;
         let dropped_counters = device.memory.read(pool.dropped)?;
-        let regions: Vec<(u32, u32)> = (0..buckets).map(|b| (b * region, b * region + counters[b as usize].min(region))).collect();
-        let walk = Walk::new(&device.memory.read(pool.heads)?, &device.memory.read(pool.nodes)?, buckets, &regions);
+        let regions: Vec<(u32, u32)> = (0..buckets)
+            .map(|b| (b * region, b * region + counters[b as usize].min(region)))
+            .collect();
+        let walk = Walk::new(
+            &device.memory.read(pool.heads)?,
+            &device.memory.read(pool.nodes)?,
+            buckets,
+            &regions,
+        );
         let capture = walk.capture(frame, buckets);
         let image = read_image(&fb);
         let zmin_v = device.memory.read(zmin)?;
         let zmax_v = device.memory.read(zmax)?;
 
-        let per_bucket_stored: Vec<u64> =
-            (0..buckets as usize).map(|b| walk.lists.iter().skip(b).step_by(buckets as usize).map(|l| l.len() as u64).sum()).collect();
-        let overflow: Vec<u64> = counters.iter().map(|&c| c.saturating_sub(region) as u64).collect();
+        let per_bucket_stored: Vec<u64> = (0..buckets as usize)
+            .map(|b| {
+                walk.lists
+                    .iter()
+                    .skip(b)
+                    .step_by(buckets as usize)
+                    .map(|l| l.len() as u64)
+                    .sum()
+            })
+            .collect();
+        let overflow: Vec<u64> = counters
+            .iter()
+            .map(|&c| c.saturating_sub(region) as u64)
+            .collect();
         let dropped: u64 = overflow.iter().sum();
-        let all_linked = (0..buckets as usize).all(|b| per_bucket_stored[b] == counters[b].min(region) as u64);
+        let all_linked =
+            (0..buckets as usize).all(|b| per_bucket_stored[b] == counters[b].min(region) as u64);
         let mut misplaced = 0usize;
         let mut first_misplaced = None;
         for (i, list) in walk.lists.iter().enumerate() {
@@ -266,19 +328,48 @@ mod tests {
         let f = frame(&mesh, 24, 20);
         for exec in executors() {
             let r = assert_exact(&BunLl, &f, &Params::default(), &exec);
-            assert_eq!(r.report.hazards.total(), 0, "{:?}: {:?}", exec.mode, r.report.hazard_list.first());
+            assert_eq!(
+                r.report.hazards.total(),
+                0,
+                "{:?}: {:?}",
+                exec.mode,
+                r.report.hazard_list.first()
+            );
         }
         for buckets in [1, 2, 7] {
-            let params = Params { buckets, ..Params::default() };
-            for exec in [ExecConfig::ordered(), ExecConfig::parallel(3), ExecConfig::scheduled(Policy::Random, buckets as u64)] {
+            let params = Params {
+                buckets,
+                ..Params::default()
+            };
+            for exec in [
+                ExecConfig::ordered(),
+                ExecConfig::parallel(3),
+                ExecConfig::scheduled(Policy::Random, buckets as u64),
+            ] {
                 assert_exact(&BunLl, &f, &params, &exec);
             }
         }
-        let roomy = Params { pool_per_pixel: Some(30.0), ..Params::default() };
-        assert_exact(&BunLl, &f, &roomy, &ExecConfig::scheduled(Policy::Pct { depth: 3 }, 4));
+        let roomy = Params {
+            pool_per_pixel: Some(30.0),
+            ..Params::default()
+        };
+        assert_exact(
+            &BunLl,
+            &f,
+            &roomy,
+            &ExecConfig::scheduled(Policy::Pct { depth: 3 }, 4),
+        );
         let deep = stack(21);
         let f = frame(&deep, 4, 3);
-        assert_exact(&BunLl, &f, &Params { buckets: 2, ..Params::default() }, &ExecConfig::parallel(2));
+        assert_exact(
+            &BunLl,
+            &f,
+            &Params {
+                buckets: 2,
+                ..Params::default()
+            },
+            &ExecConfig::parallel(2),
+        );
     }
 
     #[test]
@@ -288,7 +379,10 @@ mod tests {
         // keeps 8 fragments in each bucket and drops the rest.
         let mesh = stack(5);
         let f = frame(&mesh, 5, 4);
-        let params = Params { pool_per_pixel: Some(2.0), ..Params::default() };
+        let params = Params {
+            pool_per_pixel: Some(2.0),
+            ..Params::default()
+        };
         let truth = Truth::capture(&f, 1).unwrap();
         for exec in executors() {
             let r = BunLl.run(&f, &params, &exec).unwrap();
@@ -298,7 +392,12 @@ mod tests {
             let m = oracle::compare(&BunLl.info(), &r, &truth, &params);
             assert_eq!(m.generated, 100);
             assert_eq!(m.captured + r.dropped, 100, "{:?}", exec.mode);
-            assert!(m.captured <= 40 && r.dropped >= 60, "{:?}: captured {}", exec.mode, m.captured);
+            assert!(
+                m.captured <= 40 && r.dropped >= 60,
+                "{:?}: captured {}",
+                exec.mode,
+                m.captured
+            );
         }
     }
 

@@ -1,4 +1,4 @@
-//! `dfb`: the dynamic fragment buffer (Maule et al. 2012, "[MCTB12]" of the z-thickness paper),
+//! `dfb`: the dynamic fragment buffer (Maule et al. 2012, "\[MCTB12\]" of the z-thickness paper),
 //! and the pieces every count-scan-store A-buffer of this family shares (the count pass, the
 //! array resolve, the resolve target, the common checks).
 //!
@@ -8,7 +8,7 @@
 //! counts over all pixels) gives every pixel a contiguous range, a **store pass** puts each
 //! fragment at `offset + atomicAdd(fill)` (only an atomic count, no read-modify-write of the
 //! fragment data, hence no hazard), and the **resolve pass** sorts each range (insertion sort
-//! under 16 fragments, shell sort above, [VPF15] as cited in 5.1.2) and composites.
+//! under 16 fragments, shell sort above, \[VPF15\] as cited in 5.1.2) and composites.
 //!
 //! The prefix sum runs on the device as three full-screen passes (a reduce-then-scan with rows
 //! as blocks, the classic three-phase GPU scan): one invocation per row scans its row, one
@@ -16,10 +16,18 @@
 //! read back by the host, to allocate the fragment arrays (a GPU would read back the same
 //! word, or allocate a worst-case chunk as the z-thickness paper does with N = 1024).
 
-use fragrace_emu::{Buf, ExecConfig, Format, Frag, FragmentKernel, FragmentState, Framebuffer, KernelInfo, PassReport, SampleCount, TargetState};
+use fragrace_emu::{
+    Buf, ExecConfig, Format, Frag, FragmentKernel, FragmentState, Framebuffer, KernelInfo,
+    PassReport, SampleCount, TargetState,
+};
 
-use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame, HazardClass, Params};
-use crate::common::{self, capture_state, composite_frags, framebuffer, geometry_pass, pixels, sort_fragments};
+use crate::algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
+    HazardClass, Params,
+};
+use crate::common::{
+    self, capture_state, composite_frags, framebuffer, geometry_pass, pixels, sort_fragments,
+};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![Box::new(Dfb)]
@@ -62,7 +70,11 @@ pub(super) fn resolve_state() -> FragmentState {
 
 /// Reads the resolve target back as the result image.
 pub(super) fn read_image(fb: &Framebuffer) -> Vec<[f32; 4]> {
-    fb.image(0).texels.iter().map(|t| t.map(f32::from_bits)).collect()
+    fb.image(0)
+        .texels
+        .iter()
+        .map(|t| t.map(f32::from_bits))
+        .collect()
 }
 
 /// Storage of a run: the device's buffers plus the resolve target.
@@ -78,7 +90,10 @@ pub(super) fn image_check(image: &[[f32; 4]], capture: &Capture, params: &Params
     let mut first = None;
     for (p, got) in image.iter().enumerate().take(capture.pixels()) {
         let want = composite_frags(capture.pixel(p), params.alpha, params.background);
-        if (0..4).any(|c| !((got[c] - want[c]).abs() <= 1e-6)) {
+        if (0..4).any(|c| {
+            let d = (got[c] - want[c]).abs();
+            d.is_nan() || d > 1e-6
+        }) {
             bad += 1;
             first.get_or_insert(p);
         }
@@ -86,22 +101,44 @@ pub(super) fn image_check(image: &[[f32; 4]], capture: &Capture, params: &Params
     Check::new(
         "resolve image is the composite of the captured fragments",
         bad == 0,
-        format!("{bad} pixels differ{}", first.map(|p| format!(", first at pixel {p}")).unwrap_or_default()),
+        format!(
+            "{bad} pixels differ{}",
+            first
+                .map(|p| format!(", first at pixel {p}"))
+                .unwrap_or_default()
+        ),
     )
 }
 
 /// No invocation of any pass faulted (out-of-bounds, watchdog, panic).
 pub(super) fn fault_check(report: &PassReport) -> Check {
-    let first = report.faults.first().map(|f| format!(": first {f:?}")).unwrap_or_default();
-    Check::new("no invocation faulted", report.stats.faulted == 0, format!("{} faulted{first}", report.stats.faulted))
+    let first = report
+        .faults
+        .first()
+        .map(|f| format!(": first {f:?}"))
+        .unwrap_or_default();
+    Check::new(
+        "no invocation faulted",
+        report.stats.faulted == 0,
+        format!("{} faulted{first}", report.stats.faulted),
+    )
 }
 
 /// The captured fragments of every pixel are in front-to-back order (the resolve sorted them).
 pub(super) fn sorted_check(capture: &Capture) -> Check {
     let bad = (0..capture.pixels())
-        .filter(|&p| capture.pixel(p).windows(2).any(|w| common::depth_order(&w[0], &w[1]).is_gt()))
+        .filter(|&p| {
+            capture
+                .pixel(p)
+                .windows(2)
+                .any(|w| common::depth_order(&w[0], &w[1]).is_gt())
+        })
         .count();
-    Check::new("resolve order is front to back", bad == 0, format!("{bad} pixels out of order"))
+    Check::new(
+        "resolve order is front to back",
+        bad == 0,
+        format!("{bad} pixels out of order"),
+    )
 }
 
 /// No (depth, primitive) pair appears twice in one pixel (a single draw gives each primitive
@@ -110,7 +147,11 @@ pub(super) fn duplicate_check(capture: &Capture) -> Check {
     let mut bad = 0usize;
     let mut first = None;
     for p in 0..capture.pixels() {
-        let mut v: Vec<(u32, u32)> = capture.pixel(p).iter().map(|f| (f.depth.to_bits(), f.prim)).collect();
+        let mut v: Vec<(u32, u32)> = capture
+            .pixel(p)
+            .iter()
+            .map(|f| (f.depth.to_bits(), f.prim))
+            .collect();
         v.sort_unstable();
         if v.windows(2).any(|w| w[0] == w[1]) {
             bad += 1;
@@ -120,14 +161,23 @@ pub(super) fn duplicate_check(capture: &Capture) -> Check {
     Check::new(
         "no fragment stored twice in a pixel",
         bad == 0,
-        format!("{bad} pixels with a duplicate{}", first.map(|p| format!(", first at pixel {p}")).unwrap_or_default()),
+        format!(
+            "{bad} pixels with a duplicate{}",
+            first
+                .map(|p| format!(", first at pixel {p}"))
+                .unwrap_or_default()
+        ),
     )
 }
 
 /// Covered pixels' ranges `(start, len)` are pairwise disjoint and together cover exactly
 /// `[0, total)` (the offset table of a count-scan-store A-buffer).
 pub(super) fn ranges_check(ranges: &[(u32, u32)], total: u32) -> Check {
-    let mut r: Vec<(u64, u64)> = ranges.iter().filter(|r| r.1 > 0).map(|&(s, l)| (s as u64, l as u64)).collect();
+    let mut r: Vec<(u64, u64)> = ranges
+        .iter()
+        .filter(|r| r.1 > 0)
+        .map(|&(s, l)| (s as u64, l as u64))
+        .collect();
     r.sort_unstable();
     let mut next = 0u64;
     let mut problem = None;
@@ -160,7 +210,11 @@ pub(super) enum Layout {
     /// DFB: `[offsets[p], offsets[p] + len)`.
     Offsets { offsets: Buf<u32> },
     /// SB: `[group_base[p % groups] + offsets[p], ... + len)` (covered pixels only).
-    Grouped { offsets: Buf<u32>, group_base: Buf<u32>, groups: u32 },
+    Grouped {
+        offsets: Buf<u32>,
+        group_base: Buf<u32>,
+        groups: u32,
+    },
 }
 
 impl Layout {
@@ -168,9 +222,14 @@ impl Layout {
         match *self {
             Layout::Fixed { cap } => p.wrapping_mul(cap),
             Layout::Offsets { offsets } => f.load(offsets, p).await,
-            Layout::Grouped { offsets, group_base, groups } => {
-                f.load(group_base, p % groups).await.wrapping_add(f.load(offsets, p).await)
-            }
+            Layout::Grouped {
+                offsets,
+                group_base,
+                groups,
+            } => f
+                .load(group_base, p % groups)
+                .await
+                .wrapping_add(f.load(offsets, p).await),
         }
     }
     fn cap(&self) -> u32 {
@@ -217,8 +276,10 @@ impl FragmentKernel for ArrayResolve {
             }
             sort_fragments(&mut frags);
             for (i, fr) in frags.iter().enumerate() {
-                f.store(self.depth, base.wrapping_add(i as u32), fr.depth).await;
-                f.store(self.prim, base.wrapping_add(i as u32), fr.prim).await;
+                f.store(self.depth, base.wrapping_add(i as u32), fr.depth)
+                    .await;
+                f.store(self.prim, base.wrapping_add(i as u32), fr.prim)
+                    .await;
             }
         }
         f.output(0, composite_frags(&frags, self.alpha, self.background));
@@ -226,26 +287,46 @@ impl FragmentKernel for ArrayResolve {
 }
 
 /// Reads per-pixel ranges `(base, len)` of the fragment arrays back as a capture.
-pub(super) fn capture_ranges(frame: &Frame<'_>, ranges: &[(u32, u32)], depth: &[f32], prim: &[u32]) -> Capture {
+pub(super) fn capture_ranges(
+    frame: &Frame<'_>,
+    ranges: &[(u32, u32)],
+    depth: &[f32],
+    prim: &[u32],
+) -> Capture {
     let lists = ranges.iter().map(|&(base, len)| {
         let (b, l) = (base as usize, len as usize);
         if l == 0 || b + l > depth.len() {
             return Vec::new();
         }
-        depth[b..b + l].iter().zip(&prim[b..b + l]).map(|(&depth, &prim)| CapturedFrag { depth, prim }).collect()
+        depth[b..b + l]
+            .iter()
+            .zip(&prim[b..b + l])
+            .map(|(&depth, &prim)| CapturedFrag { depth, prim })
+            .collect()
     });
     Capture::from_lists(frame.width, frame.height, lists)
 }
 
 /// Per pixel, the store pass filled exactly what the count pass counted.
 pub(super) fn count_store_check(counts: &[u32], fill: &[u32]) -> Check {
-    let bad: Vec<usize> = (0..counts.len()).filter(|&p| counts[p] != fill[p]).collect();
+    let bad: Vec<usize> = (0..counts.len())
+        .filter(|&p| counts[p] != fill[p])
+        .collect();
     Check::new(
         "count pass equals store pass (per pixel)",
         bad.is_empty(),
         match bad.first() {
-            Some(&p) => format!("{} pixels differ; pixel {p}: counted {}, stored {}", bad.len(), counts[p], fill[p]),
-            None => format!("{} fragments in {} pixels", counts.iter().map(|&c| c as u64).sum::<u64>(), counts.len()),
+            Some(&p) => format!(
+                "{} pixels differ; pixel {p}: counted {}, stored {}",
+                bad.len(),
+                counts[p],
+                fill[p]
+            ),
+            None => format!(
+                "{} fragments in {} pixels",
+                counts.iter().map(|&c| c as u64).sum::<u64>(),
+                counts.len()
+            ),
         },
     )
 }
@@ -373,7 +454,12 @@ impl Algorithm for Dfb {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let n = pixels(frame);
         let mut device = common::fresh();
         let mut fb = resolve_framebuffer(frame)?;
@@ -384,16 +470,55 @@ impl Algorithm for Dfb {
         let total_buf = device.buffer::<u32>("dfb-total", 1)?;
         let overflow = device.buffer::<u32>("dfb-overflow", 1)?;
 
-        let mut report = geometry_pass(&device, &mut fb, frame, &capture_state(), &CountKernel { counts }, exec)?;
+        let mut report = geometry_pass(
+            &device,
+            &mut fb,
+            frame,
+            &capture_state(),
+            &CountKernel { counts },
+            exec,
+        )?;
         let none = FragmentState::new();
-        report.merge(&device.fullscreen(&mut fb, &none, &RowScan { counts, offsets, row_total }, exec)?);
-        report.merge(&device.fullscreen(&mut fb, &none, &RowTotalsScan { row_total, total: total_buf }, exec)?);
-        report.merge(&device.fullscreen(&mut fb, &none, &AddRowBase { offsets, row_base: row_total }, exec)?);
+        report.merge(&device.fullscreen(
+            &mut fb,
+            &none,
+            &RowScan {
+                counts,
+                offsets,
+                row_total,
+            },
+            exec,
+        )?);
+        report.merge(&device.fullscreen(
+            &mut fb,
+            &none,
+            &RowTotalsScan {
+                row_total,
+                total: total_buf,
+            },
+            exec,
+        )?);
+        report.merge(&device.fullscreen(
+            &mut fb,
+            &none,
+            &AddRowBase {
+                offsets,
+                row_base: row_total,
+            },
+            exec,
+        )?);
         let total = device.memory.read(total_buf)?[0];
 
         let depth = device.buffer::<f32>("dfb-depth", total.max(1) as u64)?;
         let prim = device.buffer::<u32>("dfb-prim", total.max(1) as u64)?;
-        let store = DfbStore { counts, offsets, fill, depth, prim, overflow };
+        let store = DfbStore {
+            counts,
+            offsets,
+            fill,
+            depth,
+            prim,
+            overflow,
+        };
         let stored_report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
         let generated = stored_report.stats.fragments_generated;
         report.merge(&stored_report);
@@ -412,8 +537,15 @@ impl Algorithm for Dfb {
         let offsets_v = device.memory.read(offsets)?;
         let fill_v = device.memory.read(fill)?;
         let dropped = device.memory.read(overflow)?[0] as u64;
-        let ranges: Vec<(u32, u32)> = (0..n).map(|p| (offsets_v[p], fill_v[p].min(counts_v[p]))).collect();
-        let capture = capture_ranges(frame, &ranges, &device.memory.read(depth)?, &device.memory.read(prim)?);
+        let ranges: Vec<(u32, u32)> = (0..n)
+            .map(|p| (offsets_v[p], fill_v[p].min(counts_v[p])))
+            .collect();
+        let capture = capture_ranges(
+            frame,
+            &ranges,
+            &device.memory.read(depth)?,
+            &device.memory.read(prim)?,
+        );
         let image = read_image(&fb);
         let stored = capture.frags.len() as u64;
         let counted_ranges: Vec<(u32, u32)> = (0..n).map(|p| (offsets_v[p], counts_v[p])).collect();
@@ -456,7 +588,12 @@ pub(super) mod test_support {
     /// `z1` (right).
     pub fn quad(m: &mut Mesh, [x0, y0, x1, y1]: [f32; 4], z0: f32, z1: f32) {
         let b = m.positions.len() as u32;
-        m.positions.extend([Vec3::new(x0, y0, z0), Vec3::new(x1, y0, z1), Vec3::new(x1, y1, z1), Vec3::new(x0, y1, z0)]);
+        m.positions.extend([
+            Vec3::new(x0, y0, z0),
+            Vec3::new(x1, y0, z1),
+            Vec3::new(x1, y1, z1),
+            Vec3::new(x0, y1, z0),
+        ]);
         m.indices.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
     }
 
@@ -485,12 +622,21 @@ pub(super) mod test_support {
     }
 
     pub fn frame(mesh: &Mesh, width: u32, height: u32) -> Frame<'_> {
-        Frame { mesh, view_proj: Mat4::IDENTITY, width, height }
+        Frame {
+            mesh,
+            view_proj: Mat4::IDENTITY,
+            width,
+            height,
+        }
     }
 
     /// Ordered, parallel, and scheduled under several policies and seeds.
     pub fn executors() -> Vec<ExecConfig> {
-        let mut v = vec![ExecConfig::ordered(), ExecConfig::parallel(2), ExecConfig::parallel(4)];
+        let mut v = vec![
+            ExecConfig::ordered(),
+            ExecConfig::parallel(2),
+            ExecConfig::parallel(4),
+        ];
         for seed in 0..3 {
             v.push(ExecConfig::scheduled(Policy::Random, seed));
         }
@@ -503,7 +649,12 @@ pub(super) mod test_support {
 
     /// Runs `algo` and asserts what a hazard-free A-buffer owes: EPR 0 against truth, every
     /// check passing, nothing dropped, every fragment captured.
-    pub fn assert_exact(algo: &dyn Algorithm, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> AlgoResult {
+    pub fn assert_exact(
+        algo: &dyn Algorithm,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> AlgoResult {
         let info = algo.info();
         let r = algo.run(frame, params, exec).expect("runs");
         let truth = Truth::capture(frame, 1).expect("truth");
@@ -512,7 +663,11 @@ pub(super) mod test_support {
         for c in &r.checks {
             assert!(c.passed, "{what}: check `{}` failed: {}", c.name, c.detail);
         }
-        assert_eq!(m.epr, 0.0, "{what}: EPR {} (first error at {:?})", m.epr, m.first_error);
+        assert_eq!(
+            m.epr, 0.0,
+            "{what}: EPR {} (first error at {:?})",
+            m.epr, m.first_error
+        );
         assert_eq!(m.captured, m.generated, "{what}");
         assert_eq!(r.dropped, 0, "{what}");
         assert!(m.generated > 0, "{what}: empty scene");
@@ -531,7 +686,12 @@ mod tests {
         let f = frame(&mesh, 24, 20);
         for exec in executors() {
             let r = assert_exact(&Dfb, &f, &Params::default(), &exec);
-            assert_eq!(r.report.hazards.total(), 0, "{:?}", r.report.hazard_list.first());
+            assert_eq!(
+                r.report.hazards.total(),
+                0,
+                "{:?}",
+                r.report.hazard_list.first()
+            );
         }
     }
 
@@ -540,7 +700,11 @@ mod tests {
         // 20 fragments per pixel: the resolve takes the shell-sort branch.
         let mesh = stack(20);
         let f = frame(&mesh, 6, 5);
-        for exec in [ExecConfig::ordered(), ExecConfig::parallel(3), ExecConfig::scheduled(fragrace_emu::Policy::Random, 3)] {
+        for exec in [
+            ExecConfig::ordered(),
+            ExecConfig::parallel(3),
+            ExecConfig::scheduled(fragrace_emu::Policy::Random, 3),
+        ] {
             assert_exact(&Dfb, &f, &Params::default(), &exec);
         }
     }

@@ -1,5 +1,5 @@
-//! `fab`: the fixed-array A-buffer (FreePipe, Liu et al. 2010, [21] of the depth-fighting
-//! paper; realised with OpenGL atomics as FAB, [23]).
+//! `fab`: the fixed-array A-buffer (FreePipe, Liu et al. 2010, \[21\] of the depth-fighting
+//! paper; realised with OpenGL atomics as FAB, \[23\]).
 //!
 //! Every pixel owns `params.fab_capacity` slots and an atomic counter (depth-fighting paper,
 //! section 2 and Fig. 3(a)): a fragment takes `slot = atomicAdd(count[p], 1)` and writes its
@@ -12,10 +12,12 @@
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
 use super::dfb::{
-    capture_ranges, duplicate_check, fault_check, image_check, read_image, resolve_framebuffer, resolve_state, sorted_check, storage,
-    ArrayResolve, Layout,
+    capture_ranges, duplicate_check, fault_check, image_check, read_image, resolve_framebuffer,
+    resolve_state, sorted_check, storage, ArrayResolve, Layout,
 };
-use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params};
+use crate::algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+};
 use crate::common::{self, capture_state, geometry_pass, pixels};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -67,12 +69,19 @@ impl Algorithm for Fab {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let cap = params.fab_capacity;
         let n = pixels(frame);
         let slots = n as u64 * cap as u64;
         if slots > u32::MAX as u64 {
-            return Err(AlgoError::Invalid(format!("FAB needs {slots} slots ({n} pixels x {cap}): more than a buffer can index")));
+            return Err(AlgoError::Invalid(format!(
+                "FAB needs {slots} slots ({n} pixels x {cap}): more than a buffer can index"
+            )));
         }
         let mut device = common::fresh();
         let mut fb = resolve_framebuffer(frame)?;
@@ -81,7 +90,13 @@ impl Algorithm for Fab {
         let prim = device.buffer::<u32>("fab-prim", slots.max(1))?;
         let dropped_buf = device.buffer::<u32>("fab-dropped", 1)?;
 
-        let store = FabStore { counts, depth, prim, dropped: dropped_buf, cap };
+        let store = FabStore {
+            counts,
+            depth,
+            prim,
+            dropped: dropped_buf,
+            cap,
+        };
         let mut report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
         let generated = report.stats.fragments_generated;
         let resolve = ArrayResolve {
@@ -96,8 +111,15 @@ impl Algorithm for Fab {
         report.merge(&device.fullscreen(&mut fb, &resolve_state(), &resolve, exec)?);
 
         let counts_v = device.memory.read(counts)?;
-        let ranges: Vec<(u32, u32)> = (0..n).map(|p| (p as u32 * cap, counts_v[p].min(cap))).collect();
-        let capture = capture_ranges(frame, &ranges, &device.memory.read(depth)?, &device.memory.read(prim)?);
+        let ranges: Vec<(u32, u32)> = (0..n)
+            .map(|p| (p as u32 * cap, counts_v[p].min(cap)))
+            .collect();
+        let capture = capture_ranges(
+            frame,
+            &ranges,
+            &device.memory.read(depth)?,
+            &device.memory.read(prim)?,
+        );
         let image = read_image(&fb);
         let dropped = device.memory.read(dropped_buf)?[0] as u64;
         let overflow: u64 = counts_v.iter().map(|&c| c.saturating_sub(cap) as u64).sum();
@@ -107,7 +129,9 @@ impl Algorithm for Fab {
             Check::new(
                 "every generated fragment stored exactly once unless its array overflowed",
                 stored + dropped == generated && counted == generated,
-                format!("stored {stored}, dropped {dropped}, generated {generated}, counted {counted}"),
+                format!(
+                    "stored {stored}, dropped {dropped}, generated {generated}, counted {counted}"
+                ),
             ),
             Check::new(
                 "overflow counted exactly",
@@ -146,10 +170,18 @@ mod tests {
         let f = frame(&mesh, 24, 20);
         for exec in executors() {
             let r = assert_exact(&Fab, &f, &Params::default(), &exec);
-            assert_eq!(r.report.hazards.total(), 0, "{:?}", r.report.hazard_list.first());
+            assert_eq!(
+                r.report.hazards.total(),
+                0,
+                "{:?}",
+                r.report.hazard_list.first()
+            );
         }
         // Exactly sized arrays: capacity = the deepest pixel.
-        let params = Params { fab_capacity: 6, ..Params::default() };
+        let params = Params {
+            fab_capacity: 6,
+            ..Params::default()
+        };
         assert_exact(&Fab, &f, &params, &ExecConfig::scheduled(Policy::Random, 5));
     }
 
@@ -157,7 +189,10 @@ mod tests {
     fn fab_overflow_is_counted_exactly_and_keeps_the_rest() {
         let mesh = stack(7);
         let f = frame(&mesh, 6, 5);
-        let params = Params { fab_capacity: 3, ..Params::default() };
+        let params = Params {
+            fab_capacity: 3,
+            ..Params::default()
+        };
         let truth = Truth::capture(&f, 1).unwrap();
         for exec in executors() {
             let r = Fab.run(&f, &params, &exec).unwrap();
@@ -174,7 +209,10 @@ mod tests {
             for p in 0..c.pixels() {
                 assert_eq!(c.pixel(p).len(), 3);
                 for fr in c.pixel(p) {
-                    assert!(t.pixel(p).contains(fr), "pixel {p}: {fr:?} is not one of truth's");
+                    assert!(
+                        t.pixel(p).contains(fr),
+                        "pixel {p}: {fr:?} is not one of truth's"
+                    );
                 }
             }
         }

@@ -1,4 +1,4 @@
-//! `ll`: per-pixel linked lists (Yang et al. 2010, [24] of the depth-fighting paper; section
+//! `ll`: per-pixel linked lists (Yang et al. 2010, \[24\] of the depth-fighting paper; section
 //! 3.1.3 "Overview" and Fig. 3(b) there; the llvmpipe peer's `--algo ll`), and the list pieces
 //! `bun-ll` shares (insertion, resolve walk, host walk).
 //!
@@ -29,13 +29,19 @@
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
 use super::dfb::{
-    duplicate_check, fault_check, image_check, read_image, resolve_framebuffer, resolve_state, sorted_check, storage, CountKernel,
+    duplicate_check, fault_check, image_check, read_image, resolve_framebuffer, resolve_state,
+    sorted_check, storage, CountKernel,
 };
-use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame, HazardClass, Params};
-use crate::common::{self, capture_state, composite_frags, geometry_pass, pixels, sort_fragments, EMPTY};
+use crate::algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
+    HazardClass, Params,
+};
+use crate::common::{
+    self, capture_state, composite_frags, geometry_pass, pixels, sort_fragments, EMPTY,
+};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    vec![Box::new(LinkedList::default())]
+    vec![Box::new(LinkedList::correct())]
 }
 
 /// Words per node: `[depth bits, primitive, next]`.
@@ -64,17 +70,31 @@ pub(super) struct ListPool {
 impl ListPool {
     /// Allocates the pool: `lists` heads and `nodes` nodes (filled with `EMPTY`, so an
     /// unwritten word is recognisable), `regions` counters.
-    pub fn new(device: &mut fragrace_emu::Device, prefix: &str, lists: u64, nodes: u64, regions: u64) -> Result<ListPool, AlgoError> {
+    pub fn new(
+        device: &mut fragrace_emu::Device,
+        prefix: &str,
+        lists: u64,
+        nodes: u64,
+        regions: u64,
+    ) -> Result<ListPool, AlgoError> {
         if nodes > MAX_POOL_NODES {
-            return Err(AlgoError::Invalid(format!("{prefix}: a pool of {nodes} nodes is larger than a buffer can hold")));
+            return Err(AlgoError::Invalid(format!(
+                "{prefix}: a pool of {nodes} nodes is larger than a buffer can hold"
+            )));
         }
         let heads = device.buffer::<u32>(&format!("{prefix}-heads"), lists)?;
         device.memory.fill(heads, EMPTY)?;
-        let nodes = device.buffer::<u32>(&format!("{prefix}-nodes"), nodes.max(1) * NODE_WORDS as u64)?;
+        let nodes =
+            device.buffer::<u32>(&format!("{prefix}-nodes"), nodes.max(1) * NODE_WORDS as u64)?;
         device.memory.fill(nodes, EMPTY)?;
         let counters = device.buffer::<u32>(&format!("{prefix}-counters"), regions)?;
         let dropped = device.buffer::<u32>(&format!("{prefix}-dropped"), regions)?;
-        Ok(ListPool { heads, nodes, counters, dropped })
+        Ok(ListPool {
+            heads,
+            nodes,
+            counters,
+            dropped,
+        })
     }
 }
 
@@ -151,14 +171,23 @@ impl FragmentKernel for ListResolve {
                     break;
                 }
                 let mut rec = [0u32; NODE_WORDS as usize];
-                f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec).await;
+                f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec)
+                    .await;
                 nodes.push(cur);
-                frags.push(CapturedFrag { depth: f32::from_bits(rec[0]), prim: rec[1] });
+                frags.push(CapturedFrag {
+                    depth: f32::from_bits(rec[0]),
+                    prim: rec[1],
+                });
                 cur = rec[NEXT as usize];
             }
             sort_fragments(&mut frags);
             for (&node, fr) in nodes.iter().zip(&frags) {
-                f.store_record(self.pool.nodes, node * NODE_WORDS, &[fr.depth.to_bits(), fr.prim]).await;
+                f.store_record(
+                    self.pool.nodes,
+                    node * NODE_WORDS,
+                    &[fr.depth.to_bits(), fr.prim],
+                )
+                .await;
             }
             all.extend(frags);
         }
@@ -186,7 +215,13 @@ impl Walk {
     pub fn new(heads: &[u32], nodes: &[u32], lists: u32, regions: &[(u32, u32)]) -> Walk {
         let pool = nodes.len() / NODE_WORDS as usize;
         let mut visited = vec![false; pool];
-        let mut w = Walk { lists: Vec::with_capacity(heads.len()), stored: 0, bad_links: 0, revisits: 0, first_problem: None };
+        let mut w = Walk {
+            lists: Vec::with_capacity(heads.len()),
+            stored: 0,
+            bad_links: 0,
+            revisits: 0,
+            first_problem: None,
+        };
         for (i, &h) in heads.iter().enumerate() {
             let (lo, hi) = regions[i % lists as usize];
             let mut list = Vec::new();
@@ -194,17 +229,22 @@ impl Walk {
             while cur != EMPTY {
                 if cur < lo || cur >= hi {
                     w.bad_links += 1;
-                    w.first_problem.get_or_insert(format!("list {i} links node {cur} outside [{lo}, {hi})"));
+                    w.first_problem
+                        .get_or_insert(format!("list {i} links node {cur} outside [{lo}, {hi})"));
                     break;
                 }
                 if visited[cur as usize] {
                     w.revisits += 1;
-                    w.first_problem.get_or_insert(format!("list {i} reaches node {cur} a second time"));
+                    w.first_problem
+                        .get_or_insert(format!("list {i} reaches node {cur} a second time"));
                     break;
                 }
                 visited[cur as usize] = true;
                 let at = (cur * NODE_WORDS) as usize;
-                list.push(CapturedFrag { depth: f32::from_bits(nodes[at]), prim: nodes[at + 1] });
+                list.push(CapturedFrag {
+                    depth: f32::from_bits(nodes[at]),
+                    prim: nodes[at + 1],
+                });
                 w.stored += 1;
                 cur = nodes[at + NEXT as usize];
             }
@@ -216,13 +256,18 @@ impl Walk {
     /// Per pixel, its lists concatenated in bucket order, as a capture.
     pub fn capture(&self, frame: &Frame<'_>, lists: u32) -> Capture {
         let per = lists.max(1) as usize;
-        Capture::from_lists(frame.width, frame.height, self.lists.chunks(per).map(|c| c.concat()))
+        Capture::from_lists(
+            frame.width,
+            frame.height,
+            self.lists.chunks(per).map(|c| c.concat()),
+        )
     }
 
     /// "Lists acyclic and every next index in range", from this walk and the resolve's
     /// own counts (`faults` of [`ListResolve`]).
     pub fn integrity_check(&self, resolve_faults: &[u32]) -> Check {
-        let ok = self.bad_links == 0 && self.revisits == 0 && resolve_faults.iter().all(|&c| c == 0);
+        let ok =
+            self.bad_links == 0 && self.revisits == 0 && resolve_faults.iter().all(|&c| c == 0);
         Check::new(
             "lists acyclic, disjoint, and every next index in range",
             ok,
@@ -262,7 +307,11 @@ struct LlInsert {
 
 impl FragmentKernel for LlInsert {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new(if self.publish_before_write { "ll-insert-publish-first" } else { "ll-insert" })
+        KernelInfo::new(if self.publish_before_write {
+            "ll-insert-publish-first"
+        } else {
+            "ll-insert"
+        })
     }
     async fn shade(&self, f: Frag<'_>) {
         let p = f.pixel_index();
@@ -272,7 +321,8 @@ impl FragmentKernel for LlInsert {
         let mut steps = 0;
         while cur != EMPTY && cur < self.cap && steps < self.cap {
             let mut payload = [0u32; PAYLOAD_WORDS as usize];
-            f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut payload).await;
+            f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut payload)
+                .await;
             if payload.contains(&EMPTY) {
                 f.atomic_add(seen, 0, 1).await;
             }
@@ -300,15 +350,24 @@ pub struct LinkedList {
 impl LinkedList {
     /// The correct lists (the registered `ll`).
     pub const fn correct() -> LinkedList {
-        LinkedList { publish_before_write: false, concurrent_reader: false }
+        LinkedList {
+            publish_before_write: false,
+            concurrent_reader: false,
+        }
     }
     /// The planted bug with the in-pass reader that exposes it.
     pub const fn planted_bug() -> LinkedList {
-        LinkedList { publish_before_write: true, concurrent_reader: true }
+        LinkedList {
+            publish_before_write: true,
+            concurrent_reader: true,
+        }
     }
     /// The correct order with the in-pass reader (the control for [`LinkedList::planted_bug`]).
     pub const fn correct_with_reader() -> LinkedList {
-        LinkedList { publish_before_write: false, concurrent_reader: true }
+        LinkedList {
+            publish_before_write: false,
+            concurrent_reader: true,
+        }
     }
 
     fn name(&self) -> &'static str {
@@ -343,7 +402,12 @@ impl Algorithm for LinkedList {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let n = pixels(frame);
         let mut device = common::fresh();
         let mut fb = resolve_framebuffer(frame)?;
@@ -355,7 +419,14 @@ impl Algorithm for LinkedList {
             Some(per_pixel) => pool_from_params(per_pixel, n),
             None => {
                 let counts = device.buffer::<u32>("ll-counts", n as u64)?;
-                report.merge(&geometry_pass(&device, &mut fb, frame, &capture_state(), &CountKernel { counts }, exec)?);
+                report.merge(&geometry_pass(
+                    &device,
+                    &mut fb,
+                    frame,
+                    &capture_state(),
+                    &CountKernel { counts },
+                    exec,
+                )?);
                 let c = device.memory.read(counts)?;
                 let total = c.iter().map(|&x| x as u64).sum();
                 counted = Some(c);
@@ -364,11 +435,21 @@ impl Algorithm for LinkedList {
         };
         let pool = ListPool::new(&mut device, "ll", n as u64, capacity, 1)?;
         let cap = capacity as u32;
-        let reader = if self.concurrent_reader { Some(device.buffer::<u32>("ll-reader-half-written", 1)?) } else { None };
+        let reader = if self.concurrent_reader {
+            Some(device.buffer::<u32>("ll-reader-half-written", 1)?)
+        } else {
+            None
+        };
         let faults = device.buffer::<u32>("ll-resolve-faults", 2)?;
 
-        let insert = LlInsert { pool, cap, publish_before_write: self.publish_before_write, reader };
-        let capture_report = geometry_pass(&device, &mut fb, frame, &capture_state(), &insert, exec)?;
+        let insert = LlInsert {
+            pool,
+            cap,
+            publish_before_write: self.publish_before_write,
+            reader,
+        };
+        let capture_report =
+            geometry_pass(&device, &mut fb, frame, &capture_state(), &insert, exec)?;
         let generated = capture_report.stats.fragments_generated;
         report.merge(&capture_report);
         let resolve = ListResolve {
@@ -384,7 +465,12 @@ impl Algorithm for LinkedList {
         let counter = device.memory.read(pool.counters)?[0];
         let dropped_counter = device.memory.read(pool.dropped)?[0] as u64;
         let allocated = counter.min(cap);
-        let walk = Walk::new(&device.memory.read(pool.heads)?, &device.memory.read(pool.nodes)?, 1, &[(0, allocated)]);
+        let walk = Walk::new(
+            &device.memory.read(pool.heads)?,
+            &device.memory.read(pool.nodes)?,
+            1,
+            &[(0, allocated)],
+        );
         let capture = walk.capture(frame, 1);
         let image = read_image(&fb);
         let dropped = counter.saturating_sub(cap) as u64;
@@ -410,7 +496,9 @@ impl Algorithm for LinkedList {
             fault_check(&report),
         ];
         if let Some(c) = &counted {
-            let bad = (0..n).filter(|&p| walk.lists[p].len() as u32 != c[p]).count();
+            let bad = (0..n)
+                .filter(|&p| walk.lists[p].len() as u32 != c[p])
+                .count();
             checks.push(Check::new(
                 "list lengths equal the count pass (per pixel)",
                 bad == 0,
@@ -452,17 +540,34 @@ mod tests {
         let f = frame(&mesh, 24, 20);
         for exec in executors() {
             let r = assert_exact(&LinkedList::default(), &f, &Params::default(), &exec);
-            assert_eq!(r.report.hazards.total(), 0, "{:?}: {:?}", exec.mode, r.report.hazard_list.first());
+            assert_eq!(
+                r.report.hazards.total(),
+                0,
+                "{:?}: {:?}",
+                exec.mode,
+                r.report.hazard_list.first()
+            );
         }
         // A roomy pool from pool_per_pixel instead of the count pass.
-        let params = Params { pool_per_pixel: Some(8.0), ..Params::default() };
-        for exec in [ExecConfig::ordered(), ExecConfig::parallel(4), ExecConfig::scheduled(Policy::Random, 9)] {
+        let params = Params {
+            pool_per_pixel: Some(8.0),
+            ..Params::default()
+        };
+        for exec in [
+            ExecConfig::ordered(),
+            ExecConfig::parallel(4),
+            ExecConfig::scheduled(Policy::Random, 9),
+        ] {
             assert_exact(&LinkedList::default(), &f, &params, &exec);
         }
         // Deep lists: the resolve shell-sorts.
         let mesh = stack(19);
         let f = frame(&mesh, 5, 4);
-        for exec in [ExecConfig::ordered(), ExecConfig::parallel(2), ExecConfig::scheduled(Policy::Random, 2)] {
+        for exec in [
+            ExecConfig::ordered(),
+            ExecConfig::parallel(2),
+            ExecConfig::scheduled(Policy::Random, 2),
+        ] {
             assert_exact(&LinkedList::default(), &f, &Params::default(), &exec);
         }
     }
@@ -473,7 +578,10 @@ mod tests {
         let f = frame(&mesh, 6, 5); // 30 pixels x 4 = 120 fragments
         let truth = Truth::capture(&f, 1).unwrap();
         for (per_pixel, capacity) in [(1.5, 45u64), (0.0, 0), (3.99, 119), (4.0, 120)] {
-            let params = Params { pool_per_pixel: Some(per_pixel), ..Params::default() };
+            let params = Params {
+                pool_per_pixel: Some(per_pixel),
+                ..Params::default()
+            };
             for exec in executors() {
                 let r = LinkedList::default().run(&f, &params, &exec).unwrap();
                 let what = format!("pool {per_pixel}/px under {:?}", exec.mode);
@@ -488,7 +596,10 @@ mod tests {
                 let t = truth.capture.as_ref().unwrap();
                 for p in 0..c.pixels() {
                     for fr in c.pixel(p) {
-                        assert!(t.pixel(p).contains(fr), "{what}: pixel {p}: {fr:?} is not one of truth's");
+                        assert!(
+                            t.pixel(p).contains(fr),
+                            "{what}: pixel {p}: {fr:?} is not one of truth's"
+                        );
                     }
                 }
                 assert_eq!(r.report.hazards.total(), 0, "{what}");
@@ -511,9 +622,18 @@ mod tests {
                 // tell the planted bug from the correct order.
                 let m = oracle::compare(&variant.info(), &r, &truth, &Params::default());
                 assert_eq!(m.epr, 0.0, "{} seed {seed}", variant.info().name);
-                let half = r.checks.iter().any(|c| c.name.contains("half-written") && !c.passed);
+                let half = r
+                    .checks
+                    .iter()
+                    .any(|c| c.name.contains("half-written") && !c.passed);
                 for c in r.checks.iter().filter(|c| !c.name.contains("half-written")) {
-                    assert!(c.passed, "{} seed {seed}: `{}`: {}", variant.info().name, c.name, c.detail);
+                    assert!(
+                        c.passed,
+                        "{} seed {seed}: `{}`: {}",
+                        variant.info().name,
+                        c.name,
+                        c.detail
+                    );
                 }
                 (r.report.hazards.torn, r.report.hazards.races, half)
             })
@@ -523,18 +643,43 @@ mod tests {
     #[test]
     fn planted_bug_shows_torn_records_and_half_written_nodes() {
         let bug = race_bug(LinkedList::planted_bug(), 8);
-        assert!(bug.iter().any(|&(torn, _, _)| torn > 0), "no seed tore a record: {bug:?}");
-        assert!(bug.iter().any(|&(_, _, half)| half), "no seed let the reader see a half-written node: {bug:?}");
+        assert!(
+            bug.iter().any(|&(torn, _, _)| torn > 0),
+            "no seed tore a record: {bug:?}"
+        );
+        assert!(
+            bug.iter().any(|&(_, _, half)| half),
+            "no seed let the reader see a half-written node: {bug:?}"
+        );
         // The control: same reader, correct order. The detector still reports races (the
         // reader's plain loads overlap the writers' lifetimes) but never a torn payload, and
         // the reader never sees a half-written one.
         let control = race_bug(LinkedList::correct_with_reader(), 8);
-        assert!(control.iter().all(|&(torn, _, half)| torn == 0 && !half), "{control:?}");
+        assert!(
+            control.iter().all(|&(torn, _, half)| torn == 0 && !half),
+            "{control:?}"
+        );
         // Without a reader the bug is latent: no hazard, exact result.
-        let latent = race_bug(LinkedList { publish_before_write: true, concurrent_reader: false }, 4);
-        assert!(latent.iter().all(|&(torn, races, half)| torn == 0 && races == 0 && !half), "{latent:?}");
+        let latent = race_bug(
+            LinkedList {
+                publish_before_write: true,
+                concurrent_reader: false,
+            },
+            4,
+        );
+        assert!(
+            latent
+                .iter()
+                .all(|&(torn, races, half)| torn == 0 && races == 0 && !half),
+            "{latent:?}"
+        );
         let correct = race_bug(LinkedList::correct(), 8);
-        assert!(correct.iter().all(|&(torn, races, half)| torn == 0 && races == 0 && !half), "{correct:?}");
+        assert!(
+            correct
+                .iter()
+                .all(|&(torn, races, half)| torn == 0 && races == 0 && !half),
+            "{correct:?}"
+        );
     }
 
     #[test]
@@ -542,9 +687,21 @@ mod tests {
         assert_eq!(LinkedList::default(), LinkedList::correct());
         assert_eq!(LinkedList::correct().info().name, "ll");
         assert_eq!(LinkedList::correct().info().hazard, HazardClass::HazardFree);
-        assert_eq!(LinkedList::planted_bug().info().name, "ll-publish-first-reader");
-        assert_eq!(LinkedList::planted_bug().info().hazard, HazardClass::HazardProne);
-        assert_eq!(algorithms().iter().map(|a| a.info().name).collect::<Vec<_>>(), ["ll"]);
+        assert_eq!(
+            LinkedList::planted_bug().info().name,
+            "ll-publish-first-reader"
+        );
+        assert_eq!(
+            LinkedList::planted_bug().info().hazard,
+            HazardClass::HazardProne
+        );
+        assert_eq!(
+            algorithms()
+                .iter()
+                .map(|a| a.info().name)
+                .collect::<Vec<_>>(),
+            ["ll"]
+        );
     }
 
     #[test]
@@ -558,29 +715,5 @@ mod tests {
         let ok = Walk::new(&[1, EMPTY], &[0, 0, EMPTY, 0, 0, 0], 1, &[(0, 2)]);
         assert!(ok.integrity_check(&[0, 0]).passed);
         assert!(!ok.integrity_check(&[0, 1]).passed);
-    }
-}
-#[cfg(test)]
-mod scratch {
-    use super::super::dfb::test_support::*;
-    use super::*;
-    #[test]
-    fn scratch_print() {
-        let mesh = layers();
-        let f = frame(&mesh, 24, 20);
-        let truth = crate::basic::Truth::capture(&f, 1).unwrap();
-        let m = crate::oracle::compare(&LinkedList::default().info(), &truth, &truth, &Params::default());
-        eprintln!("layers: generated {} covered {} maxdc {} coplanarity {}", m.generated, m.covered_pixels, m.max_depth_complexity, m.coplanarity);
-        for v in [LinkedList::planted_bug(), LinkedList::correct_with_reader()] {
-            let mesh = stack(8);
-            let f = frame(&mesh, 4, 4);
-            for seed in 0..8 {
-                let r = v.run(&f, &Params::default(), &ExecConfig::scheduled(fragrace_emu::Policy::Random, seed)).unwrap();
-                let half = r.checks.iter().find(|c| c.name.contains("half")).unwrap();
-                eprintln!("{} seed {seed}: {:?} half: {}", v.info().name, r.report.hazards, half.detail);
-            }
-        }
-        let r = crate::abuffer::algorithms();
-        eprintln!("{:?}", r.iter().map(|a| a.info().name).collect::<Vec<_>>());
     }
 }

@@ -1,4 +1,4 @@
-//! `sb`: the S-buffer, a sparsity-aware A-buffer (Vasilakis and Fudos 2012, [25] of the
+//! `sb`: the S-buffer, a sparsity-aware A-buffer (Vasilakis and Fudos 2012, \[25\] of the
 //! depth-fighting paper; section 2 and Fig. 3(c) there).
 //!
 //! The S-buffer "organizes linearly memory into variable contiguous regions for each pixel"
@@ -22,10 +22,13 @@
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, FragmentState, KernelInfo};
 
 use super::dfb::{
-    capture_ranges, count_store_check, duplicate_check, fault_check, image_check, ranges_check, read_image, resolve_framebuffer,
-    resolve_state, sorted_check, storage, ArrayResolve, CountKernel, Layout,
+    capture_ranges, count_store_check, duplicate_check, fault_check, image_check, ranges_check,
+    read_image, resolve_framebuffer, resolve_state, sorted_check, storage, ArrayResolve,
+    CountKernel, Layout,
 };
-use crate::algo::{AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params};
+use crate::algo::{
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+};
 use crate::common::{self, capture_state, geometry_pass, pixels, EMPTY};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -109,9 +112,13 @@ impl FragmentKernel for SbStore {
             f.atomic_add(self.overflow, 0, 1).await;
             return;
         }
-        let base = f.load(self.group_base, p % self.groups).await.wrapping_add(f.load(self.offsets, p).await);
+        let base = f
+            .load(self.group_base, p % self.groups)
+            .await
+            .wrapping_add(f.load(self.offsets, p).await);
         f.store(self.depth, base.wrapping_add(i), f.depth()).await;
-        f.store(self.prim, base.wrapping_add(i), f.primitive_id()).await;
+        f.store(self.prim, base.wrapping_add(i), f.primitive_id())
+            .await;
     }
 }
 
@@ -133,7 +140,12 @@ impl Algorithm for SBuffer {
         }
     }
 
-    fn run(&self, frame: &Frame<'_>, params: &Params, exec: &ExecConfig) -> Result<AlgoResult, AlgoError> {
+    fn run(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let n = pixels(frame);
         let groups = GROUPS.min(n.max(1) as u32);
         let mut device = common::fresh();
@@ -147,20 +159,60 @@ impl Algorithm for SBuffer {
         let total_buf = device.buffer::<u32>("sb-total", 1)?;
         let overflow = device.buffer::<u32>("sb-overflow", 1)?;
 
-        let mut report = geometry_pass(&device, &mut fb, frame, &capture_state(), &CountKernel { counts }, exec)?;
+        let mut report = geometry_pass(
+            &device,
+            &mut fb,
+            frame,
+            &capture_state(),
+            &CountKernel { counts },
+            exec,
+        )?;
         let none = FragmentState::new();
-        report.merge(&device.fullscreen(&mut fb, &none, &SparseAllocate { counts, offsets, group_total, groups }, exec)?);
-        report.merge(&device.fullscreen(&mut fb, &none, &GroupScan { group_total, group_base, total: total_buf, groups }, exec)?);
+        report.merge(&device.fullscreen(
+            &mut fb,
+            &none,
+            &SparseAllocate {
+                counts,
+                offsets,
+                group_total,
+                groups,
+            },
+            exec,
+        )?);
+        report.merge(&device.fullscreen(
+            &mut fb,
+            &none,
+            &GroupScan {
+                group_total,
+                group_base,
+                total: total_buf,
+                groups,
+            },
+            exec,
+        )?);
         let total = device.memory.read(total_buf)?[0];
 
         let depth = device.buffer::<f32>("sb-depth", total.max(1) as u64)?;
         let prim = device.buffer::<u32>("sb-prim", total.max(1) as u64)?;
-        let store = SbStore { counts, offsets, group_base, fill, depth, prim, overflow, groups };
+        let store = SbStore {
+            counts,
+            offsets,
+            group_base,
+            fill,
+            depth,
+            prim,
+            overflow,
+            groups,
+        };
         let store_report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
         let generated = store_report.stats.fragments_generated;
         report.merge(&store_report);
         let resolve = ArrayResolve {
-            layout: Layout::Grouped { offsets, group_base, groups },
+            layout: Layout::Grouped {
+                offsets,
+                group_base,
+                groups,
+            },
             lens: fill,
             limit: Some(counts),
             depth,
@@ -176,11 +228,28 @@ impl Algorithm for SBuffer {
         let fill_v = device.memory.read(fill)?;
         let dropped = device.memory.read(overflow)?[0] as u64;
         let start = |p: usize| bases_v[p % groups as usize].wrapping_add(offsets_v[p]);
-        let uncovered_with_range = (0..n).filter(|&p| counts_v[p] == 0 && offsets_v[p] != EMPTY).count();
-        let covered: Vec<(u32, u32)> = (0..n).filter(|&p| counts_v[p] > 0).map(|p| (start(p), counts_v[p])).collect();
-        let ranges: Vec<(u32, u32)> =
-            (0..n).map(|p| if counts_v[p] == 0 { (0, 0) } else { (start(p), fill_v[p].min(counts_v[p])) }).collect();
-        let capture = capture_ranges(frame, &ranges, &device.memory.read(depth)?, &device.memory.read(prim)?);
+        let uncovered_with_range = (0..n)
+            .filter(|&p| counts_v[p] == 0 && offsets_v[p] != EMPTY)
+            .count();
+        let covered: Vec<(u32, u32)> = (0..n)
+            .filter(|&p| counts_v[p] > 0)
+            .map(|p| (start(p), counts_v[p]))
+            .collect();
+        let ranges: Vec<(u32, u32)> = (0..n)
+            .map(|p| {
+                if counts_v[p] == 0 {
+                    (0, 0)
+                } else {
+                    (start(p), fill_v[p].min(counts_v[p]))
+                }
+            })
+            .collect();
+        let capture = capture_ranges(
+            frame,
+            &ranges,
+            &device.memory.read(depth)?,
+            &device.memory.read(prim)?,
+        );
         let image = read_image(&fb);
         let stored = capture.frags.len() as u64;
         let checks = vec![
@@ -189,7 +258,10 @@ impl Algorithm for SBuffer {
             Check::new(
                 "only covered pixels get ranges",
                 uncovered_with_range == 0,
-                format!("{uncovered_with_range} uncovered pixels with an offset; {} covered", covered.len()),
+                format!(
+                    "{uncovered_with_range} uncovered pixels with an offset; {} covered",
+                    covered.len()
+                ),
             ),
             Check::new(
                 "every generated fragment stored exactly once",
@@ -226,7 +298,12 @@ mod tests {
         let f = frame(&mesh, 24, 20);
         for exec in executors() {
             let r = assert_exact(&SBuffer, &f, &Params::default(), &exec);
-            assert_eq!(r.report.hazards.total(), 0, "{:?}", r.report.hazard_list.first());
+            assert_eq!(
+                r.report.hazards.total(),
+                0,
+                "{:?}",
+                r.report.hazard_list.first()
+            );
         }
     }
 
@@ -238,10 +315,16 @@ mod tests {
         quad(&mut mesh, [-0.3, -0.3, 0.2, 0.1], 0.1, 0.3);
         quad(&mut mesh, [-0.1, -0.5, 0.4, 0.0], -0.2, 0.0);
         let f = frame(&mesh, 40, 30);
-        for exec in [ExecConfig::ordered(), ExecConfig::parallel(4), ExecConfig::scheduled(Policy::Random, 11)] {
+        for exec in [
+            ExecConfig::ordered(),
+            ExecConfig::parallel(4),
+            ExecConfig::scheduled(Policy::Random, 11),
+        ] {
             let r = assert_exact(&SBuffer, &f, &Params::default(), &exec);
             let covered = r.capture.as_ref().unwrap();
-            let n_covered = (0..covered.pixels()).filter(|&p| !covered.pixel(p).is_empty()).count();
+            let n_covered = (0..covered.pixels())
+                .filter(|&p| !covered.pixel(p).is_empty())
+                .count();
             assert!(n_covered > 0 && n_covered < 40 * 30 / 4, "{n_covered}");
         }
     }
@@ -250,7 +333,11 @@ mod tests {
     fn sb_deep_pixels() {
         let mesh = stack(18);
         let f = frame(&mesh, 5, 7);
-        for exec in [ExecConfig::ordered(), ExecConfig::parallel(2), ExecConfig::scheduled(Policy::Pct { depth: 2 }, 1)] {
+        for exec in [
+            ExecConfig::ordered(),
+            ExecConfig::parallel(2),
+            ExecConfig::scheduled(Policy::Pct { depth: 2 }, 1),
+        ] {
             assert_exact(&SBuffer, &f, &Params::default(), &exec);
         }
     }

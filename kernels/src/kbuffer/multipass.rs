@@ -31,11 +31,15 @@
 //! least one certified fragment per pass, so the algorithm ends within k geometry passes
 //! (checked). Races cost passes, never fragments.
 //!
-//! **Hazard class: hazard-free.** The capture races by design (the detector reports it, and
-//! the pass count depends on the interleaving), but only certified fragments are kept, so
-//! the result is the same under every executor, policy and seed (EPR 0), which is what the
-//! class promises. Liu et al. make the same claim ("robust against the unreliable parallel
-//! read-after-write behavior ... guaranteeing correct transparency ordering").
+//! **Hazard class: hazard-prone, with a guarantee of progress and an exact result.** The
+//! capture races by design: the detector reports its lost updates, races and torn records,
+//! and how many passes a pixel needs depends on the interleaving (1 when nothing overlaps,
+//! up to k). What races is never kept, so the result is the same under every executor,
+//! policy and seed (EPR 0, asserted by this module's tests), as Liu et al. claim ("robust
+//! against the unreliable parallel read-after-write behavior ... guaranteeing correct
+//! transparency ordering"). It is declared hazard-prone because its memory accesses are:
+//! the class describes what the detector must see, and the exactness is this algorithm's
+//! own invariant.
 //!
 //! The depth test breaks depth ties by API order (the first of equal depths stays); for one
 //! draw, a pixel's fragments arrive in primitive order, so that is the `(depth, primitive)`
@@ -236,7 +240,7 @@ impl Algorithm for KbMultipass {
             memory: "8 k + 20 bytes: k depths + k primitive ids + bound (depth, primitive), certified count, \
                      in-flight and dirty words (Table 1, MultiKB: 3K + 2 words); + 12 bytes of depth and RG32F \
                      target; + 16-byte resolve target",
-            hazard: HazardClass::HazardFree,
+            hazard: HazardClass::HazardProne,
             capacity: Capacity::KNearest,
         }
     }

@@ -650,10 +650,11 @@ pub(super) mod testing {
     pub fn assert_image_matches_capture(r: &AlgoResult, params: &Params, what: &str) {
         let c = r.capture.as_ref().expect("capture");
         let img = r.image.as_ref().expect("image");
-        for p in 0..c.pixels() {
+        assert_eq!(img.len(), c.pixels(), "{what}: one texel per pixel");
+        for (p, &got) in img.iter().enumerate() {
             let want = crate::common::composite_frags(c.pixel(p), params.alpha, params.background);
             assert_eq!(
-                img[p], want,
+                got, want,
                 "{what}: resolve image differs from the capture at pixel {p}"
             );
         }

@@ -85,6 +85,8 @@ impl FragmentKernel for SpinStore {
 /// relate error pixels to drops).
 pub(super) struct SpinRun {
     pub result: AlgoResult,
+    /// Give-ups per pixel, row-major.
+    #[cfg_attr(not(test), allow(dead_code))] // read by the tests
     pub gave_up: Vec<u32>,
 }
 

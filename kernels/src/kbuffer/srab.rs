@@ -312,9 +312,9 @@ fn run(
     let (mut full_pixels, mut partial_pixels, mut partial_dups, mut partial_lost) =
         (0u64, 0u64, 0u64, 0u64);
     let mut lost_full = 0u64;
-    for p in 0..n {
+    for (p, &count) in frag_counts.iter().enumerate() {
         let (x, y) = (p as u32 % w, p as u32 / w);
-        let nf = frag_counts[p] as u64;
+        let nf = count as u64;
         let cov: Vec<u64> = (0..SAMPLES)
             .map(|s| f32::from_bits(covering.texels[p * SAMPLES + s][0]) as u64)
             .collect();
@@ -513,10 +513,10 @@ mod tests {
             assert_eq!(m.error_pixels, deep);
             // Pixels with <= 8 fragments: the resolved image is the exact composite.
             let img = r.image.as_ref().unwrap();
-            for p in 0..t.pixels() {
+            for (p, got) in img.iter().enumerate() {
                 let want = common::composite_frags(t.pixel(p), params.alpha, params.background);
                 if t.pixel(p).len() <= 8 {
-                    assert_eq!(img[p], want, "pixel {p}");
+                    assert_eq!(*got, want, "pixel {p}");
                 }
             }
         }

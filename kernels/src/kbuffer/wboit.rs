@@ -291,9 +291,9 @@ mod tests {
                 // Background untouched where nothing was drawn.
                 let img = r.image.as_ref().unwrap();
                 let t = truth.capture.as_ref().unwrap();
-                for p in 0..t.pixels() {
+                for (p, got) in img.iter().enumerate() {
                     if t.pixel(p).is_empty() {
-                        assert_eq!(&img[p][..3], &params.background[..]);
+                        assert_eq!(&got[..3], &params.background[..]);
                     }
                 }
             }
@@ -329,12 +329,12 @@ mod tests {
             }
             let img = r.image.clone().unwrap();
             // Coverage (alpha) matches the exact composite's within rounding.
-            for p in 0..t.pixels() {
+            for (p, got) in img.iter().enumerate() {
                 let want = common::composite_frags(t.pixel(p), params.alpha, params.background);
                 assert!(
-                    (img[p][3] - want[3]).abs() < 1e-5,
+                    (got[3] - want[3]).abs() < 1e-5,
                     "pixel {p}: {} vs {}",
-                    img[p][3],
+                    got[3],
                     want[3]
                 );
             }

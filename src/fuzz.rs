@@ -1,0 +1,391 @@
+//! Fuzz campaigns: random scenes x random algorithms and parameters x random executors,
+//! policies and seeds, each run checked against the truth and against the algorithm's
+//! declared hazard class. A hazard-free algorithm that differs from the truth, shows a
+//! hazard, faults or breaks an invariant is a *violation*; a hazard-prone one showing its
+//! hazard is an *expected finding*. Every new (algorithm, policy, anomaly) signature is
+//! shrunk and written as a case file.
+//!
+//! Campaigns lose nothing when killed: cases and the campaign state are written atomically
+//! as they happen, and iteration `i` is a pure function of (campaign seed, i), so
+//! `--resume` continues where the state file says.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use fragrace_emu::{ExecConfig, ExecMode, Policy, ScheduleConfig};
+use fragrace_kernels::{HazardClass, Params};
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+
+use crate::case::{self, Case, Observation};
+use crate::run::{self, RunSpec, SceneSpec};
+use crate::scene::Camera;
+
+/// What a campaign runs.
+#[derive(Clone, Debug)]
+pub struct FuzzConfig {
+    pub out: PathBuf,
+    pub time: Option<Duration>,
+    pub iterations: Option<u64>,
+    /// Algorithms to fuzz (empty: every one but `truth`).
+    pub algos: Vec<String>,
+    pub jobs: usize,
+    pub seed: u64,
+    pub resume: bool,
+    /// A directory of OBJ meshes to draw scenes from, besides the built-ins.
+    pub meshes: Option<PathBuf>,
+    /// Time allowed to shrink each new case.
+    pub shrink_budget: Duration,
+    /// Largest viewport side.
+    pub max_size: u32,
+}
+
+/// The campaign's persistent state (`DIR/campaign.json`).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct CampaignState {
+    pub seed: u64,
+    pub algos: Vec<String>,
+    /// Iterations below this are done.
+    pub next_iteration: u64,
+    pub executions: u64,
+    pub violations: u64,
+    pub expected_findings: u64,
+    /// Runs per anomaly signature.
+    pub signatures: BTreeMap<String, u64>,
+    /// Runs per "algorithm x policy".
+    pub coverage: BTreeMap<String, u64>,
+    pub cases: Vec<String>,
+    pub elapsed_s: f64,
+}
+
+/// Why a campaign cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum FuzzError {
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}: campaign state unreadable: {source}")]
+    State {
+        path: String,
+        source: serde_json::Error,
+    },
+    #[error("unknown algorithm `{0}`")]
+    UnknownAlgo(String),
+}
+
+fn io(path: &Path) -> impl Fn(std::io::Error) -> FuzzError + '_ {
+    move |source| FuzzError::Io {
+        path: path.display().to_string(),
+        source,
+    }
+}
+
+/// The run of iteration `i`.
+pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i: u64) -> RunSpec {
+    let mut rng = SmallRng::seed_from_u64(cfg.seed ^ i.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let scene = match rng.gen_range(0..10) {
+        0 => SceneSpec::Builtin("cubes".into()),
+        1 => SceneSpec::Builtin(format!("coplanar-stack:{}", rng.gen_range(2..12))),
+        2 => SceneSpec::Builtin("spheres".into()),
+        3 => SceneSpec::Builtin("hairball".into()),
+        4 if !meshes.is_empty() => SceneSpec::Obj {
+            path: meshes[rng.gen_range(0..meshes.len())].clone(),
+            sha256: None,
+        },
+        4 | 5 => SceneSpec::Builtin(["bunny", "teapot"][rng.gen_range(0..2)].into()),
+        _ => SceneSpec::Builtin(format!(
+            "random-triangles:{}:{}",
+            rng.gen::<u32>(),
+            rng.gen_range(1..48)
+        )),
+    };
+    let algo = algos[rng.gen_range(0..algos.len())].clone();
+    let size = rng.gen_range(8..=cfg.max_size.max(8));
+    let policies = Policy::all();
+    let exec = if rng.gen_bool(0.85) {
+        let policy = if rng.gen_bool(0.15) {
+            Policy::Bytes((0..rng.gen_range(0..64)).map(|_| rng.gen()).collect())
+        } else {
+            policies[rng.gen_range(0..policies.len())].clone()
+        };
+        let window = [2, 4, 8, 16, 32, 64][rng.gen_range(0..6)];
+        ExecConfig {
+            mode: ExecMode::Scheduled(ScheduleConfig {
+                policy,
+                seed: rng.gen(),
+                window,
+                record: false,
+            }),
+            threads: 1,
+            ..ExecConfig::default()
+        }
+    } else {
+        ExecConfig::parallel(2)
+    };
+    let k = [1, 2, 4, 8, 16][rng.gen_range(0..5)];
+    RunSpec {
+        scene,
+        camera: Camera::new(rng.gen_range(0.0..360.0), rng.gen_range(-60.0..60.0)),
+        width: size,
+        height: size,
+        algo,
+        params: Params {
+            k,
+            ..Params::default()
+        },
+        exec,
+    }
+}
+
+fn policy_name(spec: &RunSpec) -> String {
+    match &spec.exec.mode {
+        ExecMode::Scheduled(s) => match &s.policy {
+            Policy::Bytes(_) => "bytes".into(),
+            Policy::Pct { .. } => "pct".into(),
+            Policy::Warp { .. } => "warp".into(),
+            p => p.to_string(),
+        },
+        m => m.name().into(),
+    }
+}
+
+/// Progress, for the CLI's bar.
+pub struct Progress {
+    pub executions: AtomicU64,
+    pub cases: AtomicU64,
+    pub violations: AtomicU64,
+}
+
+/// Runs a campaign until its time or iteration budget is spent or `stop` is set.
+pub fn campaign(
+    cfg: &FuzzConfig,
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Result<CampaignState, FuzzError> {
+    std::fs::create_dir_all(&cfg.out).map_err(io(&cfg.out))?;
+    let state_path = cfg.out.join("campaign.json");
+    let mut state = if cfg.resume && state_path.exists() {
+        let bytes = std::fs::read(&state_path).map_err(io(&state_path))?;
+        serde_json::from_slice::<CampaignState>(&bytes).map_err(|source| FuzzError::State {
+            path: state_path.display().to_string(),
+            source,
+        })?
+    } else {
+        let algos = if cfg.algos.is_empty() {
+            fragrace_kernels::names()
+                .into_iter()
+                .filter(|n| *n != "truth")
+                .map(String::from)
+                .collect()
+        } else {
+            cfg.algos.clone()
+        };
+        CampaignState {
+            seed: cfg.seed,
+            algos,
+            ..Default::default()
+        }
+    };
+    for a in &state.algos {
+        if fragrace_kernels::algorithm(a).is_none() {
+            return Err(FuzzError::UnknownAlgo(a.clone()));
+        }
+    }
+    let cfg = FuzzConfig {
+        seed: state.seed,
+        ..cfg.clone()
+    };
+    let meshes: Vec<PathBuf> = match &cfg.meshes {
+        Some(dir) => std::fs::read_dir(dir)
+            .map_err(io(dir))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.to_string_lossy().contains(".obj"))
+            .collect(),
+        None => Vec::new(),
+    };
+    progress
+        .executions
+        .store(state.executions, Ordering::Relaxed);
+    progress
+        .cases
+        .store(state.cases.len() as u64, Ordering::Relaxed);
+    let start = Instant::now();
+    let elapsed_before = state.elapsed_s;
+    let next = AtomicU64::new(state.next_iteration);
+    let first_iteration = state.next_iteration;
+    let shared = Mutex::new((state, std::collections::BTreeSet::<u64>::new()));
+    let save = |st: &CampaignState| -> Result<(), FuzzError> {
+        let json = serde_json::to_vec_pretty(st).expect("state serialises");
+        crate::output::write_atomic(&state_path, &json).map_err(io(&state_path))
+    };
+    let jobs = cfg.jobs.max(1);
+    let result: Result<(), FuzzError> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..jobs)
+            .map(|_| {
+                s.spawn(|| -> Result<(), FuzzError> {
+                    loop {
+                        if stop.load(Ordering::Relaxed)
+                            || cfg.time.is_some_and(|t| start.elapsed() >= t)
+                        {
+                            return Ok(());
+                        }
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        if cfg.iterations.is_some_and(|n| i >= first_iteration + n) {
+                            return Ok(());
+                        }
+                        let algos = shared
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .0
+                            .algos
+                            .clone();
+                        let spec = iteration_spec(&cfg, &algos, &meshes, i);
+                        let outcome = run_one(&spec);
+                        let mut guard = shared.lock().unwrap_or_else(|e| e.into_inner());
+                        let (st, done) = &mut *guard;
+                        st.executions += 1;
+                        progress.executions.fetch_add(1, Ordering::Relaxed);
+                        *st.coverage
+                            .entry(format!("{} x {}", spec.algo, policy_name(&spec)))
+                            .or_default() += 1;
+                        // The state's next iteration is the first one not yet finished.
+                        done.insert(i);
+                        while done.remove(&st.next_iteration) {
+                            st.next_iteration += 1;
+                        }
+                        let Some((obs, verdict, violation)) = outcome else {
+                            continue;
+                        };
+                        let key = format!(
+                            "{} / {} / {}",
+                            spec.algo,
+                            policy_name(&spec),
+                            obs.signature().join("+")
+                        );
+                        let first = !st.signatures.contains_key(&key);
+                        *st.signatures.entry(key.clone()).or_default() += 1;
+                        if violation {
+                            st.violations += 1;
+                            progress.violations.fetch_add(1, Ordering::Relaxed);
+                        } else {
+                            st.expected_findings += 1;
+                        }
+                        if !first {
+                            continue;
+                        }
+                        drop(guard);
+                        // Shrink outside the lock, then write the case atomically.
+                        let written = write_case(&cfg, &spec, &obs, &verdict, i)?;
+                        let mut guard = shared.lock().unwrap_or_else(|e| e.into_inner());
+                        guard.0.cases.push(written);
+                        progress.cases.fetch_add(1, Ordering::Relaxed);
+                        guard.0.elapsed_s = elapsed_before + start.elapsed().as_secs_f64();
+                        save(&guard.0)?;
+                    }
+                })
+            })
+            .collect();
+        // Save the state every second while the workers run.
+        while handles.iter().any(|h| !h.is_finished()) {
+            std::thread::sleep(Duration::from_millis(200));
+            let mut g = shared.lock().unwrap_or_else(|e| e.into_inner());
+            g.0.elapsed_s = elapsed_before + start.elapsed().as_secs_f64();
+            save(&g.0)?;
+        }
+        for h in handles {
+            h.join().unwrap_or(Ok(()))?;
+        }
+        Ok(())
+    });
+    result?;
+    let (mut state, _) = shared.into_inner().unwrap_or_else(|e| e.into_inner());
+    state.elapsed_s = elapsed_before + start.elapsed().as_secs_f64();
+    save(&state)?;
+    Ok(state)
+}
+
+/// Runs one spec; `Some((observation, verdict, is_violation))` when anything is anomalous.
+fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool)> {
+    let loaded = run::load(spec).ok()?;
+    let truth = run::truth(spec, &loaded).ok()?;
+    let c = run::check_with(spec, &loaded, &truth).ok()?;
+    let class = c.rendered.info.hazard;
+    let approximate = c.rendered.info.capacity == fragrace_kernels::Capacity::Image
+        || c.rendered.result.dropped > 0;
+    let obs = Observation::of(&c);
+    let hazard = c.hazards().total() > 0;
+    let errors = c.metrics.error_pixels > 0 && !approximate;
+    let faults = c.rendered.result.report.stats.faulted > 0;
+    let broken = !c.failed_checks().is_empty();
+    match class {
+        HazardClass::HazardProne => (hazard
+            || c.metrics.error_pixels > 0
+            || faults
+            || broken
+            || c.rendered.result.dropped > 0)
+            .then(|| {
+                (
+                    obs,
+                    format!("{} shows its hazard (expected: hazard-prone)", spec.algo),
+                    faults || broken,
+                )
+            }),
+        _ => (hazard || errors || faults || broken).then(|| {
+            let why = if broken {
+                "invariant violated"
+            } else if faults {
+                "faulted"
+            } else if errors {
+                "differs from the truth"
+            } else {
+                "hazard detected"
+            };
+            (
+                obs,
+                format!("VIOLATION: {} is {} but {why}", spec.algo, class.name()),
+                true,
+            )
+        }),
+    }
+}
+
+fn write_case(
+    cfg: &FuzzConfig,
+    spec: &RunSpec,
+    obs: &Observation,
+    verdict: &str,
+    i: u64,
+) -> Result<String, FuzzError> {
+    let shrunk = crate::shrink::shrink(spec, obs, cfg.shrink_budget);
+    let case = match shrunk {
+        Some(s) => Case {
+            version: case::VERSION,
+            verdict: verdict.into(),
+            spec: s.spec,
+            observed: s.observed,
+            original_size: Some(s.before),
+            shrunk_size: Some(s.after),
+        },
+        None => Case {
+            version: case::VERSION,
+            verdict: verdict.into(),
+            spec: spec.clone(),
+            observed: obs.clone(),
+            original_size: None,
+            shrunk_size: None,
+        },
+    };
+    let name = format!("{}-{}-{i}.json", spec.algo, obs.signature().join("+"));
+    let path = cfg.out.join(&name);
+    case::write(&path, &case).map_err(|e| FuzzError::Io {
+        path: path.display().to_string(),
+        source: std::io::Error::other(e.to_string()),
+    })?;
+    Ok(name)
+}
