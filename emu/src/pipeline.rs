@@ -189,6 +189,55 @@ impl Device {
         Ok(report)
     }
 
+    /// Runs `kernel` on explicit fragments (no rasterizer, no framebuffer): for model-sized
+    /// experiments (a handful of invocations on one pixel), fuzzing kernels against their
+    /// oracles under arbitrary schedules, and the executors' own benchmarks. Fragments of
+    /// one pixel must carry their ordered-interlock tickets (0, 1, ... in API order) if the
+    /// kernel uses ordered interlock; `seq` is assigned here in slice order.
+    pub fn invocations<K: FragmentKernel>(
+        &self,
+        width: u32,
+        height: u32,
+        inputs: &[FragInput],
+        kernel: &K,
+        exec: &ExecConfig,
+    ) -> PassReport {
+        let start = Instant::now();
+        let info = kernel.info();
+        let interlock = info.interlock.map(|_| Interlock::new(width, height));
+        let env = PassEnv {
+            memory: &self.memory,
+            tris: &[],
+            width,
+            height,
+            samples: 1,
+            interlock: interlock.as_ref(),
+            interlock_mode: info.interlock,
+            mode: match exec.mode {
+                ExecMode::Scheduled(_) => Mode::Scheduled,
+                ExecMode::Parallel if exec.lockstep => Mode::Direct { yield_every: 1 },
+                _ => Mode::Direct { yield_every: 0 },
+            },
+            max_steps: exec.max_steps,
+            max_waits: exec.max_waits,
+            contention: None,
+        };
+        let mut inputs = inputs.to_vec();
+        for (i, f) in inputs.iter_mut().enumerate() {
+            f.seq = i as u64;
+            f.x = f.x.min(width.saturating_sub(1));
+            f.y = f.y.min(height.saturating_sub(1));
+        }
+        let mut outs = vec![FragOut::default(); inputs.len()];
+        let mut colors = vec![[0u32; 4]; inputs.len() * 8];
+        let outcome = shade(kernel, &env, exec, &inputs, &mut outs, &mut colors, 8);
+        let mut report = PassReport::default();
+        absorb(&mut report, outcome, &self.memory);
+        report.stats.fragments_generated = inputs.len() as u64;
+        report.wall = start.elapsed();
+        report
+    }
+
     /// Runs a full-screen pass: one invocation per pixel (all samples covered, depth 0.5,
     /// primitive 0), through `state`'s depth/stencil tests and target writes.
     pub fn fullscreen<K: FragmentKernel>(

@@ -214,6 +214,9 @@ fn fill_rule_single_triangle_edges() {
     assert!(ys.contains(&8));
 }
 
+/// A grid mesh over `rect` (pixels) with jittered interior vertices, some moved exactly onto
+/// pixel centres or the 1/16 sample grid, random diagonals and random windings; the diagonal
+/// is chosen so that no triangle folds over (the mesh tiles the rectangle exactly).
 fn jittered_grid(
     rng: &mut SmallRng,
     v: Viewport,
@@ -221,41 +224,51 @@ fn jittered_grid(
     rect: (f64, f64, f64, f64),
 ) -> (Vec<Vec4>, Vec<[u32; 3]>) {
     let (x0, y0, x1, y1) = rect;
-    let mut pos = Vec::new();
+    let cell = ((x1 - x0) / n as f64).min((y1 - y0) / n as f64);
+    let mut xy = Vec::new();
     for j in 0..=n {
         for i in 0..=n {
             let mut x = x0 + (x1 - x0) * i as f64 / n as f64;
             let mut y = y0 + (y1 - y0) * j as f64 / n as f64;
             if i > 0 && i < n && j > 0 && j < n {
-                let cell = (x1 - x0) / n as f64;
-                x += rng.gen_range(-0.4..0.4) * cell;
-                y += rng.gen_range(-0.4..0.4) * cell;
-                match rng.gen_range(0..4) {
-                    // Exactly on a pixel centre.
-                    0 => {
-                        x = x.floor() + 0.5;
-                        y = y.floor() + 0.5;
-                    }
-                    // On the 1/16 sample grid.
-                    1 => {
-                        x = (x * 16.0).round() / 16.0;
-                        y = (y * 16.0).round() / 16.0;
-                    }
-                    _ => {}
+                x += rng.gen_range(-0.25..0.25) * cell;
+                y += rng.gen_range(-0.25..0.25) * cell;
+                let (sx, sy) = match rng.gen_range(0..4) {
+                    0 => (x.floor() + 0.5, y.floor() + 0.5),                           // on a pixel centre
+                    1 => ((x * 16.0).round() / 16.0, (y * 16.0).round() / 16.0), // on the sample grid
+                    _ => (x, y),
+                };
+                if (sx - x).abs().max((sy - y).abs()) < 0.1 * cell {
+                    (x, y) = (sx, sy);
                 }
             }
-            pos.push(px(x, y, v));
+            xy.push((x, y));
         }
     }
+    let pos: Vec<Vec4> = xy.iter().map(|&(x, y)| px(x, y, v)).collect();
+    let area = |t: [u32; 3]| {
+        let [a, b, c] = t.map(|i| xy[i as usize]);
+        (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0)
+    };
     let mut idx = Vec::new();
     let at = |i: usize, j: usize| (j * (n + 1) + i) as u32;
     for j in 0..n {
         for i in 0..n {
             let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
-            let tris = if rng.gen() {
-                [[a, b, c], [a, c, d]]
-            } else {
-                [[a, b, d], [b, c, d]]
+            let diag1 = [[a, b, c], [a, c, d]];
+            let diag2 = [[a, b, d], [b, c, d]];
+            let ok = |q: &[[u32; 3]; 2]| q.iter().all(|&t| area(t) > 0.0);
+            let tris = match (ok(&diag1), ok(&diag2)) {
+                (true, true) => {
+                    if rng.gen() {
+                        diag1
+                    } else {
+                        diag2
+                    }
+                }
+                (true, false) => diag1,
+                (false, true) => diag2,
+                _ => panic!("folded quad"),
             };
             for mut t in tris {
                 if rng.gen() {
@@ -1223,3 +1236,4 @@ fn time_dragon_512() {
         );
     }
 }
+

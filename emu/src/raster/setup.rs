@@ -451,7 +451,7 @@ impl Ctx<'_> {
             let xmin = a[0].min(b[0]).min(c[0]);
             let special = bad_index | (xmin == OUT);
             let x0 = (xmin.max(-(1 << 30)) - si.max_x + (ONE - 1)) >> SUBPIXEL_BITS;
-            let x1 = (a[0].max(b[0]).max(c[0]) - si.min_x) >> SUBPIXEL_BITS;
+            let x1 = (a[0].max(b[0]).max(c[0]).max(-(1 << 30)) - si.min_x) >> SUBPIXEL_BITS;
             let y0 = (a[1].min(b[1]).min(c[1]) - si.max_y + (ONE - 1)) >> SUBPIXEL_BITS;
             let y1 = (a[1].max(b[1]).max(c[1]) - si.min_y) >> SUBPIXEL_BITS;
             let reaches = (x0.max(0) <= x1.min(w1)) & (y0.max(0) <= y1.min(h1));

@@ -7,6 +7,8 @@ mod fab;
 mod ll;
 mod sb;
 
+pub use ll::LinkedList;
+
 use crate::algo::Algorithm;
 
 /// The algorithms of this family.
