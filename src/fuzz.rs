@@ -170,7 +170,7 @@ pub fn campaign(
 ) -> Result<CampaignState, FuzzError> {
     std::fs::create_dir_all(&cfg.out).map_err(io(&cfg.out))?;
     let state_path = cfg.out.join("campaign.json");
-    let mut state = if cfg.resume && state_path.exists() {
+    let state = if cfg.resume && state_path.exists() {
         let bytes = std::fs::read(&state_path).map_err(io(&state_path))?;
         serde_json::from_slice::<CampaignState>(&bytes).map_err(|source| FuzzError::State {
             path: state_path.display().to_string(),

@@ -1,8 +1,8 @@
 //! The stencil-routed A-buffer (SRAB; Myers & Bavoil, "Stencil routed A-buffer", SIGGRAPH
 //! 2007 sketch, and the NVIDIA "Stencil Routed K-Buffer" SDK whitepaper, 2007; [18] in the
-//! depth-fighting seed, Table 1 and section 2; [BMO08] in the occupancy-culling seed): up to
+//! depth-fighting seed, section 2 and Table 1; [BMO08] in the occupancy-culling seed): up to
 //! 8 fragments per pixel captured in one geometry pass by fixed-function hardware alone,
-//! with no read-modify-write and no shader memory access at all.
+//! with no read-modify-write of shared memory.
 //!
 //! The 8 samples of an MSAA framebuffer are used as 8 slots. Their stencil values are set
 //! to distinct values (sample `s` to `s + 2`, by 8 full-screen passes each restricted to one
@@ -15,36 +15,38 @@
 //! A full-screen resolve reads the 8 samples, sorts and composites them (the paper sorts
 //! with a bitonic network; any sort gives the same order here).
 //!
-//! **Lost fragments are counted exactly.** A count pass over the same rasterization (an
-//! atomic counter per pixel, plus additive blending of 1 into every covered sample) gives
-//! each pixel's fragments `n` and each sample's covering fragments `c_s`; the loss is `n`
-//! minus the distinct fragments stored. (The whitepaper detects overflow with an occlusion
-//! query on a full-screen pass; a count is what an exact figure needs.) The count pass is
-//! instrumentation, not part of the paper's algorithm.
+//! **Lost fragments are counted exactly**, against the ground truth's fragments: a count
+//! pass with the truth's single-sample rasterization gives each pixel's fragments `n`, and
+//! the loss is `n` minus the fragments stored. (The whitepaper detects overflow with an
+//! occlusion query on a full-screen pass; an exact figure needs a count.) The count pass
+//! and a per-pixel counter of routed fragments in the capture kernel are instrumentation,
+//! not part of the paper's algorithm.
 //!
 //! **The 8-bit stencil wrap.** Routing must decrement with saturation (`DecrClamp`, GL's
 //! `DECR`, D3D's `DECR_SAT`): a sample's counter then passes 2 exactly once and settles at 0.
 //! With a wrapping decrement (`DECR_WRAP`) the counter of sample `s` comes back to 2 after
 //! 256 more fragments, and fragment `257 + s` silently overwrites sample `s`. The final
-//! stencil of every sample is checked against `max(s + 2 - c_s, 0)`, and the stored
+//! stencil of every sample is checked against `max(s + 2 - routed, 0)`, and the stored
 //! fragments against API order, which catches the wrap (see the tests).
 //!
-//! **MSAA coverage.** The routing assumes every fragment covers all 8 samples; the paper
-//! turns multisampling *off* while rendering into the MSAA target
+//! **MSAA coverage.** Routing needs every fragment to cover all 8 samples: the paper turns
+//! multisampling *off* while rendering into the MSAA target
 //! (`D3D10_RASTERIZER_DESC::MultisampleEnable = FALSE`: pixel-centre coverage replicated to
 //! every sample), which is why the depth-fighting seed calls SRAB incompatible with MSAA.
 //! The emulator has no such switch yet, so the capture rasterizes with real 8-sample
-//! coverage: fragments that cover only some samples (triangle edges) decrement only those
-//! samples' counters and desynchronise the routing (a fragment may land in two samples, or
-//! in none), and the 8-sample fragment set differs from the single-sample one of the ground
-//! truth on edge pixels. Pixels where every fragment covered every sample are checked
-//! exactly; the others are reported (informational check) and count in `dropped` only for
-//! what they really failed to store.
+//! coverage, and a fragment covering only some samples (at a triangle edge) would decrement
+//! only those counters and desynchronise the routing (the same fragment in two samples,
+//! later fragments in none). The capture kernel therefore discards partially covering
+//! fragments before the (late) stencil test: they are dropped and counted, and everything
+//! stored is a true fragment (full 8-sample coverage puts the pixel centre strictly inside
+//! the triangle, so the single-sample truth has it too), in API order, one per sample. With
+//! multisample-off rasterization every fragment covers all samples and nothing is dropped
+//! but the fragments beyond 8.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, Buf, ExecConfig, Format, Frag, FragmentKernel, FragmentState,
-    Framebuffer, Image, KernelInfo, PassState, RasterState, SampleCount, StencilFace, StencilOp,
-    StencilState, TargetState,
+    Buf, CompareFunc, ExecConfig, Format, Frag, FragmentKernel, FragmentState, Framebuffer, Image,
+    KernelInfo, PassState, RasterState, SampleCount, StencilFace, StencilOp, StencilState,
+    TargetState,
 };
 
 use crate::algo::{
@@ -52,11 +54,13 @@ use crate::algo::{
     HazardClass, Params,
 };
 use crate::common::{
-    self, composite_frags, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
+    self, capture_state, composite_frags, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
 };
 
 /// Slots per pixel: the samples of the MSAA framebuffer.
 const SAMPLES: usize = 8;
+/// Every sample covered.
+const FULL: u8 = 0xff;
 /// Stencil value that routes a fragment into a sample; sample `s` starts at `ROUTE + s`.
 const ROUTE: u8 = 2;
 
@@ -84,17 +88,17 @@ impl Routing {
             Routing::Wrap => StencilOp::DecrWrap,
         }
     }
-    /// The stencil of a sample that started at `init` after `covering` fragments covered it.
-    fn predict(self, init: u8, covering: u64) -> u8 {
+    /// The stencil of a sample that started at `init` after `routed` fragments went by.
+    fn predict(self, init: u8, routed: u32) -> u8 {
         match self {
-            Routing::Saturate => (init as u64).saturating_sub(covering) as u8,
-            Routing::Wrap => (init as u64).wrapping_sub(covering) as u8,
+            Routing::Saturate => (init as u32).saturating_sub(routed) as u8,
+            Routing::Wrap => (init as u32).wrapping_sub(routed) as u8,
         }
     }
 }
 
 /// Stencil initialisation: a full-screen pass that shades nothing (the fixed-function
-/// stencil write with the sample mask does the work).
+/// stencil write under the sample mask does the work).
 struct StencilInit;
 
 impl FragmentKernel for StencilInit {
@@ -104,8 +108,7 @@ impl FragmentKernel for StencilInit {
     async fn shade(&self, _f: Frag<'_>) {}
 }
 
-/// Loss accounting: fragments per pixel (atomic counter) and, through additive blending of
-/// 1 into target 0, covering fragments per sample.
+/// Loss accounting: the truth's fragments per pixel (single-sample rasterization).
 struct Count {
     counts: Buf<u32>,
 }
@@ -115,19 +118,27 @@ impl FragmentKernel for Count {
         KernelInfo::new("srab-count")
     }
     async fn shade(&self, f: Frag<'_>) {
-        f.output(0, [1.0, 0.0, 0.0, 0.0]);
         f.atomic_add(self.counts, f.pixel_index(), 1).await;
     }
 }
 
 /// The capture: depth and primitive id to the one sample the stencil test lets through.
-struct Capture8;
+/// Partially covering fragments are discarded before the late stencil test (see the
+/// module notes); the routed ones are counted per pixel (instrumentation).
+struct Capture8 {
+    routed: Buf<u32>,
+}
 
 impl FragmentKernel for Capture8 {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("srab-capture")
+        KernelInfo::new("srab-capture").with_discard()
     }
     async fn shade(&self, f: Frag<'_>) {
+        if f.coverage() != FULL {
+            f.discard();
+            return;
+        }
+        f.atomic_add(self.routed, f.pixel_index(), 1).await;
         f.output(0, [f.depth(), f32::from_bits(f.primitive_id()), 0.0, 0.0]);
     }
 }
@@ -201,9 +212,8 @@ impl Algorithm for Srab {
             source: "Myers & Bavoil, Stencil routed A-buffer, SIGGRAPH 2007 sketch + NVIDIA SDK \
                      whitepaper Stencil Routed K-Buffer (2007); depth-fighting seed [18] (sec. 2, \
                      Table 1), occupancy-culling seed [BMO08]",
-            passes:
-                "8 full-screen (stencil init) + 1 geometry (capture) + 1 full-screen (resolve); \
-                     + 1 geometry count pass for the exact loss figure",
+            passes: "8 full-screen (stencil init) + 1 geometry (capture) + 1 full-screen \
+                     (resolve); + 1 geometry count pass for the exact loss figure",
             memory: "4K+2 words in Table 1 of the depth-fighting paper (16K + 8 bytes, K = 8); \
                      here K samples x (RG32F depth+id + 32-bit depth-stencil) = 12K bytes",
             hazard: HazardClass::HazardFree,
@@ -231,24 +241,18 @@ fn run(
     let (w, h) = (frame.width, frame.height);
     let mut device = common::fresh();
 
-    // 1. Count pass (instrumentation): fragments per pixel and covering fragments per sample.
+    // 1. Count pass (instrumentation): the truth's fragments per pixel.
     let counts = device.buffer::<u32>("srab-counts", n as u64)?;
-    let mut count_fb = framebuffer(frame, SampleCount::X8, &[Format::R32F])?;
-    let mut count_state = FragmentState::new();
-    count_state.targets = vec![TargetState {
-        blend: Some(BlendState::equation(BlendEquation::Add)),
-        ..TargetState::new(Format::R32F)
-    }];
+    let mut count_fb = framebuffer(frame, SampleCount::X1, &[])?;
     let mut report = geometry_pass(
         &device,
         &mut count_fb,
         frame,
-        &msaa_pass(count_state),
+        &capture_state(),
         &Count { counts },
         exec,
     )?;
     let frag_counts = device.memory.read(counts)?;
-    let covering = count_fb.image(0);
 
     // 2. Stencil initialisation: sample s <- ROUTE + s, one sample-masked full-screen pass each.
     let mut fb = framebuffer(frame, SampleCount::X8, &[Format::RG32F])?;
@@ -258,7 +262,7 @@ fn run(
         let mut st = FragmentState::new();
         st.sample_mask = 1 << s;
         st.stencil = stencil(StencilFace {
-            func: fragrace_emu::CompareFunc::Always,
+            func: CompareFunc::Always,
             pass_op: StencilOp::Replace,
             reference: ROUTE + s,
             ..StencilFace::default()
@@ -267,10 +271,11 @@ fn run(
     }
 
     // 3. Capture: stencil EQUAL ROUTE, decrement on pass and fail, no depth test.
+    let routed = device.buffer::<u32>("srab-routed", n as u64)?;
     let mut cap_state = FragmentState::new();
     cap_state.targets = vec![TargetState::new(Format::RG32F)];
     cap_state.stencil = stencil(StencilFace {
-        func: fragrace_emu::CompareFunc::Equal,
+        func: CompareFunc::Equal,
         fail_op: routing.op(),
         depth_fail_op: routing.op(),
         pass_op: routing.op(),
@@ -278,17 +283,17 @@ fn run(
         read_mask: 0xff,
         write_mask: 0xff,
     });
-    let capture_report = geometry_pass(
+    let capture = geometry_pass(
         &device,
         &mut fb,
         frame,
         &msaa_pass(cap_state),
-        &Capture8,
+        &Capture8 { routed },
         exec,
     )?;
-    let capture_faults = capture_report.stats.faulted;
-    report.merge(&capture_report);
+    report.merge(&capture);
     let image = fb.image(0);
+    let routed = device.memory.read(routed)?;
 
     // 4. Resolve.
     let mut out_fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA32F])?;
@@ -306,23 +311,19 @@ fn run(
     // Read back what the samples hold, and check the routing.
     let mut lists = Vec::with_capacity(n);
     let mut dropped = 0u64;
+    let mut shallow_dropped = 0u64;
     let mut stencil_bad: Option<String> = None;
     let mut order_bad: Option<String> = None;
     let mut overcount: Option<String> = None;
-    let (mut full_pixels, mut partial_pixels, mut partial_dups, mut partial_lost) =
-        (0u64, 0u64, 0u64, 0u64);
-    let mut lost_full = 0u64;
-    for (p, &count) in frag_counts.iter().enumerate() {
+    for (p, (&nf, &r)) in frag_counts.iter().zip(&routed).enumerate() {
         let (x, y) = (p as u32 % w, p as u32 / w);
-        let nf = count as u64;
-        let cov: Vec<u64> = (0..SAMPLES)
-            .map(|s| f32::from_bits(covering.texels[p * SAMPLES + s][0]) as u64)
-            .collect();
-        for (s, &c) in cov.iter().enumerate() {
-            let want = routing.predict(ROUTE + s as u8, c);
+        for s in 0..SAMPLES as u8 {
+            let want = routing.predict(ROUTE + s, r);
             let got = fb.stencil(x, y, s as u32);
             if stencil_bad.is_none() && got != want {
-                stencil_bad = Some(format!("pixel ({x}, {y}) sample {s}: stencil {got}, expected {want} after {c} fragments"));
+                stencil_bad = Some(format!(
+                    "pixel ({x}, {y}) sample {s}: stencil {got}, expected {want} after {r} routed fragments"
+                ));
             }
         }
         let samples: Vec<Option<CapturedFrag>> = (0..SAMPLES)
@@ -335,83 +336,74 @@ fn run(
             })
             .collect();
         let stored: Vec<CapturedFrag> = samples.iter().flatten().copied().collect();
-        let mut prims: Vec<u32> = stored.iter().map(|f| f.prim).collect();
-        prims.sort_unstable();
-        prims.dedup();
-        let distinct = prims.len() as u64;
-        if distinct > nf {
+        // Samples 0..min(routed, 8) hold the first routed fragments in API order (primitive
+        // order within one draw), one each; the rest are empty.
+        let m = (r as usize).min(SAMPLES);
+        let prefix =
+            samples[..m].iter().all(Option::is_some) && samples[m..].iter().all(Option::is_none);
+        let ordered = stored.windows(2).all(|v| v[0].prim < v[1].prim);
+        if order_bad.is_none() && !(prefix && ordered) {
+            let prims: Vec<Option<u32>> = samples.iter().map(|s| s.map(|f| f.prim)).collect();
+            order_bad = Some(format!(
+                "pixel ({x}, {y}), {r} routed fragments: samples hold {prims:?}"
+            ));
+        }
+        let kept = stored.len() as u64;
+        if kept > nf as u64 || r > nf {
             if overcount.is_none() {
                 overcount = Some(format!(
-                    "pixel ({x}, {y}): {distinct} distinct fragments stored of {nf}"
+                    "pixel ({x}, {y}): {kept} stored, {r} routed, of {nf} fragments"
                 ));
             }
         } else {
-            dropped += nf - distinct;
-        }
-        if cov.iter().all(|&c| c == nf) {
-            // Every fragment covered every sample: the routing is exact. Samples 0..min(n, 8)
-            // hold the first fragments in API order (primitive order within one draw), the
-            // rest are empty, and exactly max(n - 8, 0) fragments are lost.
-            if nf > 0 {
-                full_pixels += 1;
+            dropped += nf as u64 - kept;
+            if nf as usize <= SAMPLES {
+                shallow_dropped += nf as u64 - kept;
             }
-            let m = (nf as usize).min(SAMPLES);
-            let prefix = samples[..m].iter().all(Option::is_some)
-                && samples[m..].iter().all(Option::is_none);
-            let ordered = stored.windows(2).all(|v| v[0].prim < v[1].prim);
-            if order_bad.is_none() && !(prefix && ordered) {
-                order_bad = Some(format!(
-                    "pixel ({x}, {y}), {nf} fragments: samples hold {:?}",
-                    samples
-                        .iter()
-                        .map(|s| s.map(|f| f.prim))
-                        .collect::<Vec<_>>()
-                ));
-            }
-            lost_full += nf.saturating_sub(SAMPLES as u64);
-        } else {
-            partial_pixels += 1;
-            partial_dups += stored.len() as u64 - distinct;
-            partial_lost += nf.saturating_sub(distinct);
         }
         let mut list = stored;
         sort_fragments(&mut list);
         lists.push(list);
     }
-    let generated = capture_report.stats.fragments_generated;
-    let total: u64 = frag_counts.iter().map(|&c| c as u64).sum();
+    let counted: u64 = frag_counts.iter().map(|&c| c as u64).sum();
+    let routed_total: u64 = routed.iter().map(|&c| c as u64).sum();
+    let cs = &capture.stats;
     let ok = |v: &Option<String>| v.is_none();
     let checks = vec![
         Check::new(
-            "count pass and capture pass see the same fragments",
-            total == generated && capture_faults == 0,
-            format!("counted {total}, capture generated {generated}, faulted {capture_faults}"),
+            "capture: every fragment routed or dropped for partial coverage, none faulted",
+            routed_total + cs.discarded == cs.fragments_generated && cs.shaded == cs.fragments_generated && cs.faulted == 0,
+            format!(
+                "routed {routed_total} + partial {} of {} generated, {} shaded, {} faulted",
+                cs.discarded, cs.fragments_generated, cs.shaded, cs.faulted
+            ),
         ),
         Check::new(
-            "stencil counters: initial - covering fragments, never wrapped",
+            "stencil counters = initial - routed fragments, never wrapped",
             ok(&stencil_bad),
             stencil_bad.clone().unwrap_or_else(|| format!("{} samples", n * SAMPLES)),
         ),
         Check::new(
-            "routing (full coverage): first min(n, 8) fragments in API order, one per sample",
+            "routing: first min(routed, 8) fragments in API order, one per sample",
             ok(&order_bad),
-            order_bad.clone().unwrap_or_else(|| format!("{full_pixels} covered pixels, {lost_full} fragments lost beyond 8")),
+            order_bad.clone().unwrap_or_else(|| format!("{n} pixels")),
         ),
         Check::new(
-            "no pixel stores more fragments than it generated",
+            "stored and routed never exceed the pixel's fragments; losses counted",
             ok(&overcount),
-            overcount.clone().unwrap_or_else(|| format!("dropped {dropped} of {total}")),
+            overcount.clone().unwrap_or_else(|| format!("dropped {dropped} of {counted}")),
         ),
         Check::new(
-            "partial MSAA coverage desynchronises routing (informational)",
+            "fragments dropped for partial MSAA coverage (informational)",
             true,
             format!(
-                "{partial_pixels} pixels with partially covering fragments: {partial_dups} duplicate \
-                 entries, {partial_lost} fragments missed (needs rasterization with multisampling off)"
+                "{} partially covering fragments dropped; {shallow_dropped} fragments lost on pixels \
+                 with <= 8 fragments (none with multisample-off rasterization)",
+                cs.discarded
             ),
         ),
     ];
-    let storage_bytes = fb_bytes(&fb) + n as u64 * 16 + device.memory.bytes() + fb_bytes(&count_fb);
+    let storage_bytes = fb_bytes(&fb) + n as u64 * 16 + device.memory.bytes();
     Ok(AlgoResult {
         capture: Some(Capture::from_lists(w, h, lists)),
         image: Some(resolved),
@@ -589,31 +581,58 @@ mod tests {
     }
 
     #[test]
-    fn partial_coverage_is_reported_not_hidden() {
-        // A quad's diagonal splits pixels between two triangles at 8 samples.
+    fn partial_coverage_is_dropped_counted_and_never_misrouted() {
+        // Quads with edges inside pixels (and their diagonals) cover pixels partially at 8
+        // samples: those fragments are dropped and counted, everything stored is a true
+        // fragment, and every error pixel is one that lost fragments.
         let mut mesh = Mesh::default();
-        mesh.positions.extend([
-            Vec3::new(-0.7, -0.7, 0.0),
-            Vec3::new(0.7, -0.7, 0.0),
-            Vec3::new(0.7, 0.7, 0.0),
-            Vec3::new(-0.7, 0.7, 0.0),
-        ]);
-        mesh.indices.extend([[0, 1, 2], [0, 2, 3]]);
+        for (i, z) in [0.0f32, 0.4, -0.3].into_iter().enumerate() {
+            let o = 0.13 * i as f32;
+            let b = mesh.positions.len() as u32;
+            mesh.positions.extend([
+                Vec3::new(-0.7 + o, -0.7, z),
+                Vec3::new(0.7, -0.7 + o, z),
+                Vec3::new(0.7 - o, 0.7, z),
+                Vec3::new(-0.7, 0.7 - o, z),
+            ]);
+            mesh.indices.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
+        }
+        cover_all(&mut mesh, 0.2, 0.0);
         let frame = Frame {
             mesh: &mesh,
             view_proj: Mat4::IDENTITY,
             width: 16,
             height: 16,
         };
-        let r = Srab
-            .run(&frame, &Params::default(), &ExecConfig::ordered())
-            .unwrap();
-        assert_checks(&r, "quad");
-        let info = r
-            .checks
-            .iter()
-            .find(|c| c.name.starts_with("partial"))
-            .unwrap();
-        assert!(!info.detail.starts_with("0 pixels"), "{}", info.detail);
+        let truth = Truth::capture(&frame, 1).unwrap();
+        let t = truth.capture.as_ref().unwrap();
+        let params = Params::default();
+        for exec in execs() {
+            let r = Srab.run(&frame, &params, &exec).unwrap();
+            assert_checks(&r, &format!("{:?}", exec.mode));
+            let info = r
+                .checks
+                .iter()
+                .find(|c| c.name.contains("partial MSAA"))
+                .unwrap();
+            assert!(!info.detail.starts_with("0 "), "{}", info.detail);
+            let cap = r.capture.as_ref().unwrap();
+            let m = oracle::compare(&Srab.info(), &r, &truth, &params);
+            let mut lost = 0;
+            for p in 0..t.pixels() {
+                assert!(
+                    cap.pixel(p).iter().all(|f| t.pixel(p).contains(f)),
+                    "pixel {p}"
+                );
+                assert_eq!(
+                    m.error_mask[p],
+                    cap.pixel(p).len() < t.pixel(p).len(),
+                    "pixel {p}"
+                );
+                lost += t.pixel(p).len() - cap.pixel(p).len();
+            }
+            assert_eq!(r.dropped, lost as u64);
+            assert!(m.error_pixels > 0 && m.error_pixels < m.covered_pixels);
+        }
     }
 }
