@@ -158,7 +158,7 @@ pub(crate) fn area2(v: &[[i32; 2]; 3]) -> i64 {
 /// interior to its right has `dE/dx = -dy > 0` (left edge).
 #[inline]
 pub(crate) fn is_top_left(dx: i64, dy: i64) -> bool {
-    dy < 0 || (dy == 0 && dx > 0)
+    (dy < 0) | ((dy == 0) & (dx > 0))
 }
 
 /// The three edge functions `E_i(x, y) = a_i x + b_i y + c_i` (sub-pixel units) of a

@@ -127,6 +127,8 @@ struct BinEntry {
 
 /// Flag of a precomputed single-pixel [`BinEntry`].
 const SINGLE: u32 = 1 << 31;
+/// Flag of a [`BinEntry`] of one of several fan pieces of a clipped triangle.
+const PIECE: u32 = 1 << 30;
 
 impl Binned {
     pub fn tile_count(&self) -> usize {
@@ -170,40 +172,67 @@ impl Binned {
         if x0 >= x1 || y0 >= y1 {
             return;
         }
+        let rect = [x0 as i32, y0 as i32, x1 as i32, y1 as i32];
         let si = SampleInfo::new(self.samples);
+        let mut merge: Vec<(u32, u32, u8)> = Vec::new();
         for c in &self.chunks {
             let list = &c.entries[c.tile_start[tile] as usize..c.tile_start[tile + 1] as usize];
-            for e in list {
+            let mut i = 0;
+            while i < list.len() {
+                let e = list[i];
                 let tri = c.base + e.tri;
-                if e.info & SINGLE != 0 {
-                    emit(Fragment {
-                        x: x0 + (e.info & 0xff),
-                        y: y0 + ((e.info >> 8) & 0xff),
-                        tri,
-                        coverage: (e.info >> 16) as u8,
-                    });
-                    continue;
+                // With several samples, the fan pieces of one clipped triangle can each cover
+                // some samples of a pixel on their shared diagonal: merge them into one
+                // fragment (the pieces are consecutive, and share the source's planes).
+                let mut j = i + 1;
+                if e.info & PIECE != 0 && si.offs.len() > 1 {
+                    let source = self.tris[tri as usize].source;
+                    while j < list.len()
+                        && list[j].info & PIECE != 0
+                        && self.tris[(c.base + list[j].tri) as usize].source == source
+                    {
+                        j += 1;
+                    }
                 }
-                let v = &c.verts[e.info as usize];
-                let (x0, y0, x1, y1) = (x0 as i32, y0 as i32, x1 as i32, y1 as i32);
-                let Some(r) = si.pixel_rect(bbox(v), x1, y1) else {
-                    continue;
-                };
-                let r = [r[0].max(x0), r[1].max(y0), r[2], r[3]];
-                if r[0] > r[2] || r[1] > r[3] {
-                    continue;
+                if j == i + 1 {
+                    entry_coverage(c, &e, rect, &si, |x, y, coverage| emit(Fragment { x, y, tri, coverage }));
+                } else {
+                    merge.clear();
+                    for e in &list[i..j] {
+                        entry_coverage(c, e, rect, &si, |x, y, m| merge.push((y, x, m)));
+                    }
+                    merge.sort_unstable_by_key(|&(y, x, _)| (y, x));
+                    let mut k = 0;
+                    while k < merge.len() {
+                        let (y, x, mut coverage) = merge[k];
+                        k += 1;
+                        while k < merge.len() && (merge[k].0, merge[k].1) == (y, x) {
+                            coverage |= merge[k].2;
+                            k += 1;
+                        }
+                        emit(Fragment { x, y, tri, coverage });
+                    }
                 }
-                let edges = Edges::new(v);
-                coverage::raster(&edges, &si, r, |x, y, coverage| {
-                    emit(Fragment {
-                        x,
-                        y,
-                        tri,
-                        coverage,
-                    })
-                });
+                i = j;
             }
         }
+    }
+}
+
+/// Calls `f(x, y, mask)` for the pixels of tile rectangle `rect` (`[x0, y0, x1, y1)`) covered
+/// by one bin entry, in row-major order.
+#[inline]
+fn entry_coverage(c: &ChunkBins, e: &BinEntry, rect: [i32; 4], si: &SampleInfo, mut f: impl FnMut(u32, u32, u8)) {
+    if e.info & SINGLE != 0 {
+        let (x, y) = (rect[0] as u32 + (e.info & 0xff), rect[1] as u32 + ((e.info >> 8) & 0xff));
+        f(x, y, (e.info >> 16) as u8);
+        return;
+    }
+    let v = &c.verts[(e.info & !PIECE) as usize];
+    let Some(r) = si.pixel_rect(bbox(v), rect[2], rect[3]) else { return };
+    let r = [r[0].max(rect[0]), r[1].max(rect[1]), r[2], r[3]];
+    if r[0] <= r[2] && r[1] <= r[3] {
+        coverage::raster(&Edges::new(v), si, r, f);
     }
 }
 
@@ -495,7 +524,7 @@ impl Ctx<'_> {
         for i in 0..3 {
             q[i][perm[i]] = zw[i][1];
         }
-        self.finish(out, t as u32, front, v, r, zw.map(|z| z[0]), q);
+        self.finish(out, t as u32, front, false, v, r, zw.map(|z| z[0]), q);
     }
 
     /// Slow path: a vertex is outside a clip plane (or not finite).
@@ -557,7 +586,7 @@ impl Ctx<'_> {
                 let iw = proj[j].iw as f64;
                 [(b[0] * iw) as f32, (b[1] * iw) as f32, (b[2] * iw) as f32]
             });
-            self.finish(out, source, front, v, r, zw, q);
+            self.finish(out, source, front, m > 3, v, r, zw, q);
         }
     }
 
@@ -571,6 +600,7 @@ impl Ctx<'_> {
         out: &mut ChunkOut,
         source: u32,
         front_facing: bool,
+        piece: bool,
         v: [[i32; 2]; 3],
         r: [i32; 4],
         zw: [f32; 3],
@@ -614,7 +644,7 @@ impl Ctx<'_> {
                 out.verts.push(v);
                 out.verts.len() as u32 - 1
             }
-        };
+        } | if piece { PIECE } else { 0 };
         let (tx0, ty0, tx1, ty1) = (r[0] >> sh, r[1] >> sh, r[2] >> sh, r[3] >> sh);
         if tx0 == tx1 && ty0 == ty1 {
             out.bins.push((
@@ -827,13 +857,10 @@ pub fn bin_triangles(
         ccw_front: state.front_face == FrontFace::Ccw,
     };
     let n = indices.len();
-    // A few chunks per thread balance the load; few enough that the per-chunk tile tables
-    // (ntiles + 1 words each) stay small even for many tiles.
-    let target = (threads * 4)
-        .min((1usize << 22) / (ntiles + 1))
-        .max(threads)
-        .max(1);
-    let chunk = n.div_ceil(target).max(4096);
+    // One contiguous chunk per thread: the first chunk's buffer becomes `tris` and only the
+    // others are appended (copying setup records is a large part of the memory traffic).
+    // Rejecting off-screen or sub-pixel triangles is cheap, so equal ranges balance well.
+    let chunk = n.div_ceil(threads).max(4096);
     let nchunks = n.div_ceil(chunk);
     let mut parts: Vec<(Vec<SetupTriangle>, ChunkBins, u64)> = if ntiles == 0 {
         // Empty viewport: nothing is drawn, but bad input is still counted.
@@ -864,20 +891,16 @@ pub fn bin_triangles(
     // 3. Concatenate in chunk order (a single chunk is moved, not copied).
     let total: usize = parts.iter().map(|p| p.0.len()).sum();
     let mut rejected = 0;
-    let tris = if parts.len() == 1 {
-        rejected = parts[0].2;
-        std::mem::take(&mut parts[0].0)
-    } else {
-        let mut tris = TRIS.take();
-        tris.reserve(total);
-        for (t, bins, r) in &mut parts {
-            rejected += *r;
+    let mut tris = std::mem::take(&mut parts[0].0);
+    tris.reserve(total - tris.len());
+    for (k, (t, bins, r)) in parts.iter_mut().enumerate() {
+        rejected += *r;
+        if k > 0 {
             bins.base = tris.len() as u32;
             tris.extend_from_slice(t);
             TRIS.give(std::mem::take(t));
         }
-        tris
-    };
+    }
     if std::env::var_os("RT").is_some() {
         eprintln!(
             "TIMING v {:.2} t {:.2} m {:.2}",

@@ -102,7 +102,7 @@ impl Algorithm for KbInterlock {
             family: "k-buffer",
             summary,
             source: "pixel synchronization [Sal13] (occupancy paper, section 1); z-thickness paper, section 4.2; \
-                     Bavoil et al. 2007, section 3",
+                     Bavoil et al. 2007 (I3D)",
             passes: "1 geometry + 1 full-screen (resolve)",
             memory: "8 k + 8 bytes: k depths + k primitive ids (Table 1, KB: 2K + 2 words) + the last entrant and \
                      entry count of the invariants; + 16-byte resolve target",

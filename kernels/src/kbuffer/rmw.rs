@@ -207,8 +207,9 @@ pub(super) fn depth_key(depth: f32) -> u32 {
     (depth + 0.0).to_bits()
 }
 
-/// The full-screen resolve of Bavoil et al. (section 3: "a final full-screen pass sorts and
-/// composites the k fragments"): read the pixel's slots, sort, composite front to back.
+/// The full-screen resolve every buffer-based method needs (depth-fighting paper, section 2:
+/// "an additional fullscreen post-processing pass to sort the captured fragments"; `oit.py`'s
+/// `FS_KBUF_RESOLVE`): read the pixel's slots, sort, composite front to back.
 struct Resolve {
     slots: Slots,
     k: u32,
@@ -423,7 +424,7 @@ impl Shape {
     }
 }
 
-/// The read-modify-write capture kernel (Bavoil et al. 2007, section 3.1; `oit.py`'s
+/// The read-modify-write capture kernel (Bavoil et al. 2007; `oit.py`'s
 /// `FS_KBUF_RMW`).
 struct RmwStore {
     kb: SplitSlots,
@@ -458,7 +459,7 @@ impl Algorithm for KbRmw {
             family: "k-buffer",
             summary: "the original k-buffer: plain load of the k slots, sorted insertion, plain store of all k \
                       (read-modify-write hazard by design)",
-            source: "Bavoil et al. 2007 (I3D), section 3; depth-fighting paper [17], section 2 and Table 1 (KB); \
+            source: "Bavoil et al. 2007 (I3D); depth-fighting paper [17], section 2 and Table 1 (KB); \
                      llvmpipe peer `kbuf-rmw`",
             passes: "1 geometry + 1 full-screen (resolve)",
             memory: "8 k bytes: k depths + k primitive ids (Table 1, KB: 2K + 2 words with the colour and depth \

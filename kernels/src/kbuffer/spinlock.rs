@@ -5,8 +5,8 @@
 //!
 //! Acquire: compare-exchange of the pixel's lock word 0 -> 1 (acquire), retried; each attempt
 //! is one step, where other invocations may run. Release: an atomic store of 0 (release).
-//! After `params.spin_cap` failed attempts the fragment gives up: it is **dropped and
-//! counted** (per pixel, reported in [`AlgoResult::dropped`] and a check), never silently.
+//! After `params.spin_cap` failed attempts (at least 1) the fragment gives up: it is **dropped
+//! and counted** (per pixel, reported in [`AlgoResult::dropped`] and a check), never silently.
 //!
 //! Why it is declared hazard-prone (DESIGN.md 7): a spinlock gives no forward progress
 //! guarantee. A lock holder that the scheduler does not run (a PCT priority drop, the
@@ -165,7 +165,7 @@ impl Algorithm for KbSpinlock {
             summary: "read-modify-write k-buffer inside a per-pixel spinlock (compare-exchange acquire, atomic-store \
                       release); fragments that reach the spin cap are dropped and counted",
             source: "pixel synchronization k-buffers (occupancy paper, section 1) without hardware interlock; \
-                     DESIGN.md 7 (spinlock k-buffer); Bavoil et al. 2007, section 3",
+                     DESIGN.md 7 (spinlock k-buffer); Bavoil et al. 2007 (I3D)",
             passes: "1 geometry + 1 full-screen (resolve)",
             memory: "8 k + 12 bytes: k depths + k primitive ids (Table 1, KB: 2K + 2 words) + the lock + the entry \
                      and give-up counts of the invariants; + 16-byte resolve target",
