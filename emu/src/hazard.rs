@@ -154,6 +154,8 @@ pub struct Detector {
     names: Vec<String>,
     /// Pairs already reported, so a spin loop is one hazard, not thousands.
     seen: FastMap<(u8, u64, u64, u64), ()>,
+    /// Invocations with an open record load (few at a time).
+    open_records: Vec<u64>,
 }
 
 impl Detector {
@@ -169,6 +171,7 @@ impl Detector {
             keep: 256,
             names,
             seen: FastMap::default(),
+            open_records: Vec::new(),
         }
     }
 
@@ -190,9 +193,10 @@ impl Detector {
     pub fn finish(&mut self, seq: u64, step: u64) {
         if let Some(s) = self.invs.get_mut(&seq) {
             s.end = Some(step);
-            s.loads.clear();
+            s.loads = Vec::new();
             s.record = None;
         }
+        self.open_records.retain(|&o| o != seq);
     }
 
     /// Whether invocations `a` and `b` overlapped in time (neither finished before the
@@ -316,12 +320,16 @@ impl Detector {
             if op == OpKind::Load {
                 let mut torn_by = None;
                 if let Some(s) = self.invs.get_mut(&seq) {
-                    if word == 0 {
+                    if word == 0 && len > 1 {
                         s.record = Some((base, len, None));
+                        if !self.open_records.contains(&seq) {
+                            self.open_records.push(seq);
+                        }
                     } else if let Some((b, _, hit)) = s.record {
                         if b == base && word + 1 == len {
                             torn_by = hit;
                             s.record = None;
+                            self.open_records.retain(|&o| o != seq);
                         }
                     }
                 }
@@ -330,9 +338,10 @@ impl Detector {
                 }
             }
         }
-        if write {
+        if write && !self.open_records.is_empty() {
             let mut hits = Vec::new();
-            for (&other, s) in self.invs.iter() {
+            for &other in &self.open_records {
+                let Some(s) = self.invs.get(&other) else { continue };
                 if other == seq || s.end.is_some() {
                     continue;
                 }

@@ -15,9 +15,11 @@ fn vp(w: u32, h: u32) -> Viewport {
     }
 }
 
+/// Small tiles (8 pixels) so that the small test scenes straddle many tile borders.
 fn state(samples: SampleCount) -> RasterState {
     RasterState {
         samples,
+        tile_size: 8,
         ..RasterState::default()
     }
 }
@@ -206,7 +208,10 @@ fn fill_rule_single_triangle_edges() {
     let p = [px(6.5, 1.5, v), px(12.5, 9.5, v), px(0.5, 9.5, v)];
     let b = bin(&p, &[[0, 1, 2]], &state(X1), v);
     let ys: Vec<u32> = all_frags(&b).iter().map(|f| f.y).collect();
-    assert!(!ys.contains(&1), "apex on a centre: on the right edge, so excluded");
+    assert!(
+        !ys.contains(&1),
+        "apex on a centre: on the right edge, so excluded"
+    );
     assert!(!ys.contains(&9), "bottom edge excluded");
     assert!(ys.contains(&8));
 }
@@ -231,7 +236,7 @@ fn jittered_grid(
                 x += rng.gen_range(-0.25..0.25) * cell;
                 y += rng.gen_range(-0.25..0.25) * cell;
                 let (sx, sy) = match rng.gen_range(0..4) {
-                    0 => (x.floor() + 0.5, y.floor() + 0.5),                           // on a pixel centre
+                    0 => (x.floor() + 0.5, y.floor() + 0.5), // on a pixel centre
                     1 => ((x * 16.0).round() / 16.0, (y * 16.0).round() / 16.0), // on the sample grid
                     _ => (x, y),
                 };
@@ -844,7 +849,11 @@ fn clipped_mesh_stays_watertight() {
     let mut world = Vec::new();
     for j in 0..=n {
         for i in 0..=n {
-            world.push(Vec3::new(-6.0 + 12.0 * i as f32 / n as f32, 0.0, 6.0 - 12.0 * j as f32 / n as f32));
+            world.push(Vec3::new(
+                -6.0 + 12.0 * i as f32 / n as f32,
+                0.0,
+                6.0 - 12.0 * j as f32 / n as f32,
+            ));
         }
     }
     let eye: Vec<Vec3> = world.iter().map(|p| view.transform_point3(*p)).collect();
@@ -870,12 +879,23 @@ fn clipped_mesh_stays_watertight() {
             for x in 0..64 {
                 for (s, &(sx, sy)) in samples.positions().iter().enumerate() {
                     let (cx, cy) = (x as f64 + sx as f64, y as f64 + sy as f64);
-                    let Some((_, depth)) = ray_hit(plane, proj, v, cx, cy) else { continue };
-                    let ndc = Vec4::new((cx / 32.0 - 1.0) as f32, (1.0 - cy / 32.0) as f32, (depth * 2.0 - 1.0) as f32, 1.0);
+                    let Some((_, depth)) = ray_hit(plane, proj, v, cx, cy) else {
+                        continue;
+                    };
+                    let ndc = Vec4::new(
+                        (cx / 32.0 - 1.0) as f32,
+                        (1.0 - cy / 32.0) as f32,
+                        (depth * 2.0 - 1.0) as f32,
+                        1.0,
+                    );
                     let e = proj.inverse() * ndc;
                     let w = view.inverse().transform_point3(e.truncate() / e.w);
                     if depth > 0.01 && depth < 0.99 && w.x.abs() < 5.9 && w.z.abs() < 5.9 {
-                        assert_eq!(counts.get(&(x, y, s)), Some(&1), "hole at ({x},{y}) sample {s}");
+                        assert_eq!(
+                            counts.get(&(x, y, s)),
+                            Some(&1),
+                            "hole at ({x},{y}) sample {s}"
+                        );
                         checked += 1;
                     }
                 }
@@ -987,6 +1007,9 @@ fn out_of_range_indices_do_not_panic() {
     let b = bin(&[], &[[0, 1, 2]], &RasterState::default(), v);
     assert_eq!(b.rejected, 1);
     assert!(all_frags(&b).is_empty());
+    // No triangles at all.
+    let b = bin(&pos, &[], &RasterState::default(), v);
+    assert!(b.tris.is_empty() && all_frags(&b).is_empty());
     // Empty viewport.
     let b = bin(&pos, &[[0, 1, 2]], &RasterState::default(), vp(0, 0));
     assert_eq!(b.tile_count(), 0);
@@ -1074,9 +1097,35 @@ fn frag_set(b: &Binned) -> Vec<(u32, u32, u32, u8)> {
 #[test]
 fn tile_sizes_and_threads_give_identical_output() {
     let v = vp(300, 200);
-    let (verts, faces) = icosphere(4);
+    // A sphere, a floor through the near plane (clipped pieces) and a dense jittered grid:
+    // about 30K triangles, so that up to 7 threads get a chunk each.
+    let (verts, mut faces) = icosphere(4);
     let m = camera(Vec3::new(0.4, 0.3, 1.6), Vec3::ZERO, 1.5, 0.5, 10.0);
-    let pos: Vec<Vec4> = verts.iter().map(|p| m * p.extend(1.0)).collect();
+    let mut pos: Vec<Vec4> = verts.iter().map(|p| m * p.extend(1.0)).collect();
+    let n = 40;
+    let base = pos.len() as u32;
+    for j in 0..=n {
+        for i in 0..=n {
+            let p = Vec3::new(
+                -4.0 + 8.0 * i as f32 / n as f32,
+                -0.9,
+                4.0 - 8.0 * j as f32 / n as f32,
+            );
+            pos.push(m * p.extend(1.0));
+        }
+    }
+    for j in 0..n as u32 {
+        for i in 0..n as u32 {
+            let at = |i: u32, j: u32| base + j * (n as u32 + 1) + i;
+            faces.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+            faces.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+        }
+    }
+    let mut rng = SmallRng::seed_from_u64(21);
+    let (gp, gi) = jittered_grid(&mut rng, v, 100, (10.0, 20.0, 290.0, 150.0));
+    let base = pos.len() as u32;
+    pos.extend(gp);
+    faces.extend(gi.iter().map(|t| t.map(|i| i + base)));
     for samples in [SampleCount::X1, SampleCount::X4] {
         let reference = bin_triangles(
             &pos,
@@ -1101,7 +1150,13 @@ fn tile_sizes_and_threads_give_identical_output() {
                 let b = bin_triangles(&pos, &faces, &st, v, threads);
                 assert_eq!(b.tile_size, ts);
                 assert_eq!(b.tris, reference.tris, "ts {ts} threads {threads}");
-                assert_eq!(frag_set(&b), want, "ts {ts} threads {threads}");
+                let got = frag_set(&b);
+                if got != want {
+                    let missing: Vec<_> =
+                        want.iter().filter(|f| !got.contains(f)).take(5).collect();
+                    let extra: Vec<_> = got.iter().filter(|f| !want.contains(f)).take(5).collect();
+                    panic!("ts {ts} threads {threads}: {} vs {} fragments, missing {missing:?}, extra {extra:?}", got.len(), want.len());
+                }
                 if ts == 64 {
                     // Same tiles: same fragment sequence per tile.
                     for t in 0..b.tile_count() {
@@ -1181,7 +1236,48 @@ fn load_obj_gz(path: &str) -> Option<(Vec<Vec3>, Vec<[u32; 3]>)> {
     (!f.is_empty()).then_some((v, f))
 }
 
-/// Timing of the dragon at 512x512 (run with `--release -- --ignored --nocapture`).
+/// Best-of-`runs` wall times (ms) of `bin_triangles` and of rasterizing every tile (tiles
+/// handed out to `threads` threads), and the fragment count.
+fn time_frame(
+    pos: &[Vec4],
+    idx: &[[u32; 3]],
+    v: Viewport,
+    threads: usize,
+    runs: usize,
+) -> (f64, f64, usize) {
+    let mut best = (f64::MAX, f64::MAX);
+    let mut frags = 0;
+    for _ in 0..runs {
+        let t0 = std::time::Instant::now();
+        let b = bin_triangles(pos, idx, &RasterState::default(), v, threads);
+        let t1 = std::time::Instant::now();
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let count = std::sync::atomic::AtomicUsize::new(0);
+        std::thread::scope(|s| {
+            for _ in 0..threads {
+                s.spawn(|| {
+                    let mut n = 0;
+                    loop {
+                        let t = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        if t >= b.tile_count() {
+                            break;
+                        }
+                        b.raster_tile(t, |_| n += 1);
+                    }
+                    count.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+                });
+            }
+        });
+        let t2 = std::time::Instant::now();
+        frags = count.into_inner();
+        best.0 = best.0.min((t1 - t0).as_secs_f64() * 1e3);
+        best.1 = best.1.min((t2 - t1).as_secs_f64() * 1e3);
+    }
+    (best.0, best.1, frags)
+}
+
+/// Timing of the 871K-triangle Stanford dragon at 512x512 (run with
+/// `cargo test --release -p fragrace-emu --test raster -- --ignored --nocapture`).
 #[test]
 #[ignore]
 fn time_dragon_512() {
@@ -1199,42 +1295,40 @@ fn time_dragon_512() {
     let (c, r) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
     let m = camera(c + Vec3::new(0.0, 0.0, 2.2 * r), c, 1.0, 0.1 * r, 10.0 * r);
     let pos: Vec<Vec4> = verts.iter().map(|p| m * p.extend(1.0)).collect();
-    let v = vp(512, 512);
     for threads in [1, 2] {
-        let mut best = (f64::MAX, f64::MAX);
-        let mut frags = 0;
-        for _ in 0..30 {
-            let t0 = std::time::Instant::now();
-            let b = bin_triangles(&pos, &faces, &RasterState::default(), v, threads);
-            let t1 = std::time::Instant::now();
-            let next = std::sync::atomic::AtomicUsize::new(0);
-            let count = std::sync::atomic::AtomicUsize::new(0);
-            std::thread::scope(|s| {
-                for _ in 0..threads {
-                    s.spawn(|| {
-                        let mut n = 0;
-                        loop {
-                            let t = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                            if t >= b.tile_count() {
-                                break;
-                            }
-                            b.raster_tile(t, |_| n += 1);
-                        }
-                        count.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
-                    });
-                }
-            });
-            let t2 = std::time::Instant::now();
-            frags = count.into_inner();
-            best.0 = best.0.min((t1 - t0).as_secs_f64() * 1e3);
-            best.1 = best.1.min((t2 - t1).as_secs_f64() * 1e3);
-        }
-        println!(
-            "dragon {} tris, 512x512, {threads} threads: bin {:.2} ms + raster {:.2} ms (best of 30), {frags} fragments",
-            faces.len(),
-            best.0,
-            best.1
-        );
+        let (b, r, n) = time_frame(&pos, &faces, vp(512, 512), threads, 30);
+        println!("dragon {} tris, 512x512, {threads} threads: bin {b:.2} ms + raster {r:.2} ms (best of 30), {n} fragments", faces.len());
     }
 }
 
+/// Timing of a synthetic 871K-triangle mesh of sub-pixel triangles (a wavy 660x660 grid in
+/// perspective, vertices shared) at 512x512.
+#[test]
+#[ignore]
+fn time_synthetic_871k() {
+    let n = 660usize;
+    let m = camera(Vec3::new(0.0, 0.0, 2.4), Vec3::ZERO, 1.0, 0.1, 10.0);
+    let mut pos = Vec::with_capacity((n + 1) * (n + 1));
+    for j in 0..=n {
+        for i in 0..=n {
+            let (u, v) = (
+                i as f32 / n as f32 * 2.0 - 1.0,
+                j as f32 / n as f32 * 2.0 - 1.0,
+            );
+            let p = Vec3::new(u, v, 0.15 * (7.0 * u).sin() * (5.0 * v).cos());
+            pos.push(m * p.extend(1.0));
+        }
+    }
+    let mut idx = Vec::with_capacity(2 * n * n);
+    for j in 0..n as u32 {
+        for i in 0..n as u32 {
+            let at = |i: u32, j: u32| j * (n as u32 + 1) + i;
+            idx.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+            idx.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+        }
+    }
+    for threads in [1, 2] {
+        let (b, r, f) = time_frame(&pos, &idx, vp(512, 512), threads, 30);
+        println!("synthetic {} tris, 512x512, {threads} threads: bin {b:.2} ms + raster {r:.2} ms (best of 30), {f} fragments", idx.len());
+    }
+}

@@ -299,9 +299,7 @@ pub(crate) fn raster(e: &Edges, si: &SampleInfo, r: [i32; 4], mut f: impl FnMut(
         // Per-sample constant offsets from the pixel corner.
         let mut offs = [[0i64; 3]; 8];
         for (o, &(ox, oy)) in offs.iter_mut().zip(si.offs) {
-            for i in 0..3 {
-                o[i] = e.a[i] * ox as i64 + e.b[i] * oy as i64;
-            }
+            *o = [0, 1, 2].map(|i| e.a[i] * ox as i64 + e.b[i] * oy as i64);
         }
         let offs = &offs[..si.offs.len()];
         let mut row = e.at(bx, by);

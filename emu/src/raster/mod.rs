@@ -5,14 +5,30 @@
 //! triangles into [`Fragment`]s, tile by tile, in API order.
 //!
 //! Rules (DESIGN.md 2.1):
-//! - 8 sub-pixel bits of fixed point ([`SUBPIXEL_BITS`]), pixel centres at +0.5;
+//! - viewport transform `x = (x_ndc + 1) / 2 * W`, `y = (1 - y_ndc) / 2 * H`: screen space has
+//!   y pointing down (row 0 is the top row of the image); NDC +y is up;
+//! - 8 sub-pixel bits of fixed point ([`SUBPIXEL_BITS`], round to nearest), pixel centres at
+//!   +0.5; every vertex is snapped once, so a vertex shared by several triangles is
+//!   bit-identical in all of them;
 //! - top-left fill rule on integer (i64) edge functions: *watertight*, a sample on an edge
 //!   shared by two triangles is covered by exactly one of them; no duplicate fragments;
-//! - screen space has y pointing down (row 0 is the top row of the image); NDC +y is up;
-//! - depth `z_window = (z_ndc + 1) / 2` (OpenGL's default depth range), interpolated linearly
-//!   in screen space as an f32 plane; attributes are perspective-correct;
-//! - clipping against the near and far planes (and a guard band for x/y);
-//! - MSAA with 1, 2, 4 or 8 samples at the standard D3D positions.
+//! - facing as OpenGL: counter-clockwise in window coordinates with y up (that is, in NDC) is
+//!   front-facing for [`FrontFace::Ccw`]; zero-area triangles produce nothing;
+//! - depth `z_window = (z_ndc + 1) / 2` (OpenGL's default depth range), a plane in screen
+//!   space ([`SetupTriangle::depth_at`]), bit-identical for identical vertices;
+//!   barycentrics perspective-correct and relative to the source triangle
+//!   ([`SetupTriangle::bary_at`]);
+//! - homogeneous clipping against `w > 0`, the near and far planes, and a guard band of
+//!   ±2^20 pixels for x/y (which also bounds the fixed-point coordinates so the i64 edge
+//!   functions never overflow); a clipped polygon is fanned into setup triangles that keep
+//!   their source and partition its samples exactly;
+//! - MSAA with 1, 2, 4 or 8 samples at the standard D3D positions, exact per-sample coverage.
+//!
+//! Speed (a dense mesh is mostly sub-pixel triangles): vertices are projected once; a
+//! branch-free pass drops triangles whose snapped bounding box reaches no sample; the few
+//! left get an exact sample test, and a triangle covering a single pixel has its coverage
+//! stored in its bin entry, so rasterizing it costs nothing; setup records are 64 bytes with no
+//! heap; large buffers are recycled from frame to frame (`pool`).
 
 mod clip;
 mod coverage;

@@ -49,7 +49,7 @@ pub struct SetupTriangle {
 }
 
 impl SetupTriangle {
-    /// Window depth in [0,1] at a screen position (pixels, y down), linear in screen space.
+    /// Window depth in `[0, 1]` at a screen position (pixels, y down), linear in screen space.
     ///
     /// The plane is computed from the snapped vertices taken in a canonical order (sorted by
     /// position) and referred to a pixel that depends only on them, so triangles with
@@ -132,7 +132,7 @@ const PIECE: u32 = 1 << 30;
 
 impl Binned {
     pub fn tile_count(&self) -> usize {
-        (self.tiles_x * self.tiles_y) as usize
+        self.tiles_x as usize * self.tiles_y as usize
     }
 
     /// Pixel rectangle `(x0, y0, x1, y1)` (exclusive ends, clamped to the viewport) of a tile.
@@ -195,7 +195,14 @@ impl Binned {
                     }
                 }
                 if j == i + 1 {
-                    entry_coverage(c, &e, rect, &si, |x, y, coverage| emit(Fragment { x, y, tri, coverage }));
+                    entry_coverage(c, &e, rect, &si, |x, y, coverage| {
+                        emit(Fragment {
+                            x,
+                            y,
+                            tri,
+                            coverage,
+                        })
+                    });
                 } else {
                     merge.clear();
                     for e in &list[i..j] {
@@ -210,7 +217,12 @@ impl Binned {
                             coverage |= merge[k].2;
                             k += 1;
                         }
-                        emit(Fragment { x, y, tri, coverage });
+                        emit(Fragment {
+                            x,
+                            y,
+                            tri,
+                            coverage,
+                        });
                     }
                 }
                 i = j;
@@ -222,14 +234,25 @@ impl Binned {
 /// Calls `f(x, y, mask)` for the pixels of tile rectangle `rect` (`[x0, y0, x1, y1)`) covered
 /// by one bin entry, in row-major order.
 #[inline]
-fn entry_coverage(c: &ChunkBins, e: &BinEntry, rect: [i32; 4], si: &SampleInfo, mut f: impl FnMut(u32, u32, u8)) {
+fn entry_coverage(
+    c: &ChunkBins,
+    e: &BinEntry,
+    rect: [i32; 4],
+    si: &SampleInfo,
+    mut f: impl FnMut(u32, u32, u8),
+) {
     if e.info & SINGLE != 0 {
-        let (x, y) = (rect[0] as u32 + (e.info & 0xff), rect[1] as u32 + ((e.info >> 8) & 0xff));
+        let (x, y) = (
+            rect[0] as u32 + (e.info & 0xff),
+            rect[1] as u32 + ((e.info >> 8) & 0xff),
+        );
         f(x, y, (e.info >> 16) as u8);
         return;
     }
     let v = &c.verts[(e.info & !PIECE) as usize];
-    let Some(r) = si.pixel_rect(bbox(v), rect[2], rect[3]) else { return };
+    let Some(r) = si.pixel_rect(bbox(v), rect[2], rect[3]) else {
+        return;
+    };
     let r = [r[0].max(rect[0]), r[1].max(rect[1]), r[2], r[3]];
     if r[0] <= r[2] && r[1] <= r[3] {
         coverage::raster(&Edges::new(v), si, r, f);
@@ -292,16 +315,15 @@ impl Xform {
     }
 }
 
-/// Round to nearest (ties up) into i32, clamped to [`COORD_LIMIT`]. Adding 2^31 makes the value
-/// positive so that truncation is floor (faster than `f64::round` on baseline x86-64).
+/// Round to nearest (ties up) into i32, clamped to [`COORD_LIMIT`] (NaN gives the lower
+/// limit: never the `OUT` sentinel). Adding 2^31 makes the value positive so that truncation
+/// is floor (faster than `f64::round` on baseline x86-64); no branches.
 #[inline]
 fn round_fixed(v: f64) -> i32 {
     const BIAS: f64 = 2_147_483_648.0;
-    let c = if v.is_nan() {
-        0.0
-    } else {
-        v.clamp(-COORD_LIMIT, COORD_LIMIT)
-    };
+    // Not `clamp`: that propagates NaN, and NaN would become the OUT sentinel.
+    #[allow(clippy::manual_clamp)]
+    let c = v.max(-COORD_LIMIT).min(COORD_LIMIT);
     ((c + (0.5 + BIAS)) as i64 - BIAS as i64) as i32
 }
 
@@ -343,14 +365,22 @@ fn planes(
     let inv_d = 1.0 / (dx1 * dy2 - dx2 * dy1);
     // Offset of the reference pixel from the canonical first vertex.
     let (ox, oy) = (rx as f64 - x0, ry as f64 - y0);
-    let plane = |a: [f64; 3]| -> [f32; 3] {
-        let (da1, da2) = (a[1] - a[0], a[2] - a[0]);
-        let gx = (da1 * dy2 - da2 * dy1) * inv_d;
-        let gy = (dx1 * da2 - dx2 * da1) * inv_d;
-        [(a[0] + gx * ox + gy * oy) as f32, gx as f32, gy as f32]
-    };
-    let depth = plane(o.map(|i| zw[i] as f64));
-    let bary = [0, 1, 2].map(|k| plane(o.map(|i| q[i][k] as f64)));
+    // Coefficients of the attribute values at the three (canonical) vertices.
+    let (cx1, cx2) = (dy2 * inv_d, -dy1 * inv_d);
+    let (cy1, cy2) = (-dx2 * inv_d, dx1 * inv_d);
+    #[inline(always)]
+    fn plane(a0: f64, a1: f64, a2: f64, c: [f64; 6]) -> [f32; 3] {
+        let [cx1, cx2, cy1, cy2, ox, oy] = c;
+        let (da1, da2) = (a1 - a0, a2 - a0);
+        let gx = da1 * cx1 + da2 * cx2;
+        let gy = da1 * cy1 + da2 * cy2;
+        [(a0 + gx * ox + gy * oy) as f32, gx as f32, gy as f32]
+    }
+    let c = [cx1, cx2, cy1, cy2, ox, oy];
+    let [i0, i1, i2] = o;
+    let depth = plane(zw[i0] as f64, zw[i1] as f64, zw[i2] as f64, c);
+    let b = |k: usize| plane(q[i0][k] as f64, q[i1][k] as f64, q[i2][k] as f64, c);
+    let bary = [b(0), b(1), b(2)];
     (depth, bary)
 }
 
@@ -380,6 +410,9 @@ struct Ctx<'a> {
 
 /// Triangles per batch of the reject loop.
 const BATCH: usize = 256;
+
+/// How many triangles ahead the reject loop prefetches vertices.
+const PREFETCH: usize = 16;
 
 /// What one chunk of triangles produced.
 struct ChunkOut {
@@ -471,7 +504,16 @@ impl Ctx<'_> {
         let si = &self.si;
         let (w1, h1) = (self.w - 1, self.h - 1);
         let mut n = 0;
+        let mut touch = 0;
         for t in range {
+            // Touch the vertices of a triangle a little ahead (a software prefetch without
+            // `unsafe`): the vertex order of a dense mesh is coherent, but not enough for the
+            // hardware prefetcher.
+            if let Some(&[pa, pb, pc]) = self.indices.get(t + PREFETCH) {
+                touch ^= xy[(pa as usize).min(last)][0]
+                    ^ xy[(pb as usize).min(last)][0]
+                    ^ xy[(pc as usize).min(last)][0];
+            }
             let [ia, ib, ic] = self.indices[t];
             let (ia, ib, ic) = (ia as usize, ib as usize, ic as usize);
             let bad_index = (ia > last) | (ib > last) | (ic > last);
@@ -487,6 +529,7 @@ impl Ctx<'_> {
             keep[n] = t as u32;
             n += usize::from(special | reaches);
         }
+        std::hint::black_box(touch);
         n
     }
 
@@ -518,13 +561,26 @@ impl Ctx<'_> {
         };
         let idx = if a2 > 0 { [ia, ib, ic] } else { [ia, ic, ib] };
         let perm = if a2 > 0 { [0, 1, 2] } else { [0, 2, 1] };
-        let v = idx.map(|i| self.xy[i as usize]);
+        let v = if a2 > 0 { v } else { [v[0], v[2], v[1]] };
+        let Some(single) = self.coverage(&v, r) else {
+            return;
+        };
         let zw = idx.map(|i| self.zw[i as usize]);
         let mut q = [[0.0f32; 3]; 3];
         for i in 0..3 {
             q[i][perm[i]] = zw[i][1];
         }
-        self.finish(out, t as u32, front, false, v, r, zw.map(|z| z[0]), q);
+        self.finish(
+            out,
+            t as u32,
+            front,
+            false,
+            single,
+            v,
+            r,
+            zw.map(|z| z[0]),
+            q,
+        );
     }
 
     /// Slow path: a vertex is outside a clip plane (or not finite).
@@ -580,17 +636,45 @@ impl Ctx<'_> {
             if area2(&v) <= 0 {
                 continue;
             }
+            let Some(single) = self.coverage(&v, r) else {
+                continue;
+            };
             let zw = h.map(|j| proj[j].z);
             let q = h.map(|j| {
                 let b = poly.v[j].b;
                 let iw = proj[j].iw as f64;
                 [(b[0] * iw) as f32, (b[1] * iw) as f32, (b[2] * iw) as f32]
             });
-            self.finish(out, source, front, m > 3, v, r, zw, q);
+            self.finish(out, source, front, m > 3, single, v, r, zw, q);
         }
     }
 
-    /// Tests tiny triangles exactly, stores the setup triangle and bins it into the tiles its
+    /// Exact coverage of tiny triangles (pixel rectangle `r` of at most 2x2): `None` when no
+    /// sample is covered, `Some(Some((info, tile)))` for a single covered pixel (the
+    /// [`BinEntry`] info and the one tile to bin it to), `Some(None)` otherwise.
+    #[inline]
+    fn coverage(&self, v: &[[i32; 2]; 3], r: [i32; 4]) -> Option<Option<(u32, u32)>> {
+        let sh = self.tile_shift;
+        let tmask = (1 << sh) - 1;
+        let pack = |x: i32, y: i32, m: u8| {
+            let info = SINGLE | (m as u32) << 16 | ((y & tmask) as u32) << 8 | (x & tmask) as u32;
+            (info, (y >> sh) as u32 * self.tiles_x + (x >> sh) as u32)
+        };
+        if r[0] == r[2] && r[1] == r[3] {
+            let m = coverage::pixel_mask(v, &self.si, r[0], r[1]);
+            return (m != 0).then(|| Some(pack(r[0], r[1], m)));
+        }
+        if r[2] - r[0] <= 1 && r[3] - r[1] <= 1 {
+            return match self.tiny(&Edges::new(v), r) {
+                Tiny::Empty => None,
+                Tiny::Single(x, y, m) => Some(Some(pack(x, y, m))),
+                Tiny::Several => Some(None),
+            };
+        }
+        Some(None)
+    }
+
+    /// Stores the setup triangle and bins it into the tiles its
     /// pixel rectangle `r` touches (skipping, for large triangles, tiles that lie entirely
     /// outside one edge).
     #[allow(clippy::too_many_arguments)]
@@ -601,33 +685,13 @@ impl Ctx<'_> {
         source: u32,
         front_facing: bool,
         piece: bool,
+        single: Option<(u32, u32)>,
         v: [[i32; 2]; 3],
         r: [i32; 4],
         zw: [f32; 3],
         q: [[f32; 3]; 3],
     ) {
         let sh = self.tile_shift;
-        let tmask = (1 << sh) - 1;
-        let mut single = None;
-        if r[0] == r[2] && r[1] == r[3] {
-            let m = coverage::pixel_mask(&v, &self.si, r[0], r[1]);
-            if m == 0 {
-                return;
-            }
-            single = Some(
-                SINGLE | (m as u32) << 16 | ((r[1] & tmask) as u32) << 8 | (r[0] & tmask) as u32,
-            );
-        } else if r[2] - r[0] <= 1 && r[3] - r[1] <= 1 {
-            match self.tiny(&Edges::new(&v), r) {
-                Tiny::Empty => return,
-                Tiny::Single(x, y, m) => {
-                    single = Some(
-                        SINGLE | (m as u32) << 16 | ((y & tmask) as u32) << 8 | (x & tmask) as u32,
-                    );
-                }
-                Tiny::Several => {}
-            }
-        }
         let (depth, bary) = planes(&v, &zw, &q, r[0], r[1]);
         let tri = out.tris.len() as u32;
         out.tris.push(SetupTriangle {
@@ -638,13 +702,20 @@ impl Ctx<'_> {
             depth,
             bary,
         });
-        let info = match single {
-            Some(info) => info,
-            None => {
-                out.verts.push(v);
-                out.verts.len() as u32 - 1
-            }
-        } | if piece { PIECE } else { 0 };
+        let piece = if piece { PIECE } else { 0 };
+        if let Some((info, tile)) = single {
+            // Only the tile of the covered pixel (the box may straddle tiles).
+            out.bins.push((
+                tile,
+                BinEntry {
+                    tri,
+                    info: info | piece,
+                },
+            ));
+            return;
+        }
+        out.verts.push(v);
+        let info = (out.verts.len() as u32 - 1) | piece;
         let (tx0, ty0, tx1, ty1) = (r[0] >> sh, r[1] >> sh, r[2] >> sh, r[3] >> sh);
         if tx0 == tx1 && ty0 == ty1 {
             out.bins.push((
@@ -802,17 +873,6 @@ pub fn bin_triangles(
         sy: viewport.height as f64 * (ONE / 2) as f64,
     };
 
-    let cpu = || -> f64 {
-        std::fs::read_to_string("/proc/thread-self/schedstat")
-            .unwrap()
-            .split_whitespace()
-            .next()
-            .unwrap()
-            .parse::<f64>()
-            .unwrap()
-            / 1e6
-    };
-    let _t0 = cpu();
     // 1. Vertices, in parallel slices of one array.
     let mut xy = XY.take();
     let mut zw = ZW.take();
@@ -838,7 +898,6 @@ pub fn bin_triangles(
         });
     }
 
-    let _t1 = cpu();
     // 2. Triangles, in chunks; each chunk sorts its own bins.
     let ctx = Ctx {
         positions,
@@ -862,7 +921,18 @@ pub fn bin_triangles(
     // Rejecting off-screen or sub-pixel triangles is cheap, so equal ranges balance well.
     let chunk = n.div_ceil(threads).max(4096);
     let nchunks = n.div_ceil(chunk);
-    let mut parts: Vec<(Vec<SetupTriangle>, ChunkBins, u64)> = if ntiles == 0 {
+    let empty = |rejected: u64| {
+        let bins = ChunkBins {
+            base: 0,
+            tile_start: vec![0; ntiles + 1],
+            entries: Vec::new(),
+            verts: Vec::new(),
+        };
+        (Vec::new(), bins, rejected)
+    };
+    let mut parts: Vec<(Vec<SetupTriangle>, ChunkBins, u64)> = if nchunks == 0 {
+        vec![empty(0)]
+    } else if ntiles == 0 {
         // Empty viewport: nothing is drawn, but bad input is still counted.
         let bad = indices
             .iter()
@@ -871,24 +941,17 @@ pub fn bin_triangles(
                     .any(|&i| !matches!(positions.get(i as usize), Some(p) if p.is_finite()))
             })
             .count();
-        let bins = ChunkBins {
-            base: 0,
-            tile_start: vec![0],
-            entries: Vec::new(),
-            verts: Vec::new(),
-        };
-        vec![(Vec::new(), bins, bad as u64)]
+        vec![empty(bad as u64)]
     } else {
         par_map(nchunks, threads, |c| {
             ctx.chunk(c * chunk..((c + 1) * chunk).min(n))
         })
     };
 
-    let _t2 = cpu();
     XY.give(xy);
     ZW.give(zw);
 
-    // 3. Concatenate in chunk order (a single chunk is moved, not copied).
+    // 3. Concatenate in chunk order (the first chunk's buffer is moved, not copied).
     let total: usize = parts.iter().map(|p| p.0.len()).sum();
     let mut rejected = 0;
     let mut tris = std::mem::take(&mut parts[0].0);
@@ -900,14 +963,6 @@ pub fn bin_triangles(
             tris.extend_from_slice(t);
             TRIS.give(std::mem::take(t));
         }
-    }
-    if std::env::var_os("RT").is_some() {
-        eprintln!(
-            "TIMING v {:.2} t {:.2} m {:.2}",
-            _t1 - _t0,
-            _t2 - _t1,
-            cpu() - _t2
-        );
     }
     Binned {
         tris,
@@ -934,7 +989,7 @@ mod tests {
         assert_eq!(round_fixed(-1.5), -1);
         assert_eq!(round_fixed(1e300), COORD_LIMIT as i32);
         assert_eq!(round_fixed(-1e300), -(COORD_LIMIT as i32));
-        assert_eq!(round_fixed(f64::NAN), 0);
+        assert_eq!(round_fixed(f64::NAN), -(COORD_LIMIT as i32));
     }
 
     #[test]

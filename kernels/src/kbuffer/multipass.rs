@@ -41,6 +41,12 @@
 //! the class describes what the detector must see, and the exactness is this algorithm's
 //! own invariant.
 //!
+//! **Cost.** Under heavy contention nearly every pixel is dirty in every pass, so the
+//! algorithm degrades to one certified fragment per pixel per pass, k passes: the
+//! bucket-depth-peeling paper's observation (section 2) that "as the depth complexity of the
+//! scenes increases, the RMW hazards will also increase and the performance of the algorithm
+//! will degrade rapidly". Run one fragment at a time it needs a single pass.
+//!
 //! The depth test breaks depth ties by API order (the first of equal depths stays); for one
 //! draw, a pixel's fragments arrive in primitive order, so that is the `(depth, primitive)`
 //! order of the slots and of the truth. The clean-pixel agreement check would catch a
@@ -113,11 +119,17 @@ impl FragmentKernel for Capture {
         let s = &self.s;
         let p = f.pixel_index();
         let (z, prim) = (f.depth(), f.primitive_id());
-        // The bound and the count are written only by the merge pass: no race here.
+        // The bound and the count are written only by the merge pass: no race here. The
+        // bound's primitive is needed only on a depth tie, so fragments of finished pixels
+        // and fragments in front of the bound leave after one load.
         let lo_d = f.load(s.lo_depth, p).await;
-        let lo_p = f.load(s.lo_prim, p).await;
+        let behind = z > lo_d || (z == lo_d && f.load(s.lo_prim, p).await < prim);
+        if !behind {
+            f.discard();
+            return;
+        }
         let found = f.load(s.found, p).await;
-        if !key_less(lo_d, lo_p, z, prim) || found >= s.k {
+        if found >= s.k {
             f.discard();
             return;
         }

@@ -563,7 +563,8 @@ pub(super) mod testing {
     }
 
     /// Ordered, parallel(2), parallel(4) with small batches (fragments of one pixel on
-    /// different threads), and scheduled under every policy with `seeds` seeds each.
+    /// different threads), parallel(3) with lanes run to completion instead of in lockstep,
+    /// and scheduled under every policy with `seeds` seeds each, plus a wide window.
     pub fn executors(seeds: u64) -> Vec<(String, ExecConfig)> {
         let mut v = vec![
             ("ordered".to_string(), ExecConfig::ordered()),
@@ -573,6 +574,13 @@ pub(super) mod testing {
                 ExecConfig {
                     batch: 8,
                     ..ExecConfig::parallel(4)
+                },
+            ),
+            (
+                "parallel(3) without lockstep".to_string(),
+                ExecConfig {
+                    lockstep: false,
+                    ..ExecConfig::parallel(3)
                 },
             ),
         ];

@@ -110,7 +110,7 @@ impl Algorithm for Wboit {
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "wboit",
-            family: "k-buffer",
+            family: "baseline",
             summary: "weighted blended OIT: additive accumulation of weighted premultiplied colour and \
                       multiplicative revealage, one full-screen composite; approximate colour, exact coverage",
             source: "McGuire & Bavoil, Weighted Blended Order-Independent Transparency, JCGT 2(2) 2013 \
