@@ -21,7 +21,8 @@ mod threads;
 
 pub use policy::{Policy, PolicyParseError};
 pub use run::Fault;
-pub(crate) use run::{shade, FragOut, ShadeOutcome};
+pub use run::Execution;
+pub(crate) use run::{explore, shade, FragOut, ShadeOutcome};
 pub use threads::{run_on_threads, ThreadOutcome};
 
 /// Configuration of the `scheduled` executor.

@@ -121,6 +121,7 @@ struct Access {
 
 #[derive(Default)]
 struct AddrState {
+    addr: Addr,
     last_write: Option<Access>,
     /// Reads since the last write (one entry per invocation, latest).
     reads: Vec<Access>,
@@ -130,28 +131,50 @@ struct AddrState {
     peak: u32,
 }
 
+impl Default for Addr {
+    fn default() -> Addr {
+        Addr(0)
+    }
+}
+
+#[derive(Default)]
 struct InvState {
-    id: InvocationId,
+    id: Option<InvocationId>,
     start: u64,
     end: Option<u64>,
     /// Step of this invocation's latest plain load, per address.
     loads: Vec<(Addr, u64)>,
-    /// An open record load: (base, len, interrupted by another's write).
+    /// An open record load: (base, len, interrupted by (who, step)).
     record: Option<(Addr, u32, Option<(u64, u64)>)>,
 }
 
-/// Watches the steps of one scheduled pass.
+/// A hazard as recorded (buffer by id; named when read out).
+#[derive(Clone, Copy)]
+struct RawHazard {
+    kind: HazardKind,
+    addr: Addr,
+    victim: InvocationId,
+    other: InvocationId,
+    step: u64,
+}
+
+/// Watches the steps of one scheduled pass. Reusable: [`Detector::reset`] keeps every
+/// allocation, so exploring many schedules of a small model allocates nothing per run.
 pub struct Detector {
-    invs: FastMap<u64, InvState>,
-    addrs: FastMap<Addr, AddrState>,
+    /// Per invocation, indexed by `seq - base_seq`.
+    invs: Vec<InvState>,
+    base_seq: Option<u64>,
+    /// Address -> slot in `slab`; `slab[..slab_len]` are live.
+    index: FastMap<Addr, u32>,
+    slab: Vec<AddrState>,
+    slab_len: usize,
     counts: HazardCounts,
-    hazards: Vec<Hazard>,
+    hazards: Vec<RawHazard>,
     /// Per-pixel hazard counts (row-major).
     pub heat: Vec<u32>,
     width: u32,
     /// How many hazards are kept in detail (all are counted).
     pub keep: usize,
-    names: Vec<String>,
     /// Pairs already reported, so a spin loop is one hazard, not thousands.
     seen: FastMap<(u8, u64, u64, u64), ()>,
     /// Invocations with an open record load (few at a time).
@@ -159,53 +182,99 @@ pub struct Detector {
 }
 
 impl Detector {
-    /// A detector for a `width` x `height` pass; `names` are the buffer names by id.
-    pub fn new(width: u32, height: u32, names: Vec<String>) -> Detector {
+    /// A detector for a `width` x `height` pass.
+    pub fn new(width: u32, height: u32) -> Detector {
         Detector {
-            invs: FastMap::default(),
-            addrs: FastMap::default(),
+            invs: Vec::new(),
+            base_seq: None,
+            index: FastMap::default(),
+            slab: Vec::new(),
+            slab_len: 0,
             counts: HazardCounts::default(),
             hazards: Vec::new(),
             heat: vec![0; width as usize * height as usize],
             width,
             keep: 256,
-            names,
             seen: FastMap::default(),
             open_records: Vec::new(),
         }
     }
 
-    /// An invocation was admitted at `step`.
+    /// Forgets everything, keeping allocations.
+    pub fn reset(&mut self, width: u32, height: u32) {
+        for s in &mut self.invs {
+            s.id = None;
+            s.end = None;
+            s.loads.clear();
+            s.record = None;
+        }
+        self.base_seq = None;
+        self.index.clear();
+        for a in &mut self.slab[..self.slab_len] {
+            a.last_write = None;
+            a.reads.clear();
+            a.touchers.clear();
+            a.accesses = 0;
+            a.peak = 0;
+        }
+        self.slab_len = 0;
+        self.counts = HazardCounts::default();
+        self.hazards.clear();
+        let n = width as usize * height as usize;
+        if self.heat.len() != n {
+            self.heat = vec![0; n];
+        } else {
+            self.heat.fill(0);
+        }
+        self.width = width;
+        self.seen.clear();
+        self.open_records.clear();
+    }
+
+    fn inv(&self, seq: u64) -> Option<&InvState> {
+        let i = seq.checked_sub(self.base_seq?)? as usize;
+        self.invs.get(i).filter(|s| s.id.is_some())
+    }
+
+    fn inv_mut(&mut self, seq: u64) -> Option<&mut InvState> {
+        let i = seq.checked_sub(self.base_seq?)? as usize;
+        self.invs.get_mut(i).filter(|s| s.id.is_some())
+    }
+
+    /// An invocation was admitted at `step` (in increasing `seq` order).
     pub fn start(&mut self, id: InvocationId, step: u64) {
-        self.invs.insert(
-            id.seq,
-            InvState {
-                id,
-                start: step,
-                end: None,
-                loads: Vec::new(),
-                record: None,
-            },
-        );
+        let base = *self.base_seq.get_or_insert(id.seq);
+        let Some(i) = id.seq.checked_sub(base).map(|i| i as usize) else { return };
+        if self.invs.len() <= i {
+            self.invs.resize_with(i + 1, InvState::default);
+        }
+        let s = &mut self.invs[i];
+        s.id = Some(id);
+        s.start = step;
+        s.end = None;
+        s.loads.clear();
+        s.record = None;
     }
 
     /// An invocation finished (or was dropped after a fault) at `step`.
     pub fn finish(&mut self, seq: u64, step: u64) {
-        if let Some(s) = self.invs.get_mut(&seq) {
+        if let Some(s) = self.inv_mut(seq) {
             s.end = Some(step);
-            s.loads = Vec::new();
+            s.loads.clear();
             s.record = None;
         }
         self.open_records.retain(|&o| o != seq);
     }
 
+    fn live(&self, seq: u64) -> bool {
+        self.inv(seq).is_some_and(|s| s.end.is_none())
+    }
+
     /// Whether invocations `a` and `b` overlapped in time (neither finished before the
     /// other started).
     fn overlapped(&self, a: u64, b: u64) -> bool {
-        match (self.invs.get(&a), self.invs.get(&b)) {
-            (Some(x), Some(y)) => {
-                x.end.is_none_or(|e| e > y.start) && y.end.is_none_or(|e| e > x.start)
-            }
+        match (self.inv(a), self.inv(b)) {
+            (Some(x), Some(y)) => x.end.is_none_or(|e| e > y.start) && y.end.is_none_or(|e| e > x.start),
             _ => false,
         }
     }
@@ -216,28 +285,29 @@ impl Detector {
             return;
         }
         self.counts.bump(kind);
-        let (Some(v), Some(o)) = (self.invs.get(&victim), self.invs.get(&other)) else {
+        let (Some(v), Some(o)) = (self.inv(victim).and_then(|s| s.id), self.inv(other).and_then(|s| s.id)) else {
             return;
         };
-        let (v, o) = (v.id, o.id);
         if let Some(h) = self.heat.get_mut((v.y * self.width + v.x) as usize) {
             *h += 1;
         }
         if self.hazards.len() < self.keep {
-            let buffer = self
-                .names
-                .get(addr.buffer() as usize)
-                .cloned()
-                .unwrap_or_default();
-            self.hazards.push(Hazard {
-                kind,
-                buffer,
-                index: addr.index(),
-                victim: v,
-                other: o,
-                step,
-            });
+            self.hazards.push(RawHazard { kind, addr, victim: v, other: o, step });
         }
+    }
+
+    fn slot(&mut self, addr: Addr) -> usize {
+        if let Some(&i) = self.index.get(&addr) {
+            return i as usize;
+        }
+        let i = self.slab_len;
+        if self.slab.len() <= i {
+            self.slab.push(AddrState::default());
+        }
+        self.slab[i].addr = addr;
+        self.slab_len += 1;
+        self.index.insert(addr, i as u32);
+        i
     }
 
     /// A memory access by `seq` at `step`; `lock` is the interlock key it holds, if any;
@@ -253,43 +323,47 @@ impl Detector {
     ) {
         let plain = op.is_plain();
         let write = op.is_write();
-        let me = Access {
-            seq,
-            step,
-            plain,
-            lock,
-        };
-        let state = self.addrs.entry(addr).or_default();
-        state.accesses += 1;
-        if !state.touchers.contains(&seq) {
-            state.touchers.push(seq);
-        }
-        let prev_write = state.last_write;
-        let reads = if write {
-            std::mem::take(&mut state.reads)
-        } else {
-            Vec::new()
-        };
+        let me = Access { seq, step, plain, lock };
+        let slot = self.slot(addr);
         // Conflicts with the last write (and, for a write, with the reads since it).
-        let mut conflicts: Vec<Access> = Vec::new();
-        if let Some(w) = prev_write {
-            if w.seq != seq && (plain || w.plain) {
-                conflicts.push(w);
+        let mut conflicts: [Option<Access>; 8] = [None; 8];
+        let mut more: Vec<Access> = Vec::new();
+        let mut n = 0;
+        let prev_write;
+        {
+            let st = &mut self.slab[slot];
+            st.accesses += 1;
+            if !st.touchers.contains(&seq) {
+                st.touchers.push(seq);
+            }
+            prev_write = st.last_write;
+            let mut push = |a: Access| {
+                if n < conflicts.len() {
+                    conflicts[n] = Some(a);
+                    n += 1;
+                } else {
+                    more.push(a);
+                }
+            };
+            if let Some(w) = prev_write {
+                if w.seq != seq && (plain || w.plain) {
+                    push(w);
+                }
+            }
+            if write {
+                for r in &st.reads {
+                    if r.seq != seq && (plain || r.plain) {
+                        push(*r);
+                    }
+                }
+                st.reads.clear();
+                st.last_write = Some(me);
+            } else {
+                st.reads.retain(|r| r.seq != seq);
+                st.reads.push(me);
             }
         }
-        for r in &reads {
-            if r.seq != seq && (plain || r.plain) {
-                conflicts.push(*r);
-            }
-        }
-        if write {
-            self.addrs.get_mut(&addr).expect("entry exists").last_write = Some(me);
-        } else {
-            let st = self.addrs.get_mut(&addr).expect("entry exists");
-            st.reads.retain(|r| r.seq != seq);
-            st.reads.push(me);
-        }
-        for c in conflicts {
+        for c in conflicts.iter().flatten().copied().chain(more) {
             let ordered = matches!((c.lock, lock), (Some(a), Some(b)) if a == b);
             if !ordered && self.overlapped(c.seq, seq) {
                 self.report(HazardKind::Race, addr, seq, c.seq, step);
@@ -297,10 +371,7 @@ impl Detector {
         }
         // Lost update: my plain store after my plain load, with another's write between.
         if op == OpKind::Store {
-            let my_load = self
-                .invs
-                .get(&seq)
-                .and_then(|s| s.loads.iter().rev().find(|l| l.0 == addr).map(|l| l.1));
+            let my_load = self.inv(seq).and_then(|s| s.loads.iter().rev().find(|l| l.0 == addr).map(|l| l.1));
             if let (Some(load_step), Some(w)) = (my_load, prev_write) {
                 if w.seq != seq && w.step > load_step {
                     self.report(HazardKind::LostUpdate, addr, seq, w.seq, step);
@@ -308,7 +379,7 @@ impl Detector {
             }
         }
         if op == OpKind::Load {
-            if let Some(s) = self.invs.get_mut(&seq) {
+            if let Some(s) = self.inv_mut(seq) {
                 match s.loads.iter_mut().find(|l| l.0 == addr) {
                     Some(l) => l.1 = step,
                     None => s.loads.push((addr, step)),
@@ -319,19 +390,25 @@ impl Detector {
         if let Some((base, len, word)) = record {
             if op == OpKind::Load {
                 let mut torn_by = None;
-                if let Some(s) = self.invs.get_mut(&seq) {
+                let mut opened = false;
+                let mut closed = false;
+                if let Some(s) = self.inv_mut(seq) {
                     if word == 0 && len > 1 {
                         s.record = Some((base, len, None));
-                        if !self.open_records.contains(&seq) {
-                            self.open_records.push(seq);
-                        }
+                        opened = true;
                     } else if let Some((b, _, hit)) = s.record {
                         if b == base && word + 1 == len {
                             torn_by = hit;
                             s.record = None;
-                            self.open_records.retain(|&o| o != seq);
+                            closed = true;
                         }
                     }
+                }
+                if opened && !self.open_records.contains(&seq) {
+                    self.open_records.push(seq);
+                }
+                if closed {
+                    self.open_records.retain(|&o| o != seq);
                 }
                 if let Some((other, _)) = torn_by {
                     self.report(HazardKind::Torn, base, seq, other, step);
@@ -339,36 +416,28 @@ impl Detector {
             }
         }
         if write && !self.open_records.is_empty() {
-            let mut hits = Vec::new();
-            for &other in &self.open_records {
-                let Some(s) = self.invs.get(&other) else { continue };
-                if other == seq || s.end.is_some() {
+            let open = std::mem::take(&mut self.open_records);
+            for &other in &open {
+                if other == seq {
                     continue;
                 }
-                if let Some((base, len, None)) = s.record {
-                    if base.buffer() == addr.buffer()
-                        && addr.index() >= base.index()
-                        && addr.index() < base.index().saturating_add(len)
-                    {
-                        hits.push(other);
+                if let Some(s) = self.inv_mut(other) {
+                    if let Some((base, len, hit @ None)) = &mut s.record {
+                        if base.buffer() == addr.buffer()
+                            && addr.index() >= base.index()
+                            && addr.index() < base.index().saturating_add(*len)
+                        {
+                            *hit = Some((seq, step));
+                        }
                     }
                 }
             }
-            for other in hits {
-                if let Some(s) = self.invs.get_mut(&other) {
-                    if let Some((_, _, hit)) = &mut s.record {
-                        *hit = Some((seq, step));
-                    }
-                }
-            }
+            self.open_records = open;
         }
         // Peak concurrency: touchers still in flight.
-        let live: Vec<u64> = self.addrs[&addr].touchers.clone();
-        let live: Vec<u64> = live
-            .into_iter()
-            .filter(|t| self.invs.get(t).is_some_and(|s| s.end.is_none()))
-            .collect();
-        let st = self.addrs.get_mut(&addr).expect("entry exists");
+        let mut live = std::mem::take(&mut self.slab[slot].touchers);
+        live.retain(|&t| self.live(t));
+        let st = &mut self.slab[slot];
         st.peak = st.peak.max(live.len() as u32);
         st.touchers = live;
     }
@@ -376,16 +445,26 @@ impl Detector {
     pub fn counts(&self) -> HazardCounts {
         self.counts
     }
-    pub fn hazards(&self) -> &[Hazard] {
-        &self.hazards
+
+    /// The hazards kept in detail, with buffer names from `name`.
+    pub fn hazards(&self, name: impl Fn(u32) -> String) -> Vec<Hazard> {
+        self.hazards
+            .iter()
+            .map(|h| Hazard {
+                kind: h.kind,
+                buffer: name(h.addr.buffer()),
+                index: h.addr.index(),
+                victim: h.victim,
+                other: h.other,
+                step: h.step,
+            })
+            .collect()
     }
+
     /// The hottest addresses: (address, accesses, peak concurrent accessors).
     pub fn hotspots(&self, n: usize) -> Vec<(Addr, u64, u32)> {
-        let mut v: Vec<(Addr, u64, u32)> = self
-            .addrs
-            .iter()
-            .map(|(a, s)| (*a, s.accesses, s.peak))
-            .collect();
+        let mut v: Vec<(Addr, u64, u32)> =
+            self.slab[..self.slab_len].iter().map(|s| (s.addr, s.accesses, s.peak)).collect();
         v.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
         v.truncate(n);
         v

@@ -43,6 +43,13 @@ impl Interlock {
         }
     }
 
+    /// Frees every lock and restarts every pixel's turns at ticket 0.
+    pub fn reset(&self) {
+        for w in self.words.iter() {
+            w.store(0, Ordering::Relaxed);
+        }
+    }
+
     /// The lock word of a pixel.
     pub fn key(&self, x: u32, y: u32) -> usize {
         (y * self.width + x) as usize

@@ -238,6 +238,48 @@ impl Device {
         report
     }
 
+    /// Explores schedules of a small model: runs `inputs` (explicit fragments, as
+    /// [`Device::invocations`]) once per seed in `seeds` under the scheduled executor
+    /// `schedule` (policy, window, recording), with the hazard detector on, reusing every
+    /// allocation across executions. After each execution `each` sees its outcome and the
+    /// memory (check your invariant there, then reset the buffers); return false to stop.
+    /// Returns the number of executions.
+    #[allow(clippy::too_many_arguments)] // a model is all of these
+    pub fn explore<K: FragmentKernel>(
+        &self,
+        width: u32,
+        height: u32,
+        inputs: &[FragInput],
+        kernel: &K,
+        schedule: &crate::exec::ScheduleConfig,
+        max_steps: u64,
+        seeds: std::ops::Range<u64>,
+        each: impl FnMut(&crate::exec::Execution<'_>, &Memory) -> bool,
+    ) -> u64 {
+        let info = kernel.info();
+        let interlock = info.interlock.map(|_| Interlock::new(width, height));
+        let env = PassEnv {
+            memory: &self.memory,
+            tris: &[],
+            width,
+            height,
+            samples: 1,
+            interlock: interlock.as_ref(),
+            interlock_mode: info.interlock,
+            mode: Mode::Scheduled,
+            max_steps,
+            max_waits: max_steps,
+            contention: None,
+        };
+        let mut inputs = inputs.to_vec();
+        for (i, f) in inputs.iter_mut().enumerate() {
+            f.seq = i as u64;
+            f.x = f.x.min(width.saturating_sub(1));
+            f.y = f.y.min(height.saturating_sub(1));
+        }
+        crate::exec::explore(kernel, &env, schedule, max_steps, &inputs, seeds, each)
+    }
+
     /// Runs a full-screen pass: one invocation per pixel (all samples covered, depth 0.5,
     /// primitive 0), through `state`'s depth/stencil tests and target writes.
     pub fn fullscreen<K: FragmentKernel>(

@@ -26,8 +26,8 @@ pub struct Stats {
     pub samples_passed: u64,
     /// Invocations ended by a fault.
     pub faulted: u64,
-    /// Memory operations by kind (see [`OpKind::name`]).
-    pub ops: HashMap<String, u64>,
+    /// Memory operations by kind.
+    pub ops: OpCounts,
     /// Steps (memory accesses, interlock entries and exits, yields).
     pub steps: u64,
     /// Times an invocation found the interlock taken (direct mode: polls that waited).
@@ -51,21 +51,58 @@ pub struct Hotspot {
     pub peak_concurrent: u32,
 }
 
+/// Memory operations by kind, indexed like [`OpKind::ALL`]; serialised as a map from
+/// [`OpKind::name`] to count (kinds never used are left out).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct OpCounts(pub [u64; 13]);
+
+impl OpCounts {
+    /// The count of the kind named `name` (e.g. `"add"`), `None` if it was never used.
+    pub fn get(&self, name: &str) -> Option<&u64> {
+        OpKind::ALL.iter().position(|k| k.name() == name).map(|i| &self.0[i]).filter(|&&n| n > 0)
+    }
+    pub fn of(&self, kind: OpKind) -> u64 {
+        self.0[kind as usize]
+    }
+    /// (name, count) of the kinds used.
+    pub fn iter(&self) -> impl Iterator<Item = (&'static str, u64)> + '_ {
+        OpKind::ALL.iter().zip(self.0.iter()).filter(|(_, &n)| n > 0).map(|(k, &n)| (k.name(), n))
+    }
+}
+
+impl serde::Serialize for OpCounts {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut m = s.serialize_map(None)?;
+        for (k, v) in self.iter() {
+            m.serialize_entry(k, &v)?;
+        }
+        m.end()
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for OpCounts {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let m: HashMap<String, u64> = HashMap::deserialize(d)?;
+        let mut c = OpCounts::default();
+        for (k, v) in m {
+            if let Some(i) = OpKind::ALL.iter().position(|o| o.name() == k) {
+                c.0[i] = v;
+            }
+        }
+        Ok(c)
+    }
+}
+
 impl Stats {
     pub(crate) fn add_ops(&mut self, ops: &[u32; 13]) {
-        for (k, &n) in OpKind::ALL.iter().zip(ops) {
-            if n > 0 {
-                *self.ops.entry(k.name().to_string()).or_default() += n as u64;
-            }
+        for (a, &n) in self.ops.0.iter_mut().zip(ops) {
+            *a += n as u64;
         }
     }
     /// Total atomic operations (everything but plain loads and stores).
     pub fn atomics(&self) -> u64 {
-        self.ops
-            .iter()
-            .filter(|(k, _)| *k != "load" && *k != "store")
-            .map(|(_, v)| v)
-            .sum()
+        self.ops.iter().filter(|(k, _)| *k != "load" && *k != "store").map(|(_, v)| v).sum()
     }
     /// Adds another pass's counters.
     pub fn merge(&mut self, o: &Stats) {
@@ -78,8 +115,8 @@ impl Stats {
         self.late_culled += o.late_culled;
         self.samples_passed += o.samples_passed;
         self.faulted += o.faulted;
-        for (k, v) in &o.ops {
-            *self.ops.entry(k.clone()).or_default() += v;
+        for (a, b) in self.ops.0.iter_mut().zip(o.ops.0.iter()) {
+            *a += b;
         }
         self.steps += o.steps;
         self.interlock_waits += o.interlock_waits;
@@ -87,6 +124,9 @@ impl Stats {
             .max_steps_per_invocation
             .max(o.max_steps_per_invocation);
         self.rejected_triangles += o.rejected_triangles;
+        if o.hotspots.is_empty() {
+            return;
+        }
         for h in &o.hotspots {
             match self
                 .hotspots

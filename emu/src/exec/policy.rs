@@ -153,6 +153,25 @@ impl Chooser {
         }
     }
 
+    /// Starts over for another run (keeps allocations).
+    pub fn reset(&mut self, policy: &Policy, seed: u64, steps_estimate: u64) {
+        if &self.policy != policy {
+            self.policy = policy.clone();
+        }
+        self.rng = SmallRng::seed_from_u64(seed ^ 0x6672_6167_7261_6365);
+        self.change_points.clear();
+        if let Policy::Pct { depth } = &self.policy {
+            for _ in 1..*depth {
+                self.change_points.push(self.rng.gen_range(0..steps_estimate.max(1)));
+            }
+            self.change_points.sort_unstable();
+        }
+        self.priorities.clear();
+        self.next_low = 0;
+        self.cursor = None;
+        self.pos = 0;
+    }
+
     /// A new invocation entered the window.
     pub fn admit(&mut self, seq: u64) {
         if let Policy::Pct { depth } = self.policy {

@@ -106,7 +106,7 @@ fn poll_slot<F: Future<Output = ()>>(
 
 /// Per-worker accumulation.
 #[derive(Default)]
-struct Acc {
+pub(crate) struct Acc {
     stats: Stats,
     faults: Vec<Fault>,
     ops: [u32; 13],
@@ -114,7 +114,7 @@ struct Acc {
 
 impl Acc {
     /// Copies a finished invocation's results out and counts it.
-    fn harvest(&mut self, inv: &Invocation, out: &mut FragOut, colors: &mut [[u32; 4]]) {
+    pub(crate) fn harvest(&mut self, inv: &Invocation, out: &mut FragOut, colors: &mut [[u32; 4]]) {
         let input = inv.input.get();
         let fault = inv.fault.borrow_mut().take();
         out.faulted = fault.is_some();
@@ -146,7 +146,7 @@ impl Acc {
         }
     }
 
-    fn finish(mut self, out: &mut ShadeOutcome) {
+    pub(crate) fn finish(mut self, out: &mut ShadeOutcome) {
         self.stats.add_ops(&self.ops);
         out.stats.merge(&self.stats);
         out.faults.extend(self.faults);
@@ -326,6 +326,34 @@ fn run_parallel<K: FragmentKernel>(
     }
 }
 
+/// Reusable state of the scheduled executor (everything but the futures), so that
+/// exploring many schedules of one model allocates nothing per execution.
+pub(crate) struct SchedScratch {
+    pub detector: Detector,
+    chooser: Option<Chooser>,
+    which: Vec<usize>,
+    free: Vec<usize>,
+    inflight: Vec<usize>,
+    cands: Vec<Candidate>,
+    cand_slots: Vec<usize>,
+    pub record: Vec<u8>,
+}
+
+impl SchedScratch {
+    pub fn new(width: u32, height: u32) -> SchedScratch {
+        SchedScratch {
+            detector: Detector::new(width, height),
+            chooser: None,
+            which: Vec::new(),
+            free: Vec::new(),
+            inflight: Vec::new(),
+            cands: Vec::new(),
+            cand_slots: Vec::new(),
+            record: Vec::new(),
+        }
+    }
+}
+
 #[allow(clippy::too_many_arguments)] // see run_direct
 fn run_scheduled<K: FragmentKernel>(
     kernel: &K,
@@ -339,21 +367,68 @@ fn run_scheduled<K: FragmentKernel>(
     outcome: &mut ShadeOutcome,
 ) {
     let width = sc.window.max(1);
-    let names = (0..env.memory.buffer_sizes().len() as u32)
-        .map(|b| env.memory.buffer_name(b).to_string())
-        .collect();
-    let mut detector = Detector::new(env.width, env.height, names);
-    let mut chooser = Chooser::new(&sc.policy, sc.seed, inputs.len() as u64 * 4);
-    let mut record = sc.record.then(Vec::new);
-    let mut acc = Acc::default();
     let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
     let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
     futs.resize_with(width, || None);
-    let mut which = vec![0usize; width]; // input index per slot
-    let mut free: Vec<usize> = (0..width).rev().collect();
-    let mut inflight: Vec<usize> = Vec::with_capacity(width); // slots, in API order
-    let mut cands: Vec<Candidate> = Vec::with_capacity(width);
-    let mut cand_slots: Vec<usize> = Vec::with_capacity(width);
+    let mut scratch = SchedScratch::new(env.width, env.height);
+    let mut acc = Acc::default();
+    schedule_once(
+        &slots,
+        &mut futs,
+        |inv| invocation(kernel, Frag { inv, env }),
+        env,
+        sc,
+        max_steps,
+        inputs,
+        outs,
+        colors,
+        targets,
+        &mut scratch,
+        &mut acc,
+    );
+    acc.finish(outcome);
+    let memory = env.memory;
+    outcome.hazard_counts = scratch.detector.counts();
+    outcome.hazards = scratch.detector.hazards(|b| memory.buffer_name(b).to_string());
+    outcome.scheduled_hotspots = scratch.detector.hotspots(crate::stats::HOTSPOTS);
+    outcome.heat = std::mem::take(&mut scratch.detector.heat);
+    outcome.schedule = sc.record.then(|| std::mem::take(&mut scratch.record));
+}
+
+/// One scheduled execution of `inputs` on the given slots and future array (reset here).
+/// Returns the number of steps.
+#[allow(clippy::too_many_arguments)] // the executor's whole state, borrowed apart
+pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
+    slots: &'a [Invocation],
+    futs: &mut [Option<F>],
+    make: impl Fn(&'a Invocation) -> F,
+    env: &PassEnv<'_>,
+    sc: &ScheduleConfig,
+    max_steps: u64,
+    inputs: &[FragInput],
+    outs: &mut [FragOut],
+    colors: &mut [[u32; 4]],
+    targets: usize,
+    scratch: &mut SchedScratch,
+    acc: &mut Acc,
+) -> u64 {
+    let width = slots.len();
+    let SchedScratch { detector, chooser, which, free, inflight, cands, cand_slots, record } = scratch;
+    detector.reset(env.width, env.height);
+    match chooser {
+        Some(c) => c.reset(&sc.policy, sc.seed, inputs.len() as u64 * 4),
+        None => *chooser = Some(Chooser::new(&sc.policy, sc.seed, inputs.len() as u64 * 4)),
+    }
+    let chooser = chooser.as_mut().expect("set above");
+    record.clear();
+    which.clear();
+    which.resize(width, 0);
+    free.clear();
+    free.extend((0..width).rev());
+    inflight.clear();
+    for f in futs.iter_mut() {
+        *f = None;
+    }
     let mut cx = Context::from_waker(Waker::noop());
     let mut next = 0usize;
     let mut step: u64 = 0;
@@ -364,14 +439,12 @@ fn run_scheduled<K: FragmentKernel>(
             futs[s] = None;
             let i = which[s];
             let seq = inputs[i].seq;
-            acc.harvest(
-                &slots[s],
-                &mut outs[i],
-                &mut colors[i * targets..(i + 1) * targets],
-            );
+            acc.harvest(&slots[s], &mut outs[i], &mut colors[i * targets..(i + 1) * targets]);
             detector.finish(seq, step);
             chooser.retire(seq);
-            inflight.retain(|&x| x != s);
+            if let Some(p) = inflight.iter().position(|&x| x == s) {
+                inflight.remove(p);
+            }
             free.push(s);
         }};
     }
@@ -382,13 +455,7 @@ fn run_scheduled<K: FragmentKernel>(
             let Some(s) = free.pop() else { break };
             slots[s].reset(inputs[next]);
             which[s] = next;
-            futs[s] = Some(invocation(
-                kernel,
-                Frag {
-                    inv: &slots[s],
-                    env,
-                },
-            ));
+            futs[s] = Some(make(&slots[s]));
             detector.start(id_of(&inputs[next]), step);
             chooser.admit(inputs[next].seq);
             inflight.push(s);
@@ -403,7 +470,7 @@ fn run_scheduled<K: FragmentKernel>(
         }
         cands.clear();
         cand_slots.clear();
-        for &s in &inflight {
+        for &s in inflight.iter() {
             let inv = &slots[s];
             let runnable = match inv.pending.get() {
                 Some(StepKind::InterlockBegin) => match (env.interlock, env.interlock_mode) {
@@ -425,16 +492,13 @@ fn run_scheduled<K: FragmentKernel>(
             };
             if runnable {
                 let i = inv.input.get();
-                cands.push(Candidate {
-                    seq: i.seq,
-                    depth: i.depth,
-                });
+                cands.push(Candidate { seq: i.seq, depth: i.depth });
                 cand_slots.push(s);
             }
         }
         if cands.is_empty() {
             // Everyone in flight waits on someone: a deadlock. Report and drop them all.
-            for s in inflight.clone() {
+            while let Some(&s) = inflight.first() {
                 let inv = &slots[s];
                 let w = inv.waits.get() + 1;
                 *inv.fault.borrow_mut() = Some(FaultKind::Deadlock { waits: w });
@@ -442,48 +506,99 @@ fn run_scheduled<K: FragmentKernel>(
             }
             continue;
         }
-        let k = chooser.choose(&cands, step);
-        if let Some(r) = record.as_mut() {
-            r.push(k as u8);
+        let k = chooser.choose(cands, step);
+        if sc.record {
+            record.push(k as u8);
         }
         let s = cand_slots[k];
         let inv = &slots[s];
         let input = inv.input.get();
-        if let Some(StepKind::Mem {
-            addr,
-            op,
-            record: rec,
-        }) = inv.pending.get()
-        {
+        if let Some(StepKind::Mem { addr, op, record: rec }) = inv.pending.get() {
             let lock = match env.interlock {
                 Some(l) if inv.in_interlock.get() => Some(l.key(input.x, input.y)),
                 _ => None,
             };
-            detector.access(
-                input.seq,
-                addr,
-                op,
-                step,
-                lock,
-                rec.map(|r| (r.base, r.len, r.word)),
-            );
+            detector.access(input.seq, addr, op, step, lock, rec.map(|r| (r.base, r.len, r.word)));
         }
         inv.granted.set(true);
         step += 1;
         let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
         if !done && inv.steps.get() > max_steps {
-            *inv.fault.borrow_mut() = Some(FaultKind::Watchdog {
-                steps: inv.steps.get(),
-            });
+            *inv.fault.borrow_mut() = Some(FaultKind::Watchdog { steps: inv.steps.get() });
             retire!(s);
         } else if done {
             retire!(s);
         }
     }
-    acc.finish(outcome);
-    outcome.hazard_counts = detector.counts();
-    outcome.hazards = detector.hazards().to_vec();
-    outcome.scheduled_hotspots = detector.hotspots(crate::stats::HOTSPOTS);
-    outcome.heat = std::mem::take(&mut detector.heat);
-    outcome.schedule = record;
+    step
+}
+
+/// One execution of an exploration, as shown to its callback.
+pub struct Execution<'r> {
+    /// Position in the exploration (0, 1, ...).
+    pub index: u64,
+    pub seed: u64,
+    pub steps: u64,
+    pub hazards: HazardCounts,
+    pub faults: u64,
+    /// The schedule (one byte per step), when recording.
+    pub schedule: &'r [u8],
+}
+
+/// Runs `inputs` once per seed under the scheduled executor, reusing every allocation
+/// across executions; `each` sees every execution and the memory after it (and must reset
+/// the memory for the next one); it returns false to stop. Returns the executions run.
+#[allow(clippy::too_many_arguments)] // mirrors Device::explore
+pub(crate) fn explore<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    sc: &ScheduleConfig,
+    max_steps: u64,
+    inputs: &[FragInput],
+    seeds: std::ops::Range<u64>,
+    mut each: impl FnMut(&Execution<'_>, &crate::memory::Memory) -> bool,
+) -> u64 {
+    let width = sc.window.max(1);
+    let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
+    let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
+    futs.resize_with(width, || None);
+    let mut scratch = SchedScratch::new(env.width, env.height);
+    let mut outs = vec![FragOut::default(); inputs.len()];
+    let mut colors = vec![[0u32; 4]; inputs.len() * 8];
+    let mut sc = sc.clone();
+    let mut n = 0;
+    for seed in seeds {
+        sc.seed = seed;
+        if let Some(l) = env.interlock {
+            l.reset();
+        }
+        let mut acc = Acc::default();
+        let steps = schedule_once(
+            &slots,
+            &mut futs,
+            |inv| invocation(kernel, Frag { inv, env }),
+            env,
+            &sc,
+            max_steps,
+            inputs,
+            &mut outs,
+            &mut colors,
+            8,
+            &mut scratch,
+            &mut acc,
+        );
+        let e = Execution {
+            index: n,
+            seed,
+            steps,
+            hazards: scratch.detector.counts(),
+            faults: acc.stats.faulted,
+            schedule: &scratch.record,
+        };
+        n += 1;
+        if !each(&e, env.memory) {
+            break;
+        }
+    }
+    n
 }

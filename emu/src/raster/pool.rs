@@ -11,8 +11,9 @@
 //! Plain `std` mutex, not [`crate::sync`]: this is bookkeeping outside the modelled protocols.
 use std::sync::Mutex;
 
-/// Buffers kept per kind; enough for a few concurrent binnings with a few chunks each.
-const MAX_PER_KIND: usize = 32;
+/// Buffers kept per kind: enough for a couple of concurrent binnings with a chunk per thread,
+/// few enough to bound the memory kept (a few frames' worth).
+const MAX_PER_KIND: usize = 8;
 
 /// A stack of spare buffers of one element type.
 pub(crate) struct Pool<T> {

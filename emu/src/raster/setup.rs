@@ -411,9 +411,6 @@ struct Ctx<'a> {
 /// Triangles per batch of the reject loop.
 const BATCH: usize = 256;
 
-/// How many triangles ahead the reject loop prefetches vertices.
-const PREFETCH: usize = 16;
-
 /// What one chunk of triangles produced.
 struct ChunkOut {
     tris: Vec<SetupTriangle>,
@@ -504,16 +501,7 @@ impl Ctx<'_> {
         let si = &self.si;
         let (w1, h1) = (self.w - 1, self.h - 1);
         let mut n = 0;
-        let mut touch = 0;
         for t in range {
-            // Touch the vertices of a triangle a little ahead (a software prefetch without
-            // `unsafe`): the vertex order of a dense mesh is coherent, but not enough for the
-            // hardware prefetcher.
-            if let Some(&[pa, pb, pc]) = self.indices.get(t + PREFETCH) {
-                touch ^= xy[(pa as usize).min(last)][0]
-                    ^ xy[(pb as usize).min(last)][0]
-                    ^ xy[(pc as usize).min(last)][0];
-            }
             let [ia, ib, ic] = self.indices[t];
             let (ia, ib, ic) = (ia as usize, ib as usize, ic as usize);
             let bad_index = (ia > last) | (ib > last) | (ic > last);
@@ -529,7 +517,6 @@ impl Ctx<'_> {
             keep[n] = t as u32;
             n += usize::from(special | reaches);
         }
-        std::hint::black_box(touch);
         n
     }
 

@@ -171,8 +171,9 @@ impl FragmentKernel for Merge<'_> {
         let found = f.load(s.found, p).await;
         let dirty = f.load(s.dirty, p).await != 0;
         f.store(s.dirty, p, 0).await;
-        if near.0 == DONE.0 {
+        if near.0 == DONE.0 || found >= s.k {
             // Nothing behind the bound: the pixel has fewer than k fragments, all certified.
+            // (`found == k` comes with the `DONE` bound; the test only guards the slices.)
             f.store(s.lo_depth, p, DONE.0).await;
             f.store(s.lo_prim, p, DONE.1).await;
             return;

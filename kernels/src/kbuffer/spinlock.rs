@@ -9,10 +9,11 @@
 //! and counted** (per pixel, reported in [`AlgoResult::dropped`] and a check), never silently.
 //!
 //! Why it is declared hazard-prone (DESIGN.md 7): a spinlock gives no forward progress
-//! guarantee. A lock holder that the scheduler does not run (a PCT priority drop, the
-//! far-first policy running the deeper spinner forever, an OS-descheduled thread) makes
-//! every other fragment of its pixel burn its cap and give up, so with any finite cap some
-//! schedules drop fragments (EPR > 0); without a cap they hang (the watchdog's business).
+//! guarantee. A lock holder that the scheduler does not run (a PCT priority drop, an
+//! OS-descheduled thread) makes every other fragment of its pixel burn its cap and give up,
+//! so with any finite cap some schedules drop fragments (EPR > 0; with the default cap of
+//! 1024, `pct:3` does on every built-in scene at 48 x 48); without a cap they hang (the
+//! watchdog's business).
 //! What does hold under every interleaving, and is checked: mutual exclusion (entries
 //! counted with plain read-modify-writes inside the lock add up, with the give-ups, to the
 //! fragments shaded), every lock released, slots well formed; and errors only at pixels
@@ -23,7 +24,8 @@
 //!
 //! In the parallel executor the lanes of a warp advance in lockstep (one step each in turn),
 //! so a holder in the spinner's own warp always progresses, and a holder in another warp
-//! runs on another thread; a small cap can still run out there.
+//! runs on another thread, which the OS may deschedule: even the default cap runs out there
+//! (seen with 4 threads on 2 cores).
 
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
