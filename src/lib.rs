@@ -7,6 +7,7 @@
 
 pub mod case;
 pub mod fuzz;
+pub mod fuzzing;
 pub mod output;
 pub mod run;
 pub mod scene;

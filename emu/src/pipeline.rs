@@ -169,11 +169,20 @@ impl Device {
                 threads,
                 &mut clip,
             );
-            let binned = bin_triangles(&clip, &draw.mesh.indices, &raster, viewport, threads);
+            // Multisampling off: rasterize single-sampled, then a fragment covers every
+            // sample of its pixel (see RasterState::multisample).
+            let single = !raster.multisample && raster.samples.count() > 1;
+            let bin_state = if single {
+                RasterState { samples: crate::raster::SampleCount::X1, ..raster }
+            } else {
+                raster
+            };
+            let binned = bin_triangles(&clip, &draw.mesh.indices, &bin_state, viewport, threads);
             report.stats.rejected_triangles += binned.rejected;
             let geo = Geometry::Binned {
                 binned: &binned,
                 instance: instance as u32,
+                single,
             };
             self.run_waves(
                 fb,
@@ -365,6 +374,7 @@ impl Device {
         };
         let tile_count = fb.tiles().len();
         let mut wave_index = 0u64;
+        let mut bytes_used = 0usize;
         let mut lists: Vec<Vec<FragInput>> = Vec::new();
         let mut first = 0;
         while first < tile_count {
@@ -405,6 +415,11 @@ impl Device {
                     sc.seed = sc
                         .seed
                         .wrapping_add(wave_index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                    // An explicit schedule runs on across waves: each wave continues where
+                    // the previous one stopped reading it.
+                    if let crate::exec::Policy::Bytes(b) = &mut sc.policy {
+                        b.drain(..bytes_used.min(b.len()));
+                    }
                     ExecConfig {
                         mode: ExecMode::Scheduled(sc),
                         ..exec.clone()
@@ -421,6 +436,7 @@ impl Device {
                 &mut colors,
                 targets,
             );
+            bytes_used += outcome.bytes_used;
             absorb(report, outcome, &self.memory);
             // 3. Late tests and writes, per tile in API order.
             let tiles = &mut fb.tiles_mut()[first..last];
@@ -506,7 +522,8 @@ fn absorb(report: &mut PassReport, outcome: ShadeOutcome, memory: &Memory) {
 
 /// Where a pass's fragments come from.
 enum Geometry<'a> {
-    Binned { binned: &'a Binned, instance: u32 },
+    /// `single`: multisampling off on a multisampled target (one coverage bit for all).
+    Binned { binned: &'a Binned, instance: u32, single: bool },
     FullScreen,
 }
 
@@ -597,12 +614,18 @@ impl RasterFront<'_> {
         };
         let sample_mask = self.state.sample_mask & all;
         match self.geo {
-            Geometry::Binned { binned, instance } => {
+            Geometry::Binned {
+                binned,
+                instance,
+                single,
+            } => {
                 let positions = crate::raster::SampleCount::from_count(self.samples)
                     .map(|c| c.positions())
                     .unwrap_or(&[(0.5, 0.5)]);
+                let per_sample_depth = self.samples > 1 && !*single;
                 binned.raster_tile(tile_index, |f| {
-                    let cov = f.coverage & sample_mask;
+                    let f_cov = if *single && f.coverage & 1 != 0 { all } else { f.coverage };
+                    let cov = f_cov & sample_mask;
                     if cov == 0 {
                         return;
                     }
@@ -614,7 +637,7 @@ impl RasterFront<'_> {
                     let mut cov = cov;
                     if tests {
                         let mut depths = [depth; 8];
-                        if self.samples > 1 {
+                        if per_sample_depth {
                             for (s, p) in positions.iter().enumerate() {
                                 depths[s] = t.depth_at(fx + p.0, fy + p.1);
                             }
@@ -714,7 +737,12 @@ impl RasterBack<'_> {
             if late_tests {
                 let mut depths = [o.depth.unwrap_or(f.depth); 8];
                 if o.depth.is_none() && self.samples > 1 {
-                    if let Geometry::Binned { binned, .. } = self.geo {
+                    if let Geometry::Binned {
+                        binned,
+                        single: false,
+                        ..
+                    } = self.geo
+                    {
                         let t = &binned.tris[f.tri as usize];
                         for (s, p) in positions.iter().enumerate() {
                             depths[s] = t.depth_at(f.x as f32 + p.0, f.y as f32 + p.1);

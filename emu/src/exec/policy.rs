@@ -172,6 +172,11 @@ impl Chooser {
         self.pos = 0;
     }
 
+    /// Bytes of a [`Policy::Bytes`] schedule consumed so far.
+    pub fn bytes_used(&self) -> usize {
+        self.pos
+    }
+
     /// A new invocation entered the window.
     pub fn admit(&mut self, seq: u64) {
         if let Policy::Pct { depth } = self.policy {

@@ -37,6 +37,8 @@ pub(crate) struct ShadeOutcome {
     pub heat: Vec<u32>,
     pub schedule: Option<Vec<u8>>,
     pub scheduled_hotspots: Vec<(crate::memory::Addr, u64, u32)>,
+    /// Bytes of a `Policy::Bytes` schedule consumed (the next wave continues after them).
+    pub bytes_used: usize,
 }
 
 /// Faults kept in detail per pass (all are counted).
@@ -393,6 +395,7 @@ fn run_scheduled<K: FragmentKernel>(
     outcome.scheduled_hotspots = scratch.detector.hotspots(crate::stats::HOTSPOTS);
     outcome.heat = std::mem::take(&mut scratch.detector.heat);
     outcome.schedule = sc.record.then(|| std::mem::take(&mut scratch.record));
+    outcome.bytes_used = scratch.chooser.as_ref().map_or(0, |c| c.bytes_used());
 }
 
 /// One scheduled execution of `inputs` on the given slots and future array (reset here).

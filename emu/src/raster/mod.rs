@@ -104,6 +104,11 @@ pub struct RasterState {
     /// Tile edge in pixels (a power of two from 8 to 256; other values are rounded up to one,
     /// see [`effective_tile_size`]).
     pub tile_size: u32,
+    /// With several samples: `false` rasterizes as if single-sampled (GL's
+    /// `glDisable(GL_MULTISAMPLE)`, D3D's `MultisampleEnable = FALSE`): a fragment covers
+    /// all samples or none, by the pixel centre, at the centre's depth. Stencil routing
+    /// relies on it. Applied by the pipeline.
+    pub multisample: bool,
 }
 
 impl Default for RasterState {
@@ -113,6 +118,7 @@ impl Default for RasterState {
             front_face: FrontFace::Ccw,
             samples: SampleCount::X1,
             tile_size: 64,
+            multisample: true,
         }
     }
 }

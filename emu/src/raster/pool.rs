@@ -27,7 +27,8 @@ impl<T> Pool<T> {
         }
     }
 
-    /// An empty buffer, with the capacity of a previously returned one when available.
+    /// A buffer with the capacity of a previously returned one when available: empty, or with
+    /// stale contents if it was returned by [`Pool::give_dirty`].
     pub fn take(&self) -> Vec<T> {
         let mut free = self.free.lock().unwrap_or_else(|e| e.into_inner());
         free.pop().unwrap_or_default()
@@ -35,10 +36,17 @@ impl<T> Pool<T> {
 
     /// Returns a buffer for reuse (dropped if the pool is full or it never allocated).
     pub fn give(&self, mut v: Vec<T>) {
+        v.clear();
+        self.give_dirty(v);
+    }
+
+    /// Returns a buffer for reuse *with* its contents, for buffers whose next user overwrites
+    /// every element it reads (then `resize` writes only the part beyond the old length,
+    /// instead of clearing megabytes that are about to be overwritten anyway).
+    pub fn give_dirty(&self, v: Vec<T>) {
         if v.capacity() == 0 {
             return;
         }
-        v.clear();
         let mut free = self.free.lock().unwrap_or_else(|e| e.into_inner());
         if free.len() < MAX_PER_KIND {
             free.push(v);

@@ -273,7 +273,7 @@ impl Drop for Binned {
     fn drop(&mut self) {
         TRIS.give(std::mem::take(&mut self.tris));
         for c in self.chunks.drain(..) {
-            ENTRIES.give(c.entries);
+            ENTRIES.give_dirty(c.entries); // fully overwritten by the next scatter
             STARTS.give(c.tile_start);
             VERTS.give(c.verts);
         }
@@ -816,6 +816,7 @@ fn project_vertices(
         let oc = planes.outcode(&p);
         if oc != 0 {
             *xy = [OUT, oc as i32];
+            *zw = [0.0; 2];
         } else {
             let s = xf.project(&p);
             *xy = [s.x, s.y];
@@ -861,6 +862,7 @@ pub fn bin_triangles(
     };
 
     // 1. Vertices, in parallel slices of one array.
+    // Recycled with stale contents: every element is overwritten below.
     let mut xy = XY.take();
     let mut zw = ZW.take();
     xy.resize(positions.len(), [0; 2]);
@@ -935,8 +937,8 @@ pub fn bin_triangles(
         })
     };
 
-    XY.give(xy);
-    ZW.give(zw);
+    XY.give_dirty(xy);
+    ZW.give_dirty(zw);
 
     // 3. Concatenate in chunk order (the first chunk's buffer is moved, not copied).
     let total: usize = parts.iter().map(|p| p.0.len()).sum();
