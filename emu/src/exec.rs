@@ -83,6 +83,15 @@ pub struct ExecConfig {
     /// Measure per-address contention in the parallel executor (three extra atomics per
     /// access).
     pub contention: bool,
+    /// Scheduled executor: fragments are admitted block by block (`block` x `block` pixels,
+    /// each block's fragments in API order), as a GPU's fine rasterizer hands out small
+    /// screen tiles; so overlapping primitives of one block are in flight together.
+    #[serde(default = "default_block")]
+    pub block: u32,
+}
+
+fn default_block() -> u32 {
+    4
 }
 
 impl Default for ExecConfig {
@@ -95,6 +104,7 @@ impl Default for ExecConfig {
             max_steps: 1 << 20,
             max_waits: 1 << 26,
             contention: false,
+            block: default_block(),
         }
     }
 }

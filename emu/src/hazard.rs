@@ -241,7 +241,13 @@ impl Detector {
         self.invs.get_mut(i).filter(|s| s.id.is_some())
     }
 
-    /// An invocation was admitted at `step` (in increasing `seq` order).
+    /// Sets the smallest `seq` this run will admit (invocations are indexed from it).
+    pub fn set_base(&mut self, base: u64) {
+        self.base_seq = Some(base);
+    }
+
+    /// An invocation was admitted at `step` (its `seq` at least the base, see
+    /// [`Detector::set_base`]; without a base, the first admitted sets it).
     pub fn start(&mut self, id: InvocationId, step: u64) {
         let base = *self.base_seq.get_or_insert(id.seq);
         let Some(i) = id.seq.checked_sub(base).map(|i| i as usize) else { return };

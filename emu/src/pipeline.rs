@@ -427,15 +427,26 @@ impl Device {
                 }
                 _ => exec.clone(),
             };
-            let outcome = shade(
-                kernel,
-                &env,
-                &exec_wave,
-                &inputs,
-                &mut outs,
-                &mut colors,
-                targets,
-            );
+            let outcome = if let ExecMode::Scheduled(_) = exec.mode {
+                // Admission order: pixel block by block, API order within a block.
+                let block = exec.block.max(1);
+                let mut order: Vec<usize> = (0..inputs.len()).collect();
+                order.sort_by_key(|&i| {
+                    let f = &inputs[i];
+                    ((f.y / block) as u64 * fb.width.div_ceil(block) as u64 + (f.x / block) as u64, i)
+                });
+                let sched: Vec<FragInput> = order.iter().map(|&i| inputs[i]).collect();
+                let mut s_outs = vec![FragOut::default(); sched.len()];
+                let mut s_colors = vec![[0u32; 4]; sched.len() * targets];
+                let o = shade(kernel, &env, &exec_wave, &sched, &mut s_outs, &mut s_colors, targets);
+                for (k, &i) in order.iter().enumerate() {
+                    outs[i] = s_outs[k];
+                    colors[i * targets..(i + 1) * targets].copy_from_slice(&s_colors[k * targets..(k + 1) * targets]);
+                }
+                o
+            } else {
+                shade(kernel, &env, &exec_wave, &inputs, &mut outs, &mut colors, targets)
+            };
             bytes_used += outcome.bytes_used;
             absorb(report, outcome, &self.memory);
             // 3. Late tests and writes, per tile in API order.

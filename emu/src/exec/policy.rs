@@ -18,12 +18,12 @@ pub enum Policy {
     /// Lockstep warps of `lanes` invocations (consecutive in API order): lanes take one step
     /// each in turn, warps round robin.
     Warp { lanes: u32 },
-    /// Latest primitive first.
+    /// Round robin, latest primitive first in each round.
     Reverse,
-    /// Earliest first (API order, with the window's overlap).
+    /// Round robin, earliest first in each round (API order).
     Fifo,
-    /// Farthest fragment first: fragments arrive in descending depth, the worst case for
-    /// k-buffer culling.
+    /// Round robin, farthest fragment first in each round: fragments make progress in
+    /// descending depth, the worst case for k-buffer culling.
     FarFirst,
     /// An explicit schedule: at step k, run the `bytes[k] % n`-th runnable invocation (in
     /// API order); earliest first once the bytes run out. Any byte string is valid, which
@@ -127,6 +127,8 @@ pub(crate) struct Chooser {
     next_low: u64,
     /// Warp: last chosen seq.
     cursor: Option<u64>,
+    /// Ordering policies: key of the last chosen (round robin).
+    round_cursor: Option<(u32, i128)>,
     /// Bytes: position.
     pos: usize,
 }
@@ -149,6 +151,7 @@ impl Chooser {
             change_points,
             next_low: 0,
             cursor: None,
+            round_cursor: None,
             pos: 0,
         }
     }
@@ -169,7 +172,32 @@ impl Chooser {
         self.priorities.clear();
         self.next_low = 0;
         self.cursor = None;
+        self.round_cursor = None;
         self.pos = 0;
+    }
+
+    /// Round robin in the order of `key` (smallest first): the first candidate after the
+    /// last one chosen, wrapping around.
+    fn round(&mut self, cands: &[Candidate], key: impl Fn(&Candidate) -> (f32, i128)) -> usize {
+        let k = |c: &Candidate| {
+            let (a, b) = key(c);
+            (crate::memory::f32_order_key(a), b)
+        };
+        let after = self.round_cursor;
+        let mut best: Option<(usize, (u32, i128))> = None;
+        let mut first: Option<(usize, (u32, i128))> = None;
+        for (i, c) in cands.iter().enumerate() {
+            let kc = k(c);
+            if first.is_none_or(|(_, f)| kc < f) {
+                first = Some((i, kc));
+            }
+            if after.is_none_or(|a| kc > a) && best.is_none_or(|(_, b)| kc < b) {
+                best = Some((i, kc));
+            }
+        }
+        let (i, kc) = best.or(first).expect("cands is not empty");
+        self.round_cursor = Some(kc);
+        i
     }
 
     /// Bytes of a [`Policy::Bytes`] schedule consumed so far.
@@ -196,17 +224,12 @@ impl Chooser {
         debug_assert!(!cands.is_empty());
         match &self.policy {
             Policy::Random => self.rng.gen_range(0..cands.len()),
-            Policy::Fifo => 0,
-            Policy::Reverse => cands.len() - 1,
-            Policy::FarFirst => {
-                let mut best = 0;
-                for (i, c) in cands.iter().enumerate() {
-                    if c.depth > cands[best].depth {
-                        best = i;
-                    }
-                }
-                best
-            }
+            // The ordering policies take turns like a GPU's resident warps do: every
+            // runnable invocation takes one step per round, the round in the policy's order.
+            // (Run-to-completion in that order is the same policy with a window of 1.)
+            Policy::Fifo => self.round(cands, |c| (0.0, c.seq as i128)),
+            Policy::Reverse => self.round(cands, |c| (0.0, -(c.seq as i128))),
+            Policy::FarFirst => self.round(cands, |c| (-c.depth, c.seq as i128)),
             Policy::Pct { .. } => {
                 let pick = |prio: &std::collections::HashMap<u64, u64>| {
                     let mut best = 0;

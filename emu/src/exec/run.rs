@@ -418,6 +418,9 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     let width = slots.len();
     let SchedScratch { detector, chooser, which, free, inflight, cands, cand_slots, record } = scratch;
     detector.reset(env.width, env.height);
+    if let Some(base) = inputs.iter().map(|f| f.seq).min() {
+        detector.set_base(base);
+    }
     match chooser {
         Some(c) => c.reset(&sc.policy, sc.seed, inputs.len() as u64 * 4),
         None => *chooser = Some(Chooser::new(&sc.policy, sc.seed, inputs.len() as u64 * 4)),

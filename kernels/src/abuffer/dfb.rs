@@ -39,7 +39,7 @@ pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
 
 /// Per-pixel fragment count with an atomic add: the count pass of DFB and SB, and the pass
 /// that sizes the linked-list pool exactly (as the llvmpipe peer's `count` pass does).
-pub(super) struct CountKernel {
+pub struct CountKernel {
     pub counts: Buf<u32>,
 }
 
@@ -409,13 +409,13 @@ impl FragmentKernel for AddRowBase {
 /// DFB store pass: slot = `offsets[p] + atomicAdd(fill[p], 1)`. A fragment beyond its
 /// pixel's counted range (impossible unless the passes disagree) is dropped and counted
 /// rather than written into the neighbour's range.
-struct DfbStore {
-    counts: Buf<u32>,
-    offsets: Buf<u32>,
-    fill: Buf<u32>,
-    depth: Buf<f32>,
-    prim: Buf<u32>,
-    overflow: Buf<u32>,
+pub struct DfbStore {
+    pub counts: Buf<u32>,
+    pub offsets: Buf<u32>,
+    pub fill: Buf<u32>,
+    pub depth: Buf<f32>,
+    pub prim: Buf<u32>,
+    pub overflow: Buf<u32>,
 }
 
 impl FragmentKernel for DfbStore {

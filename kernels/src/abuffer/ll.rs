@@ -45,7 +45,7 @@ pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
 }
 
 /// Words per node: `[depth bits, primitive, next]`.
-pub(super) const NODE_WORDS: u32 = 3;
+pub const NODE_WORDS: u32 = 3;
 /// Words of a node's payload (depth, primitive): the record a reader loads at once.
 const PAYLOAD_WORDS: u32 = 2;
 const NEXT: u32 = 2;
@@ -56,7 +56,7 @@ pub(super) const MAX_POOL_NODES: u64 = fragrace_emu::memory::MAX_BUFFER_WORDS / 
 /// The buffers of a node pool split into `regions` (1 for `ll`, one per bucket for `bun-ll`),
 /// each with its own allocation counter and dropped counter.
 #[derive(Clone, Copy)]
-pub(super) struct ListPool {
+pub struct ListPool {
     /// List heads, `EMPTY` when empty.
     pub heads: Buf<u32>,
     /// Nodes, `NODE_WORDS` words each.
@@ -297,12 +297,13 @@ pub(super) fn pool_from_params(per_pixel: f32, pixels: usize) -> u64 {
 /// pixel's list as it stands (an in-pass consumer, the situation in which the publication
 /// order matters), loading each node's payload as one record and counting the half-written
 /// payloads it sees (`EMPTY` words: the pool is filled with `EMPTY` before the pass).
-struct LlInsert {
-    pool: ListPool,
-    cap: u32,
-    publish_before_write: bool,
+pub struct LlInsert {
+    pub pool: ListPool,
+    /// Nodes in the pool (region 0 is the whole pool).
+    pub cap: u32,
+    pub publish_before_write: bool,
     /// `[half-written payloads seen]`, in reader mode.
-    reader: Option<Buf<u32>>,
+    pub reader: Option<Buf<u32>>,
 }
 
 impl FragmentKernel for LlInsert {

@@ -2,10 +2,10 @@
 //! (count, scan, store) memory.
 
 mod bun;
-mod dfb;
+pub(crate) mod dfb; // pub(crate): protocol kernels re-exported by crate::protocols
 mod fab;
-mod ll;
-mod sb;
+pub(crate) mod ll;
+pub(crate) mod sb;
 
 pub use ll::LinkedList;
 

@@ -40,11 +40,11 @@ pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
 const GROUPS: u32 = 64;
 
 /// Allocate pass: a covered pixel reserves `count[p]` words on its group's counter.
-struct SparseAllocate {
-    counts: Buf<u32>,
-    offsets: Buf<u32>,
-    group_total: Buf<u32>,
-    groups: u32,
+pub struct SparseAllocate {
+    pub counts: Buf<u32>,
+    pub offsets: Buf<u32>,
+    pub group_total: Buf<u32>,
+    pub groups: u32,
 }
 
 impl FragmentKernel for SparseAllocate {
@@ -90,15 +90,15 @@ impl FragmentKernel for GroupScan {
 /// Store pass: `slot = group_base[g] + offset[p] + atomicAdd(fill[p], 1)`; a fragment past its
 /// pixel's counted range (the passes disagree) is dropped and counted, never written into
 /// another pixel's range.
-struct SbStore {
-    counts: Buf<u32>,
-    offsets: Buf<u32>,
-    group_base: Buf<u32>,
-    fill: Buf<u32>,
-    depth: Buf<f32>,
-    prim: Buf<u32>,
-    overflow: Buf<u32>,
-    groups: u32,
+pub struct SbStore {
+    pub counts: Buf<u32>,
+    pub offsets: Buf<u32>,
+    pub group_base: Buf<u32>,
+    pub fill: Buf<u32>,
+    pub depth: Buf<f32>,
+    pub prim: Buf<u32>,
+    pub overflow: Buf<u32>,
+    pub groups: u32,
 }
 
 impl FragmentKernel for SbStore {

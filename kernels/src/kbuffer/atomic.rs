@@ -36,11 +36,11 @@ pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
 /// Per-pixel fragment counts and the count of negative depths: what the invariants need
 /// besides the slots (instrumentation, not part of the algorithm).
 #[derive(Clone, Copy)]
-struct Census {
+pub struct Census {
     /// Fragments per pixel (atomic add).
-    count: Buf<u32>,
+    pub count: Buf<u32>,
     /// Fragments with a negative depth, whose bits would break the key order.
-    negative: Buf<u32>,
+    pub negative: Buf<u32>,
 }
 
 impl Census {
@@ -101,10 +101,10 @@ async fn chain64(f: Frag<'_>, key: Buf<u64>, base: u32, k: u32, mut v: u64) {
 }
 
 /// `kb-atomic32`, pass 1: depth keys.
-struct Depth32 {
-    key: Buf<u32>,
-    k: u32,
-    census: Census,
+pub struct Depth32 {
+    pub key: Buf<u32>,
+    pub k: u32,
+    pub census: Census,
 }
 
 impl FragmentKernel for Depth32 {
@@ -128,13 +128,13 @@ impl FragmentKernel for Depth32 {
 /// (`oit.py`'s `FS_KBUF_ATOMIC_COLOR`, claiming with the primitive id instead of the colour
 /// so the capture can name it). The keys are read-only in this pass, so plain loads of them
 /// do not race.
-struct Claim32 {
-    key: Buf<u32>,
-    prim: Buf<u32>,
-    k: u32,
+pub struct Claim32 {
+    pub key: Buf<u32>,
+    pub prim: Buf<u32>,
+    pub k: u32,
     /// Fragments among the k nearest depths that found no slot (coplanar fragments beyond
     /// the slots of their depth; informational).
-    unclaimed: Buf<u32>,
+    pub unclaimed: Buf<u32>,
 }
 
 impl FragmentKernel for Claim32 {
@@ -166,10 +166,10 @@ impl FragmentKernel for Claim32 {
 }
 
 /// `kb-atomic64`: one pass on packed keys.
-struct Store64 {
-    key: Buf<u64>,
-    k: u32,
-    census: Census,
+pub struct Store64 {
+    pub key: Buf<u64>,
+    pub k: u32,
+    pub census: Census,
 }
 
 impl FragmentKernel for Store64 {

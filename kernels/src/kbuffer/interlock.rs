@@ -32,16 +32,16 @@ pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     ]
 }
 
-struct InterlockStore {
-    kb: SplitSlots,
-    k: u32,
-    mode: InterlockMode,
+pub struct InterlockStore {
+    pub kb: SplitSlots,
+    pub k: u32,
+    pub mode: InterlockMode,
     /// Per pixel: primitive id + 1 of the last fragment that entered (0: none yet).
-    last: Buf<u32>,
+    pub last: Buf<u32>,
     /// Per pixel: critical sections entered.
-    entries: Buf<u32>,
+    pub entries: Buf<u32>,
     /// Entries whose primitive id was not above the previous entrant's.
-    out_of_order: Buf<u32>,
+    pub out_of_order: Buf<u32>,
 }
 
 impl FragmentKernel for InterlockStore {

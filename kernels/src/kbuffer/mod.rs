@@ -2,12 +2,12 @@
 //! seeds and public implementations use, from the racy read-modify-write original to
 //! atomic, spinlock and interlock variants, plus weighted blended OIT as the baseline.
 
-mod atomic;
-mod interlock;
+pub(crate) mod atomic; // pub(crate): protocol kernels re-exported by crate::protocols
+pub(crate) mod interlock;
 mod kplus;
 mod multipass;
-mod rmw;
-mod spinlock;
+pub(crate) mod rmw;
+pub(crate) mod spinlock;
 mod srab;
 mod wboit;
 

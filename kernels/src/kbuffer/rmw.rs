@@ -57,14 +57,14 @@ pub(super) fn key_less(ad: f32, ap: u32, bd: f32, bp: u32) -> bool {
 
 /// k depth slots and k primitive slots per pixel, pixel `p`'s at `p * k ..`.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct SplitSlots {
+pub struct SplitSlots {
     pub depth: Buf<f32>,
     pub prim: Buf<u32>,
 }
 
 impl SplitSlots {
     /// Allocates and clears (`+inf` / `EMPTY`) the slots of `pixels` pixels.
-    pub(super) fn new(device: &mut Device, pixels: usize, k: u32) -> Result<SplitSlots, AlgoError> {
+    pub fn new(device: &mut Device, pixels: usize, k: u32) -> Result<SplitSlots, AlgoError> {
         let len = pixels as u64 * k as u64;
         let depth = device.buffer::<f32>("kb-depth", len)?;
         let prim = device.buffer::<u32>("kb-prim", len)?;
@@ -426,9 +426,9 @@ impl Shape {
 
 /// The read-modify-write capture kernel (Bavoil et al. 2007; `oit.py`'s
 /// `FS_KBUF_RMW`).
-struct RmwStore {
-    kb: SplitSlots,
-    k: u32,
+pub struct RmwStore {
+    pub kb: SplitSlots,
+    pub k: u32,
 }
 
 impl FragmentKernel for RmwStore {

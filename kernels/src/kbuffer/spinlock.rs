@@ -38,17 +38,17 @@ pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![Box::new(KbSpinlock)]
 }
 
-struct SpinStore {
-    kb: SplitSlots,
-    k: u32,
+pub struct SpinStore {
+    pub kb: SplitSlots,
+    pub k: u32,
     /// Per pixel: 0 free, 1 held.
-    lock: Buf<u32>,
+    pub lock: Buf<u32>,
     /// Lock attempts before giving up (at least 1).
-    cap: u32,
+    pub cap: u32,
     /// Per pixel: fragments that gave up.
-    gave_up: Buf<u32>,
+    pub gave_up: Buf<u32>,
     /// Per pixel: critical sections entered (plain read-modify-write inside the lock).
-    entries: Buf<u32>,
+    pub entries: Buf<u32>,
 }
 
 impl FragmentKernel for SpinStore {
