@@ -182,6 +182,9 @@ struct BenchArgs {
 fn spec_of(a: &RunArgs) -> Result<RunSpec> {
     let scene = match &a.obj {
         Some(p) => {
+            if !p.exists() {
+                bail!("{}: file not found", p.display());
+            }
             let bytes =
                 std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))?;
             SceneSpec::Obj {
