@@ -5,7 +5,9 @@
 //! `cargo bench --bench explore`
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use fragrace_emu::{Buf, Device, Frag, FragInput, FragmentKernel, KernelInfo, Policy, ScheduleConfig};
+use fragrace_emu::{
+    Buf, Device, Frag, FragInput, FragmentKernel, KernelInfo, Policy, ScheduleConfig,
+};
 
 /// The loom/shuttle peer's model: take a node with a counter `fetch_add`, publish it with a
 /// compare-exchange loop on the pixel's head.
@@ -39,30 +41,54 @@ fn ll_push(c: &mut Criterion) {
     let head = dev.buffer::<u32>("head", 1).unwrap();
     let next = dev.buffer::<u32>("next", 5).unwrap();
     dev.memory.write(counter, 0, &[1]).unwrap();
-    let kernel = Push { counter, head, next };
-    let frags: Vec<FragInput> = (0..4).map(|i| FragInput { primitive_id: i, coverage: 1, ..Default::default() }).collect();
+    let kernel = Push {
+        counter,
+        head,
+        next,
+    };
+    let frags: Vec<FragInput> = (0..4)
+        .map(|i| FragInput {
+            primitive_id: i,
+            coverage: 1,
+            ..Default::default()
+        })
+        .collect();
     const BATCH: u64 = 10_000;
     g.throughput(Throughput::Elements(BATCH));
     for policy in [Policy::Random, Policy::Pct { depth: 2 }] {
         let mut seed = 0;
-        let sc = ScheduleConfig { policy: policy.clone(), seed: 0, window: 4, record: true };
+        let sc = ScheduleConfig {
+            policy: policy.clone(),
+            seed: 0,
+            window: 4,
+            record: true,
+        };
         g.bench_function(policy.to_string(), |b| {
             b.iter(|| {
-                let n = dev.explore(1, 1, &frags, &kernel, &sc, 1 << 16, seed..seed + BATCH, |e, mem| {
-                    // The invariant: the list holds exactly 4 distinct nodes.
-                    let mut p = mem.read(head).unwrap()[0];
-                    let nexts = mem.read(next).unwrap();
-                    let mut n = 0;
-                    while p != 0 && n < 8 {
-                        n += 1;
-                        p = nexts[p as usize];
-                    }
-                    assert_eq!(n, 4);
-                    assert!(!e.schedule.is_empty());
-                    mem.write(counter, 0, &[1]).unwrap();
-                    mem.write(head, 0, &[0]).unwrap();
-                    true
-                });
+                let n = dev.explore(
+                    1,
+                    1,
+                    &frags,
+                    &kernel,
+                    &sc,
+                    1 << 16,
+                    seed..seed + BATCH,
+                    |e, mem| {
+                        // The invariant: the list holds exactly 4 distinct nodes.
+                        let mut p = mem.read(head).unwrap()[0];
+                        let nexts = mem.read(next).unwrap();
+                        let mut n = 0;
+                        while p != 0 && n < 8 {
+                            n += 1;
+                            p = nexts[p as usize];
+                        }
+                        assert_eq!(n, 4);
+                        assert!(!e.schedule.is_empty());
+                        mem.write(counter, 0, &[1]).unwrap();
+                        mem.write(head, 0, &[0]).unwrap();
+                        true
+                    },
+                );
                 seed += BATCH;
                 n
             })

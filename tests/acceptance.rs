@@ -15,7 +15,12 @@ fn spec(scene: &str, algo: &str, size: u32, exec: ExecConfig) -> RunSpec {
 
 fn scheduled(policy: Policy, seed: u64) -> ExecConfig {
     ExecConfig {
-        mode: ExecMode::Scheduled(ScheduleConfig { policy, seed, window: 64, record: true }),
+        mode: ExecMode::Scheduled(ScheduleConfig {
+            policy,
+            seed,
+            window: 64,
+            record: true,
+        }),
         ..ExecConfig::default()
     }
 }
@@ -40,19 +45,48 @@ fn count_plain_loses_updates_and_count_never_does() {
         assert_eq!(r.hazards.total(), 0);
     }
     // Parallel: real threads plus lockstep warps lose updates on the hairball.
-    let (c, _) = counts(&spec("hairball", "count-plain", 128, ExecConfig::parallel(2)));
+    let (c, _) = counts(&spec(
+        "hairball",
+        "count-plain",
+        128,
+        ExecConfig::parallel(2),
+    ));
     let got: u64 = c.iter().map(|&v| v as u64).sum();
-    assert!(got < total, "parallel count-plain lost nothing ({got} of {total})");
-    assert!(c.iter().zip(&exact).all(|(a, b)| a <= b), "a plain count can only lose, never gain");
+    assert!(
+        got < total,
+        "parallel count-plain lost nothing ({got} of {total})"
+    );
+    assert!(
+        c.iter().zip(&exact).all(|(a, b)| a <= b),
+        "a plain count can only lose, never gain"
+    );
     // Scheduled: every interleaving policy loses updates and the detector names them.
-    for p in [Policy::Random, Policy::Pct { depth: 3 }, Policy::Warp { lanes: 32 }, Policy::Reverse, Policy::FarFirst] {
-        let (c, r) = counts(&spec("hairball", "count-plain", 128, scheduled(p.clone(), 1)));
+    for p in [
+        Policy::Random,
+        Policy::Pct { depth: 3 },
+        Policy::Warp { lanes: 32 },
+        Policy::Reverse,
+        Policy::FarFirst,
+    ] {
+        let (c, r) = counts(&spec(
+            "hairball",
+            "count-plain",
+            128,
+            scheduled(p.clone(), 1),
+        ));
         let got: u64 = c.iter().map(|&v| v as u64).sum();
         assert!(got < total, "{p}: lost nothing");
-        assert!(r.hazards.lost_updates > 0, "{p}: the detector saw no lost update");
+        assert!(
+            r.hazards.lost_updates > 0,
+            "{p}: the detector saw no lost update"
+        );
         let h = &r.hazard_list[0];
         assert_eq!(h.buffer, "counts");
-        assert_eq!(h.index, h.victim.y * 128 + h.victim.x, "the hazard names its pixel");
+        assert_eq!(
+            h.index,
+            h.victim.y * 128 + h.victim.x,
+            "the hazard names its pixel"
+        );
     }
 }
 
@@ -64,18 +98,33 @@ fn scheduled_runs_are_bit_identical_per_seed_and_differ_across_seeds() {
     assert_eq!(c1, c2);
     assert_eq!(r1.schedule, r2.schedule);
     assert_eq!(r1.hazards, r2.hazards);
-    let (c3, r3) = counts(&spec("hairball", "count-plain", 64, scheduled(Policy::Random, 12)));
+    let (c3, r3) = counts(&spec(
+        "hairball",
+        "count-plain",
+        64,
+        scheduled(Policy::Random, 12),
+    ));
     assert!(c3 != c1 || r3.schedule != r1.schedule);
 }
 
 #[test]
 fn a_recorded_schedule_replays_exactly_through_the_bytes_policy() {
     // A recorded schedule (one byte per step) fed back as an explicit schedule.
-    let mut s = spec("hairball", "count-plain", 96, scheduled(Policy::Pct { depth: 3 }, 4));
+    let mut s = spec(
+        "hairball",
+        "count-plain",
+        96,
+        scheduled(Policy::Pct { depth: 3 }, 4),
+    );
     s.params.k = 8;
     let (c1, r1) = counts(&s);
     let bytes = r1.schedule.clone().unwrap();
-    let (c2, r2) = counts(&spec("hairball", "count-plain", 96, scheduled(Policy::Bytes(bytes.clone()), 0)));
+    let (c2, r2) = counts(&spec(
+        "hairball",
+        "count-plain",
+        96,
+        scheduled(Policy::Bytes(bytes.clone()), 0),
+    ));
     assert_eq!(c1, c2);
     assert_eq!(r2.schedule.unwrap(), bytes);
 }

@@ -5,7 +5,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn fragrace(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fragrace")).args(args).output().expect("runs")
+    Command::new(env!("CARGO_BIN_EXE_fragrace"))
+        .args(args)
+        .output()
+        .expect("runs")
 }
 
 fn tmp(name: &str) -> PathBuf {
@@ -26,33 +29,90 @@ fn render_json_has_the_documented_fields() {
     let d = tmp("render");
     let raw = d.join("counts.u32");
     let o = fragrace(&[
-        "render", "--scene", "bunny", "--algo", "count", "--width", "96", "--height", "80", "--json", "--raw-out",
-        raw.to_str().unwrap(), "--threads", "2",
+        "render",
+        "--scene",
+        "bunny",
+        "--algo",
+        "count",
+        "--width",
+        "96",
+        "--height",
+        "80",
+        "--json",
+        "--raw-out",
+        raw.to_str().unwrap(),
+        "--threads",
+        "2",
     ]);
     let v = json(&o);
     for key in [
-        "algo", "scene", "triangles", "width", "height", "exec", "policy", "seed", "threads", "fragments",
-        "covered_pixels", "max_depth_complexity", "hazards", "epr", "wall_ms",
+        "algo",
+        "scene",
+        "triangles",
+        "width",
+        "height",
+        "exec",
+        "policy",
+        "seed",
+        "threads",
+        "fragments",
+        "covered_pixels",
+        "max_depth_complexity",
+        "hazards",
+        "epr",
+        "wall_ms",
     ] {
         assert!(v.get(key).is_some(), "missing {key}: {v}");
     }
     assert_eq!(v["triangles"], 3674);
     let bytes = std::fs::read(&raw).unwrap();
     assert_eq!(bytes.len(), 96 * 80 * 4);
-    let sum: u64 = bytes.chunks(4).map(|c| u32::from_le_bytes(c.try_into().unwrap()) as u64).sum();
+    let sum: u64 = bytes
+        .chunks(4)
+        .map(|c| u32::from_le_bytes(c.try_into().unwrap()) as u64)
+        .sum();
     assert_eq!(sum, v["fragments"].as_u64().unwrap());
 }
 
 #[test]
 fn check_reports_epr_and_a_replay_command() {
     let o = fragrace(&[
-        "check", "--scene", "coplanar-stack", "--algo", "kb-rmw", "--exec", "scheduled", "--schedules", "4", "--width",
-        "24", "--height", "24", "--json",
+        "check",
+        "--scene",
+        "coplanar-stack",
+        "--algo",
+        "kb-rmw",
+        "--exec",
+        "scheduled",
+        "--schedules",
+        "4",
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--json",
     ]);
     let v = json(&o);
-    assert!(v["hazards_total"]["lost_updates"].as_u64().unwrap() > 0, "{v}");
-    assert!(v["replay"].as_str().unwrap().contains("--policy random --seed"));
-    let o = fragrace(&["check", "--scene", "cubes", "--algo", "kb-atomic64", "--width", "32", "--height", "32", "--json"]);
+    assert!(
+        v["hazards_total"]["lost_updates"].as_u64().unwrap() > 0,
+        "{v}"
+    );
+    assert!(v["replay"]
+        .as_str()
+        .unwrap()
+        .contains("--policy random --seed"));
+    let o = fragrace(&[
+        "check",
+        "--scene",
+        "cubes",
+        "--algo",
+        "kb-atomic64",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--json",
+    ]);
     let v = json(&o);
     assert_eq!(v["epr"], 0.0);
 }
@@ -61,7 +121,10 @@ fn fails_with(args: &[&str], needle: &str) {
     let o = fragrace(args);
     assert!(!o.status.success(), "{args:?} should fail");
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains(needle), "{args:?}: expected `{needle}` in: {err}");
+    assert!(
+        err.contains(needle),
+        "{args:?}: expected `{needle}` in: {err}"
+    );
     assert!(!err.contains("panicked"), "{err}");
 }
 
@@ -73,19 +136,64 @@ fn bad_input_gets_a_clear_error() {
         std::fs::write(&p, text).unwrap();
         p.to_str().unwrap().to_string()
     };
-    fails_with(&["render", "--obj", &obj("trunc.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")], "out of range");
-    fails_with(&["render", "--obj", &obj("nan.obj", b"v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")], "non-finite");
-    fails_with(&["render", "--obj", &obj("inf.obj", b"v inf 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")], "non-finite");
-    fails_with(&["render", "--obj", &obj("garbage.obj", b"\x00\xff\xfe garbage")], "");
-    fails_with(&["render", "--obj", &obj("bad.obj.gz", b"not gzip at all")], "gzip");
-    fails_with(&["render", "--obj", &obj("empty.obj", b"# nothing\n")], "no triangles");
+    fails_with(
+        &[
+            "render",
+            "--obj",
+            &obj("trunc.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n"),
+        ],
+        "out of range",
+    );
+    fails_with(
+        &[
+            "render",
+            "--obj",
+            &obj("nan.obj", b"v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"),
+        ],
+        "non-finite",
+    );
+    fails_with(
+        &[
+            "render",
+            "--obj",
+            &obj("inf.obj", b"v inf 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"),
+        ],
+        "non-finite",
+    );
+    fails_with(
+        &[
+            "render",
+            "--obj",
+            &obj("garbage.obj", b"\x00\xff\xfe garbage"),
+        ],
+        "",
+    );
+    fails_with(
+        &["render", "--obj", &obj("bad.obj.gz", b"not gzip at all")],
+        "gzip",
+    );
+    fails_with(
+        &["render", "--obj", &obj("empty.obj", b"# nothing\n")],
+        "no triangles",
+    );
     fails_with(&["render", "--obj", "/nonexistent/model.obj"], "not found");
     fails_with(&["render", "--scene", "cubes", "--width", "0"], "viewport");
-    fails_with(&["render", "--scene", "cubes", "--width", "100000", "--height", "100000"], "viewport");
+    fails_with(
+        &[
+            "render", "--scene", "cubes", "--width", "100000", "--height", "100000",
+        ],
+        "viewport",
+    );
     fails_with(&["render", "--scene", "nope"], "unknown built-in scene");
     fails_with(&["render", "--algo", "nope"], "unknown algorithm");
-    fails_with(&["render", "--exec", "scheduled", "--policy", "pct:0"], "unknown policy");
-    fails_with(&["replay", &obj("case.json", b"{\"version\": 1}")], "not a fragrace case file");
+    fails_with(
+        &["render", "--exec", "scheduled", "--policy", "pct:0"],
+        "unknown policy",
+    );
+    fails_with(
+        &["replay", &obj("case.json", b"{\"version\": 1}")],
+        "not a fragrace case file",
+    );
 }
 
 #[test]
@@ -93,7 +201,16 @@ fn fuzz_finds_the_rmw_hazard_and_replay_reproduces_it() {
     let d = tmp("fuzz");
     let out = d.join("cases");
     let o = fragrace(&[
-        "fuzz", "--algo", "kb-rmw", "--iterations", "12", "--out", out.to_str().unwrap(), "--shrink-secs", "3", "--json",
+        "fuzz",
+        "--algo",
+        "kb-rmw",
+        "--iterations",
+        "12",
+        "--out",
+        out.to_str().unwrap(),
+        "--shrink-secs",
+        "3",
+        "--json",
     ]);
     let state = json(&o);
     assert!(state["expected_findings"].as_u64().unwrap() > 0, "{state}");
@@ -120,7 +237,9 @@ fn case_files(dir: &Path) -> Vec<PathBuf> {
     std::fs::read_dir(dir)
         .map(|r| {
             r.filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.extension().is_some_and(|e| e == "json") && !p.ends_with("campaign.json"))
+                .filter(|p| {
+                    p.extension().is_some_and(|e| e == "json") && !p.ends_with("campaign.json")
+                })
                 .collect()
         })
         .unwrap_or_default()
@@ -131,26 +250,53 @@ fn a_killed_campaign_loses_nothing_and_resumes() {
     let d = tmp("kill");
     let out = d.join("cases");
     let mut child = Command::new(env!("CARGO_BIN_EXE_fragrace"))
-        .args(["fuzz", "--algo", "kb-rmw,count-plain", "--iterations", "100000", "--shrink-secs", "1", "--out"])
+        .args([
+            "fuzz",
+            "--algo",
+            "kb-rmw,count-plain",
+            "--iterations",
+            "100000",
+            "--shrink-secs",
+            "1",
+            "--out",
+        ])
         .arg(&out)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    assert!(wait_for(|| case_files(&out).len() >= 2, 120), "no case within 120 s");
+    assert!(
+        wait_for(|| case_files(&out).len() >= 2, 120),
+        "no case within 120 s"
+    );
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
     let before = case_files(&out);
     for c in &before {
         let bytes = std::fs::read(c).unwrap();
-        fragrace::case::parse(&bytes, &c.display().to_string()).expect("every case is complete JSON");
+        fragrace::case::parse(&bytes, &c.display().to_string())
+            .expect("every case is complete JSON");
     }
     let state: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("campaign.json")).unwrap()).expect("state is complete JSON");
+        serde_json::from_slice(&std::fs::read(out.join("campaign.json")).unwrap())
+            .expect("state is complete JSON");
     let done = state["next_iteration"].as_u64().unwrap();
-    let o = fragrace(&["fuzz", "--resume", "--iterations", "5", "--shrink-secs", "1", "--json", "--out", out.to_str().unwrap()]);
+    let o = fragrace(&[
+        "fuzz",
+        "--resume",
+        "--iterations",
+        "5",
+        "--shrink-secs",
+        "1",
+        "--json",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     let after = json(&o);
-    assert!(after["next_iteration"].as_u64().unwrap() >= done + 5, "{after}");
+    assert!(
+        after["next_iteration"].as_u64().unwrap() >= done + 5,
+        "{after}"
+    );
     for c in &before {
         assert!(c.exists(), "{} vanished", c.display());
     }

@@ -137,17 +137,18 @@ fn sweep(scene: &str, size: u32, azimuths: &[f32], seeds: u64) {
     );
     if scene == "hairball" {
         for (name, (epr_runs, hazard_runs)) in prone_seen {
-            if name == "kb-spinlock" {
-                continue; // hazard-prone only with a small spin cap: see the kernels' tests
-            }
             assert!(
                 hazard_runs > 0,
                 "{name}: no scheduled run showed a hazard on {scene}"
             );
-            assert!(
-                epr_runs > 0,
-                "{name}: no scheduled run differed from the truth on {scene}"
-            );
+            // kb-multipass races by design but certifies only what no race touched, so its
+            // result stays exact; kb-spinlock errs only where a fragment gave up.
+            if name != "kb-multipass" && name != "kb-spinlock" {
+                assert!(
+                    epr_runs > 0,
+                    "{name}: no scheduled run differed from the truth on {scene}"
+                );
+            }
         }
     }
 }

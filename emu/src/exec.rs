@@ -20,8 +20,8 @@ mod run;
 mod threads;
 
 pub use policy::{Policy, PolicyParseError};
-pub use run::Fault;
 pub use run::Execution;
+pub use run::Fault;
 pub(crate) use run::{explore, shade, FragOut, ShadeOutcome};
 pub use threads::{run_on_threads, ThreadOutcome};
 

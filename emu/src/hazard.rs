@@ -250,7 +250,9 @@ impl Detector {
     /// [`Detector::set_base`]; without a base, the first admitted sets it).
     pub fn start(&mut self, id: InvocationId, step: u64) {
         let base = *self.base_seq.get_or_insert(id.seq);
-        let Some(i) = id.seq.checked_sub(base).map(|i| i as usize) else { return };
+        let Some(i) = id.seq.checked_sub(base).map(|i| i as usize) else {
+            return;
+        };
         if self.invs.len() <= i {
             self.invs.resize_with(i + 1, InvState::default);
         }
@@ -280,7 +282,9 @@ impl Detector {
     /// other started).
     fn overlapped(&self, a: u64, b: u64) -> bool {
         match (self.inv(a), self.inv(b)) {
-            (Some(x), Some(y)) => x.end.is_none_or(|e| e > y.start) && y.end.is_none_or(|e| e > x.start),
+            (Some(x), Some(y)) => {
+                x.end.is_none_or(|e| e > y.start) && y.end.is_none_or(|e| e > x.start)
+            }
             _ => false,
         }
     }
@@ -291,14 +295,23 @@ impl Detector {
             return;
         }
         self.counts.bump(kind);
-        let (Some(v), Some(o)) = (self.inv(victim).and_then(|s| s.id), self.inv(other).and_then(|s| s.id)) else {
+        let (Some(v), Some(o)) = (
+            self.inv(victim).and_then(|s| s.id),
+            self.inv(other).and_then(|s| s.id),
+        ) else {
             return;
         };
         if let Some(h) = self.heat.get_mut((v.y * self.width + v.x) as usize) {
             *h += 1;
         }
         if self.hazards.len() < self.keep {
-            self.hazards.push(RawHazard { kind, addr, victim: v, other: o, step });
+            self.hazards.push(RawHazard {
+                kind,
+                addr,
+                victim: v,
+                other: o,
+                step,
+            });
         }
     }
 
@@ -329,7 +342,12 @@ impl Detector {
     ) {
         let plain = op.is_plain();
         let write = op.is_write();
-        let me = Access { seq, step, plain, lock };
+        let me = Access {
+            seq,
+            step,
+            plain,
+            lock,
+        };
         let slot = self.slot(addr);
         // Conflicts with the last write (and, for a write, with the reads since it).
         let mut conflicts: [Option<Access>; 8] = [None; 8];
@@ -377,7 +395,9 @@ impl Detector {
         }
         // Lost update: my plain store after my plain load, with another's write between.
         if op == OpKind::Store {
-            let my_load = self.inv(seq).and_then(|s| s.loads.iter().rev().find(|l| l.0 == addr).map(|l| l.1));
+            let my_load = self
+                .inv(seq)
+                .and_then(|s| s.loads.iter().rev().find(|l| l.0 == addr).map(|l| l.1));
             if let (Some(load_step), Some(w)) = (my_load, prev_write) {
                 if w.seq != seq && w.step > load_step {
                     self.report(HazardKind::LostUpdate, addr, seq, w.seq, step);
@@ -469,8 +489,10 @@ impl Detector {
 
     /// The hottest addresses: (address, accesses, peak concurrent accessors).
     pub fn hotspots(&self, n: usize) -> Vec<(Addr, u64, u32)> {
-        let mut v: Vec<(Addr, u64, u32)> =
-            self.slab[..self.slab_len].iter().map(|s| (s.addr, s.accesses, s.peak)).collect();
+        let mut v: Vec<(Addr, u64, u32)> = self.slab[..self.slab_len]
+            .iter()
+            .map(|s| (s.addr, s.accesses, s.peak))
+            .collect();
         v.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
         v.truncate(n);
         v

@@ -181,6 +181,7 @@ pub(crate) enum Mode {
 }
 
 /// What every invocation of a pass shares.
+#[derive(Clone)]
 pub(crate) struct PassEnv<'a> {
     pub memory: &'a Memory,
     pub tris: &'a [SetupTriangle],
@@ -189,6 +190,9 @@ pub(crate) struct PassEnv<'a> {
     pub samples: u32,
     pub interlock: Option<&'a Interlock>,
     pub interlock_mode: Option<InterlockMode>,
+    /// Per-sample ordered interlock: each fragment's per-sample tickets, indexed by its
+    /// `ticket` field (empty otherwise: explicit fragments use `ticket` for every sample).
+    pub sample_tickets: &'a [[u32; 8]],
     pub mode: Mode,
     pub max_steps: u64,
     pub max_waits: u64,
@@ -644,6 +648,22 @@ impl<'a> Frag<'a> {
         self.step(StepKind::Yield).await;
     }
 
+    /// The interlock words this invocation claims.
+    pub(crate) fn claim(&self) -> Option<(&'a Interlock, InterlockMode, crate::interlock::Claim)> {
+        let (lock, mode) = (self.env.interlock?, self.env.interlock_mode?);
+        let i = self.input();
+        let tickets = if mode.per_sample {
+            self.env
+                .sample_tickets
+                .get(i.ticket as usize)
+                .copied()
+                .unwrap_or([i.ticket; 8])
+        } else {
+            [i.ticket; 8]
+        };
+        Some((lock, mode, lock.claim(mode, i.x, i.y, i.coverage, tickets)))
+    }
+
     /// Enters the per-pixel critical section declared in [`KernelInfo::interlock`]
     /// (`beginInvocationInterlockARB`). Ordered mode enters in API order.
     pub async fn interlock_begin(&self) {
@@ -659,19 +679,20 @@ impl<'a> Frag<'a> {
             });
             return Halt.await;
         }
-        let input = self.input();
-        let key = lock.key(input.x, input.y);
+        let Some((_, _, claim)) = self.claim() else {
+            return Halt.await;
+        };
         match self.env.mode {
             Mode::Scheduled => {
                 // The scheduler grants this step only when the lock can be taken.
                 self.step(StepKind::InterlockBegin).await;
-                let ok = lock.try_enter(mode, key, input.ticket);
+                let ok = lock.try_enter_claim(mode, &claim);
                 debug_assert!(ok, "scheduler granted an interlock that was not free");
             }
             Mode::Direct { .. } => {
                 WaitUntil {
                     frag: *self,
-                    ready: || lock.try_enter(mode, key, input.ticket),
+                    ready: || lock.try_enter_claim(mode, &claim),
                     kind: StepKind::InterlockBegin,
                 }
                 .await;
@@ -695,8 +716,9 @@ impl<'a> Frag<'a> {
         if self.env.mode == Mode::Scheduled {
             self.step(StepKind::InterlockEnd).await;
         }
-        let input = self.input();
-        lock.leave(mode, lock.key(input.x, input.y), input.ticket);
+        if let Some((_, _, claim)) = self.claim() {
+            lock.leave_claim(mode, &claim);
+        }
         self.inv.in_interlock.set(false);
     }
 
@@ -713,21 +735,23 @@ impl<'a> Frag<'a> {
         if self.inv.entered_interlock.get() || !mode.ordered {
             return;
         }
-        let input = self.input();
-        let key = lock.key(input.x, input.y);
+        let _ = lock;
+        let Some((lock, _, claim)) = self.claim() else {
+            return;
+        };
         match self.env.mode {
             Mode::Scheduled => {
                 self.step(StepKind::PassTurn).await;
-                lock.pass_turn(key, input.ticket);
+                lock.pass_turn_claim(&claim);
             }
             Mode::Direct { .. } => {
                 WaitUntil {
                     frag: *self,
-                    ready: || lock.is_turn(key, input.ticket),
+                    ready: || lock.is_turn_claim(&claim),
                     kind: StepKind::PassTurn,
                 }
                 .await;
-                lock.pass_turn(key, input.ticket);
+                lock.pass_turn_claim(&claim);
             }
         }
     }

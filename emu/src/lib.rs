@@ -35,9 +35,9 @@ pub use framebuffer::{Framebuffer, Image};
 pub use geometry::{Draw, Mesh};
 pub use hazard::{Hazard, HazardCounts, HazardKind};
 pub use interlock::InterlockMode;
+pub use kernel::FragInput;
 pub use kernel::{FaultKind, Frag, FragmentKernel, KernelInfo};
 pub use memory::{Buf, Memory, Word};
-pub use kernel::FragInput;
 pub use pipeline::{Device, Fault, OcclusionQuery, PassError, PassReport, PassState};
 pub use raster::{CullMode, FrontFace, RasterState, SampleCount, Viewport};
 pub use state::{

@@ -173,7 +173,10 @@ impl Device {
             // sample of its pixel (see RasterState::multisample).
             let single = !raster.multisample && raster.samples.count() > 1;
             let bin_state = if single {
-                RasterState { samples: crate::raster::SampleCount::X1, ..raster }
+                RasterState {
+                    samples: crate::raster::SampleCount::X1,
+                    ..raster
+                }
             } else {
                 raster
             };
@@ -222,6 +225,7 @@ impl Device {
             samples: 1,
             interlock: interlock.as_ref(),
             interlock_mode: info.interlock,
+            sample_tickets: &[],
             mode: match exec.mode {
                 ExecMode::Scheduled(_) => Mode::Scheduled,
                 ExecMode::Parallel if exec.lockstep => Mode::Direct { yield_every: 1 },
@@ -275,6 +279,7 @@ impl Device {
             samples: 1,
             interlock: interlock.as_ref(),
             interlock_mode: info.interlock,
+            sample_tickets: &[],
             mode: Mode::Scheduled,
             max_steps,
             max_waits: max_steps,
@@ -339,7 +344,21 @@ impl Device {
             EarlyTests::Auto => !info.may_discard && !info.writes_depth,
         };
         let targets = state.targets.len();
-        let interlock = info.interlock.map(|_| Interlock::new(fb.width, fb.height));
+        let interlock = info.interlock.map(|m| {
+            Interlock::with_samples(
+                fb.width,
+                fb.height,
+                if m.per_sample {
+                    fb.samples.count() as u32
+                } else {
+                    1
+                },
+            )
+        });
+        let per_sample_ordered =
+            info.interlock.is_some_and(|m| m.per_sample && m.ordered) && fb.samples.count() > 1;
+        let mut sample_counters: Vec<u32> = Vec::new();
+        let mut side: Vec<[u32; 8]> = Vec::new();
         let contention = (exec.contention && exec.mode == ExecMode::Parallel).then(|| {
             let words: Vec<u32> = self
                 .memory
@@ -359,7 +378,7 @@ impl Device {
             Geometry::Binned { binned, .. } => &binned.tris,
             Geometry::FullScreen => &[],
         };
-        let env = PassEnv {
+        let env_base = PassEnv {
             memory: &self.memory,
             tris,
             width: fb.width,
@@ -367,6 +386,7 @@ impl Device {
             samples: fb.samples.count() as u32,
             interlock: interlock.as_ref(),
             interlock_mode: info.interlock,
+            sample_tickets: &[],
             mode,
             max_steps: exec.max_steps,
             max_waits: exec.max_waits,
@@ -386,7 +406,7 @@ impl Device {
                 geo,
                 state,
                 early,
-                samples: env.samples,
+                samples: env_base.samples,
             };
             let counts =
                 for_each_tile(tiles, &mut lists, exec.threads, |tile_index, tile, list| {
@@ -407,6 +427,31 @@ impl Device {
                 f.seq = *seq_base + i as u64;
             }
             *seq_base += inputs.len() as u64;
+            // Per-sample ordered interlock: each fragment's rank among the fragments covering
+            // each of its samples, in API order (the ticket field then indexes this table).
+            side.clear();
+            if per_sample_ordered {
+                let spp = env_base.samples as usize;
+                if sample_counters.is_empty() {
+                    sample_counters = vec![0; fb.width as usize * fb.height as usize * spp];
+                }
+                for (i, f) in inputs.iter_mut().enumerate() {
+                    let base = (f.y as usize * fb.width as usize + f.x as usize) * spp;
+                    let mut t = [0u32; 8];
+                    for (s, slot) in t.iter_mut().enumerate().take(spp) {
+                        if f.coverage & (1 << s) != 0 {
+                            *slot = sample_counters[base + s];
+                            sample_counters[base + s] += 1;
+                        }
+                    }
+                    side.push(t);
+                    f.ticket = i as u32;
+                }
+            }
+            let env = PassEnv {
+                sample_tickets: &side,
+                ..env_base.clone()
+            };
             let mut outs = vec![FragOut::default(); inputs.len()];
             let mut colors = vec![[0u32; 4]; inputs.len() * targets];
             let exec_wave = match &exec.mode {
@@ -433,19 +478,40 @@ impl Device {
                 let mut order: Vec<usize> = (0..inputs.len()).collect();
                 order.sort_by_key(|&i| {
                     let f = &inputs[i];
-                    ((f.y / block) as u64 * fb.width.div_ceil(block) as u64 + (f.x / block) as u64, i)
+                    (
+                        (f.y / block) as u64 * fb.width.div_ceil(block) as u64
+                            + (f.x / block) as u64,
+                        i,
+                    )
                 });
                 let sched: Vec<FragInput> = order.iter().map(|&i| inputs[i]).collect();
                 let mut s_outs = vec![FragOut::default(); sched.len()];
                 let mut s_colors = vec![[0u32; 4]; sched.len() * targets];
-                let o = shade(kernel, &env, &exec_wave, &sched, &mut s_outs, &mut s_colors, targets);
+                let o = shade(
+                    kernel,
+                    &env,
+                    &exec_wave,
+                    &sched,
+                    &mut s_outs,
+                    &mut s_colors,
+                    targets,
+                );
                 for (k, &i) in order.iter().enumerate() {
                     outs[i] = s_outs[k];
-                    colors[i * targets..(i + 1) * targets].copy_from_slice(&s_colors[k * targets..(k + 1) * targets]);
+                    colors[i * targets..(i + 1) * targets]
+                        .copy_from_slice(&s_colors[k * targets..(k + 1) * targets]);
                 }
                 o
             } else {
-                shade(kernel, &env, &exec_wave, &inputs, &mut outs, &mut colors, targets)
+                shade(
+                    kernel,
+                    &env,
+                    &exec_wave,
+                    &inputs,
+                    &mut outs,
+                    &mut colors,
+                    targets,
+                )
             };
             bytes_used += outcome.bytes_used;
             absorb(report, outcome, &self.memory);
@@ -534,7 +600,11 @@ fn absorb(report: &mut PassReport, outcome: ShadeOutcome, memory: &Memory) {
 /// Where a pass's fragments come from.
 enum Geometry<'a> {
     /// `single`: multisampling off on a multisampled target (one coverage bit for all).
-    Binned { binned: &'a Binned, instance: u32, single: bool },
+    Binned {
+        binned: &'a Binned,
+        instance: u32,
+        single: bool,
+    },
     FullScreen,
 }
 
@@ -635,7 +705,11 @@ impl RasterFront<'_> {
                     .unwrap_or(&[(0.5, 0.5)]);
                 let per_sample_depth = self.samples > 1 && !*single;
                 binned.raster_tile(tile_index, |f| {
-                    let f_cov = if *single && f.coverage & 1 != 0 { all } else { f.coverage };
+                    let f_cov = if *single && f.coverage & 1 != 0 {
+                        all
+                    } else {
+                        f.coverage
+                    };
                     let cov = f_cov & sample_mask;
                     if cov == 0 {
                         return;

@@ -59,14 +59,22 @@ pub struct OpCounts(pub [u64; 13]);
 impl OpCounts {
     /// The count of the kind named `name` (e.g. `"add"`), `None` if it was never used.
     pub fn get(&self, name: &str) -> Option<&u64> {
-        OpKind::ALL.iter().position(|k| k.name() == name).map(|i| &self.0[i]).filter(|&&n| n > 0)
+        OpKind::ALL
+            .iter()
+            .position(|k| k.name() == name)
+            .map(|i| &self.0[i])
+            .filter(|&&n| n > 0)
     }
     pub fn of(&self, kind: OpKind) -> u64 {
         self.0[kind as usize]
     }
     /// (name, count) of the kinds used.
     pub fn iter(&self) -> impl Iterator<Item = (&'static str, u64)> + '_ {
-        OpKind::ALL.iter().zip(self.0.iter()).filter(|(_, &n)| n > 0).map(|(k, &n)| (k.name(), n))
+        OpKind::ALL
+            .iter()
+            .zip(self.0.iter())
+            .filter(|(_, &n)| n > 0)
+            .map(|(k, &n)| (k.name(), n))
     }
 }
 
@@ -102,7 +110,11 @@ impl Stats {
     }
     /// Total atomic operations (everything but plain loads and stores).
     pub fn atomics(&self) -> u64 {
-        self.ops.iter().filter(|(k, _)| *k != "load" && *k != "store").map(|(_, v)| v).sum()
+        self.ops
+            .iter()
+            .filter(|(k, _)| *k != "load" && *k != "store")
+            .map(|(_, v)| v)
+            .sum()
     }
     /// Adds another pass's counters.
     pub fn merge(&mut self, o: &Stats) {

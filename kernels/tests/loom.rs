@@ -135,7 +135,10 @@ impl Hunt {
         let total = self.executions.load(Relaxed);
         let first = *self.first.lock().unwrap();
         let Some((n, t)) = first else {
-            panic!("{}: loom explored {total} executions and never found the bug", self.name);
+            panic!(
+                "{}: loom explored {total} executions and never found the bug",
+                self.name
+            );
         };
         println!(
             "{}: loom found it at execution {n} after {:.3} s ({total} executions explored in {:.3} s)",
@@ -411,7 +414,6 @@ fn loom_finds_the_rmw_k_buffer_losing_a_fragment() {
 
 struct Spin {
     kb: SplitSlots,
-    k: u32,
     lock: Buf<u32>,
     gave_up: Buf<u32>,
     entries: Buf<u32>,
@@ -427,7 +429,6 @@ fn spin_setup(k: u32) -> (Device, Spin) {
         dev,
         Spin {
             kb,
-            k,
             lock,
             gave_up,
             entries,
@@ -554,7 +555,11 @@ fn interlock_k_buffer(mode: InterlockMode) {
         assert_eq!(read(&dev, entries)[0], 3, "mutual exclusion");
         if mode.ordered {
             assert_eq!(read(&dev, out_of_order)[0], 0, "entered out of API order");
-            assert_eq!(read(&dev, last)[0], 3, "the last entrant is the last primitive");
+            assert_eq!(
+                read(&dev, last)[0],
+                3,
+                "the last entrant is the last primitive"
+            );
         }
     });
 }

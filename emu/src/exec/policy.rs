@@ -165,7 +165,8 @@ impl Chooser {
         self.change_points.clear();
         if let Policy::Pct { depth } = &self.policy {
             for _ in 1..*depth {
-                self.change_points.push(self.rng.gen_range(0..steps_estimate.max(1)));
+                self.change_points
+                    .push(self.rng.gen_range(0..steps_estimate.max(1)));
             }
             self.change_points.sort_unstable();
         }

@@ -391,7 +391,9 @@ fn run_scheduled<K: FragmentKernel>(
     acc.finish(outcome);
     let memory = env.memory;
     outcome.hazard_counts = scratch.detector.counts();
-    outcome.hazards = scratch.detector.hazards(|b| memory.buffer_name(b).to_string());
+    outcome.hazards = scratch
+        .detector
+        .hazards(|b| memory.buffer_name(b).to_string());
     outcome.scheduled_hotspots = scratch.detector.hotspots(crate::stats::HOTSPOTS);
     outcome.heat = std::mem::take(&mut scratch.detector.heat);
     outcome.schedule = sc.record.then(|| std::mem::take(&mut scratch.record));
@@ -416,7 +418,16 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     acc: &mut Acc,
 ) -> u64 {
     let width = slots.len();
-    let SchedScratch { detector, chooser, which, free, inflight, cands, cand_slots, record } = scratch;
+    let SchedScratch {
+        detector,
+        chooser,
+        which,
+        free,
+        inflight,
+        cands,
+        cand_slots,
+        record,
+    } = scratch;
     detector.reset(env.width, env.height);
     if let Some(base) = inputs.iter().map(|f| f.seq).min() {
         detector.set_base(base);
@@ -445,7 +456,11 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             futs[s] = None;
             let i = which[s];
             let seq = inputs[i].seq;
-            acc.harvest(&slots[s], &mut outs[i], &mut colors[i * targets..(i + 1) * targets]);
+            acc.harvest(
+                &slots[s],
+                &mut outs[i],
+                &mut colors[i * targets..(i + 1) * targets],
+            );
             detector.finish(seq, step);
             chooser.retire(seq);
             if let Some(p) = inflight.iter().position(|&x| x == s) {
@@ -479,26 +494,21 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         for &s in inflight.iter() {
             let inv = &slots[s];
             let runnable = match inv.pending.get() {
-                Some(StepKind::InterlockBegin) => match (env.interlock, env.interlock_mode) {
-                    (Some(l), Some(m)) => {
-                        let i = inv.input.get();
-                        l.can_enter(m, l.key(i.x, i.y), i.ticket)
-                    }
-                    _ => true,
-                },
-                Some(StepKind::PassTurn) => match env.interlock {
-                    Some(l) => {
-                        let i = inv.input.get();
-                        l.is_turn(l.key(i.x, i.y), i.ticket)
-                    }
-                    None => true,
-                },
+                Some(StepKind::InterlockBegin) => Frag { inv, env }
+                    .claim()
+                    .is_none_or(|(l, m, c)| l.can_enter_claim(m, &c)),
+                Some(StepKind::PassTurn) => Frag { inv, env }
+                    .claim()
+                    .is_none_or(|(l, _, c)| l.is_turn_claim(&c)),
                 Some(_) => true,
                 None => false,
             };
             if runnable {
                 let i = inv.input.get();
-                cands.push(Candidate { seq: i.seq, depth: i.depth });
+                cands.push(Candidate {
+                    seq: i.seq,
+                    depth: i.depth,
+                });
                 cand_slots.push(s);
             }
         }
@@ -519,18 +529,32 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         let s = cand_slots[k];
         let inv = &slots[s];
         let input = inv.input.get();
-        if let Some(StepKind::Mem { addr, op, record: rec }) = inv.pending.get() {
+        if let Some(StepKind::Mem {
+            addr,
+            op,
+            record: rec,
+        }) = inv.pending.get()
+        {
             let lock = match env.interlock {
                 Some(l) if inv.in_interlock.get() => Some(l.key(input.x, input.y)),
                 _ => None,
             };
-            detector.access(input.seq, addr, op, step, lock, rec.map(|r| (r.base, r.len, r.word)));
+            detector.access(
+                input.seq,
+                addr,
+                op,
+                step,
+                lock,
+                rec.map(|r| (r.base, r.len, r.word)),
+            );
         }
         inv.granted.set(true);
         step += 1;
         let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
         if !done && inv.steps.get() > max_steps {
-            *inv.fault.borrow_mut() = Some(FaultKind::Watchdog { steps: inv.steps.get() });
+            *inv.fault.borrow_mut() = Some(FaultKind::Watchdog {
+                steps: inv.steps.get(),
+            });
             retire!(s);
         } else if done {
             retire!(s);

@@ -49,6 +49,7 @@ pub fn run_on_threads<K: FragmentKernel + Send + 'static>(
                     samples: 1,
                     interlock: mode.map(|_| &*interlock),
                     interlock_mode: mode,
+                    sample_tickets: &[],
                     mode: Mode::Direct { yield_every: 0 },
                     max_steps,
                     max_waits: max_steps,
