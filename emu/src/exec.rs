@@ -22,7 +22,7 @@ mod threads;
 pub use policy::{Policy, PolicyParseError};
 pub use run::Execution;
 pub use run::Fault;
-pub(crate) use run::{explore, shade, FragOut, ShadeOutcome};
+pub(crate) use run::{explore, shade, shade_chunks, FragOut, ShadeOutcome};
 pub use threads::{run_on_threads, ThreadOutcome};
 
 /// Configuration of the `scheduled` executor.

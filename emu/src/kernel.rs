@@ -205,6 +205,8 @@ pub(crate) struct PassEnv<'a> {
 pub(crate) struct Invocation {
     pub input: Cell<FragInput>,
     pub outputs: [Cell<[u32; 4]>; 8],
+    /// Bit i set: `outputs[i]` was written since the last reset.
+    pub outputs_written: Cell<u8>,
     pub discarded: Cell<bool>,
     pub depth_out: Cell<Option<f32>>,
     pub pending: Cell<Option<StepKind>>,
@@ -223,6 +225,7 @@ impl Invocation {
         Invocation {
             input: Cell::new(FragInput::default()),
             outputs: Default::default(),
+            outputs_written: Cell::new(0),
             discarded: Cell::new(false),
             depth_out: Cell::new(None),
             pending: Cell::new(None),
@@ -240,8 +243,12 @@ impl Invocation {
     /// Resets the slot for a new fragment.
     pub fn reset(&self, input: FragInput) {
         self.input.set(input);
-        for o in &self.outputs {
-            o.set([0; 4]);
+        // Only outputs the previous invocation wrote need clearing (most write none).
+        let mut written = self.outputs_written.replace(0);
+        while written != 0 {
+            let i = written.trailing_zeros() as usize;
+            self.outputs[i].set([0; 4]);
+            written &= written - 1;
         }
         self.discarded.set(false);
         self.depth_out.set(None);
@@ -450,6 +457,9 @@ impl<'a> Frag<'a> {
     fn output_bits(&self, target: usize, value: [u32; 4]) {
         if let Some(o) = self.inv.outputs.get(target) {
             o.set(value);
+            self.inv
+                .outputs_written
+                .set(self.inv.outputs_written.get() | 1 << target);
         } else {
             self.inv.set_fault(FaultKind::Misuse {
                 message: format!("output to target {target}; at most 8 exist"),

@@ -396,6 +396,8 @@ impl Device {
         let mut wave_index = 0u64;
         let mut bytes_used = 0usize;
         let mut lists: Vec<Vec<FragInput>> = Vec::new();
+        let mut outs_lists: Vec<Vec<FragOut>> = Vec::new();
+        let mut colors_lists: Vec<Vec<[u32; 4]>> = Vec::new();
         let mut first = 0;
         while first < tile_count {
             let last = (first + TILES_PER_WAVE).min(tile_count);
@@ -417,129 +419,187 @@ impl Device {
                 report.stats.early_culled += c.1;
             }
             // 2. Shade the wave with the executor.
-            let mut inputs: Vec<FragInput> = Vec::with_capacity(lists.iter().map(Vec::len).sum());
-            let mut ranges = Vec::with_capacity(lists.len());
-            for l in &lists {
-                ranges.push(inputs.len()..inputs.len() + l.len());
-                inputs.extend_from_slice(l);
-            }
-            for (i, f) in inputs.iter_mut().enumerate() {
-                f.seq = *seq_base + i as u64;
-            }
-            *seq_base += inputs.len() as u64;
-            // Per-sample ordered interlock: each fragment's rank among the fragments covering
-            // each of its samples, in API order (the ticket field then indexes this table).
-            side.clear();
-            if per_sample_ordered {
-                let spp = env_base.samples as usize;
-                if sample_counters.is_empty() {
-                    sample_counters = vec![0; fb.width as usize * fb.height as usize * spp];
+            let direct = !per_sample_ordered && !matches!(exec.mode, ExecMode::Scheduled(_));
+            if direct {
+                // Ordered and parallel: batches straight from each tile's list (no copy).
+                for l in lists.iter_mut() {
+                    for f in l.iter_mut() {
+                        f.seq = *seq_base;
+                        *seq_base += 1;
+                    }
+                }
+                outs_lists.resize_with(lists.len(), Vec::new);
+                colors_lists.resize_with(lists.len(), Vec::new);
+                let batch = exec.batch.max(1);
+                let mut chunks = Vec::new();
+                for ((l, o), c) in lists
+                    .iter()
+                    .zip(outs_lists.iter_mut())
+                    .zip(colors_lists.iter_mut())
+                {
+                    o.clear();
+                    o.resize(l.len(), FragOut::default());
+                    c.clear();
+                    c.resize(l.len() * targets, [0; 4]);
+                    let mut o_rest = &mut o[..];
+                    let mut c_rest = &mut c[..];
+                    for ins in l.chunks(batch) {
+                        let (oo, orest) = o_rest.split_at_mut(ins.len());
+                        let (cc, crest) = c_rest.split_at_mut(ins.len() * targets);
+                        o_rest = orest;
+                        c_rest = crest;
+                        chunks.push((ins, oo, cc));
+                    }
+                }
+                let outcome = crate::exec::shade_chunks(kernel, &env_base, exec, chunks, targets);
+                absorb(report, outcome, &self.memory);
+                let tiles = &mut fb.tiles_mut()[first..last];
+                let back = RasterBack {
+                    geo,
+                    state,
+                    early,
+                    samples: env_base.samples,
+                    targets,
+                };
+                let mut ins_lists: Vec<(&[FragInput], &[FragOut], &[[u32; 4]])> = lists
+                    .iter()
+                    .zip(&outs_lists)
+                    .zip(&colors_lists)
+                    .map(|((l, o), c)| (&l[..], &o[..], &c[..]))
+                    .collect();
+                let counts = for_each_tile(tiles, &mut ins_lists, exec.threads, |_, tile, l| {
+                    back.tile(tile, l)
+                });
+                for c in &counts {
+                    report.stats.late_culled += c.0;
+                    report.stats.samples_passed += c.1;
+                }
+            } else {
+                let mut inputs: Vec<FragInput> =
+                    Vec::with_capacity(lists.iter().map(Vec::len).sum());
+                let mut ranges = Vec::with_capacity(lists.len());
+                for l in &lists {
+                    ranges.push(inputs.len()..inputs.len() + l.len());
+                    inputs.extend_from_slice(l);
                 }
                 for (i, f) in inputs.iter_mut().enumerate() {
-                    let base = (f.y as usize * fb.width as usize + f.x as usize) * spp;
-                    let mut t = [0u32; 8];
-                    for (s, slot) in t.iter_mut().enumerate().take(spp) {
-                        if f.coverage & (1 << s) != 0 {
-                            *slot = sample_counters[base + s];
-                            sample_counters[base + s] += 1;
+                    f.seq = *seq_base + i as u64;
+                }
+                *seq_base += inputs.len() as u64;
+                // Per-sample ordered interlock: each fragment's rank among the fragments covering
+                // each of its samples, in API order (the ticket field then indexes this table).
+                side.clear();
+                if per_sample_ordered {
+                    let spp = env_base.samples as usize;
+                    if sample_counters.is_empty() {
+                        sample_counters = vec![0; fb.width as usize * fb.height as usize * spp];
+                    }
+                    for (i, f) in inputs.iter_mut().enumerate() {
+                        let base = (f.y as usize * fb.width as usize + f.x as usize) * spp;
+                        let mut t = [0u32; 8];
+                        for (s, slot) in t.iter_mut().enumerate().take(spp) {
+                            if f.coverage & (1 << s) != 0 {
+                                *slot = sample_counters[base + s];
+                                sample_counters[base + s] += 1;
+                            }
+                        }
+                        side.push(t);
+                        f.ticket = i as u32;
+                    }
+                }
+                let env = PassEnv {
+                    sample_tickets: &side,
+                    ..env_base.clone()
+                };
+                let mut outs = vec![FragOut::default(); inputs.len()];
+                let mut colors = vec![[0u32; 4]; inputs.len() * targets];
+                let exec_wave = match &exec.mode {
+                    ExecMode::Scheduled(sc) => {
+                        let mut sc = sc.clone();
+                        sc.seed = sc
+                            .seed
+                            .wrapping_add(wave_index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                        // An explicit schedule runs on across waves: each wave continues where
+                        // the previous one stopped reading it.
+                        if let crate::exec::Policy::Bytes(b) = &mut sc.policy {
+                            b.drain(..bytes_used.min(b.len()));
+                        }
+                        ExecConfig {
+                            mode: ExecMode::Scheduled(sc),
+                            ..exec.clone()
                         }
                     }
-                    side.push(t);
-                    f.ticket = i as u32;
-                }
-            }
-            let env = PassEnv {
-                sample_tickets: &side,
-                ..env_base.clone()
-            };
-            let mut outs = vec![FragOut::default(); inputs.len()];
-            let mut colors = vec![[0u32; 4]; inputs.len() * targets];
-            let exec_wave = match &exec.mode {
-                ExecMode::Scheduled(sc) => {
-                    let mut sc = sc.clone();
-                    sc.seed = sc
-                        .seed
-                        .wrapping_add(wave_index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-                    // An explicit schedule runs on across waves: each wave continues where
-                    // the previous one stopped reading it.
-                    if let crate::exec::Policy::Bytes(b) = &mut sc.policy {
-                        b.drain(..bytes_used.min(b.len()));
+                    _ => exec.clone(),
+                };
+                let outcome = if let ExecMode::Scheduled(_) = exec.mode {
+                    // Admission order: pixel block by block, API order within a block.
+                    let block = exec.block.max(1);
+                    let mut order: Vec<usize> = (0..inputs.len()).collect();
+                    order.sort_by_key(|&i| {
+                        let f = &inputs[i];
+                        (
+                            (f.y / block) as u64 * fb.width.div_ceil(block) as u64
+                                + (f.x / block) as u64,
+                            i,
+                        )
+                    });
+                    let sched: Vec<FragInput> = order.iter().map(|&i| inputs[i]).collect();
+                    let mut s_outs = vec![FragOut::default(); sched.len()];
+                    let mut s_colors = vec![[0u32; 4]; sched.len() * targets];
+                    let o = shade(
+                        kernel,
+                        &env,
+                        &exec_wave,
+                        &sched,
+                        &mut s_outs,
+                        &mut s_colors,
+                        targets,
+                    );
+                    for (k, &i) in order.iter().enumerate() {
+                        outs[i] = s_outs[k];
+                        colors[i * targets..(i + 1) * targets]
+                            .copy_from_slice(&s_colors[k * targets..(k + 1) * targets]);
                     }
-                    ExecConfig {
-                        mode: ExecMode::Scheduled(sc),
-                        ..exec.clone()
-                    }
-                }
-                _ => exec.clone(),
-            };
-            let outcome = if let ExecMode::Scheduled(_) = exec.mode {
-                // Admission order: pixel block by block, API order within a block.
-                let block = exec.block.max(1);
-                let mut order: Vec<usize> = (0..inputs.len()).collect();
-                order.sort_by_key(|&i| {
-                    let f = &inputs[i];
-                    (
-                        (f.y / block) as u64 * fb.width.div_ceil(block) as u64
-                            + (f.x / block) as u64,
-                        i,
+                    o
+                } else {
+                    shade(
+                        kernel,
+                        &env,
+                        &exec_wave,
+                        &inputs,
+                        &mut outs,
+                        &mut colors,
+                        targets,
                     )
+                };
+                bytes_used += outcome.bytes_used;
+                absorb(report, outcome, &self.memory);
+                // 3. Late tests and writes, per tile in API order.
+                let tiles = &mut fb.tiles_mut()[first..last];
+                let back = RasterBack {
+                    geo,
+                    state,
+                    early,
+                    samples: env.samples,
+                    targets,
+                };
+                let mut ins_lists: Vec<(&[FragInput], &[FragOut], &[[u32; 4]])> = ranges
+                    .iter()
+                    .map(|r| {
+                        (
+                            &inputs[r.clone()],
+                            &outs[r.clone()],
+                            &colors[r.start * targets..r.end * targets],
+                        )
+                    })
+                    .collect();
+                let counts = for_each_tile(tiles, &mut ins_lists, exec.threads, |_, tile, l| {
+                    back.tile(tile, l)
                 });
-                let sched: Vec<FragInput> = order.iter().map(|&i| inputs[i]).collect();
-                let mut s_outs = vec![FragOut::default(); sched.len()];
-                let mut s_colors = vec![[0u32; 4]; sched.len() * targets];
-                let o = shade(
-                    kernel,
-                    &env,
-                    &exec_wave,
-                    &sched,
-                    &mut s_outs,
-                    &mut s_colors,
-                    targets,
-                );
-                for (k, &i) in order.iter().enumerate() {
-                    outs[i] = s_outs[k];
-                    colors[i * targets..(i + 1) * targets]
-                        .copy_from_slice(&s_colors[k * targets..(k + 1) * targets]);
+                for c in &counts {
+                    report.stats.late_culled += c.0;
+                    report.stats.samples_passed += c.1;
                 }
-                o
-            } else {
-                shade(
-                    kernel,
-                    &env,
-                    &exec_wave,
-                    &inputs,
-                    &mut outs,
-                    &mut colors,
-                    targets,
-                )
-            };
-            bytes_used += outcome.bytes_used;
-            absorb(report, outcome, &self.memory);
-            // 3. Late tests and writes, per tile in API order.
-            let tiles = &mut fb.tiles_mut()[first..last];
-            let back = RasterBack {
-                geo,
-                state,
-                early,
-                samples: env.samples,
-                targets,
-            };
-            let mut ins_lists: Vec<(&[FragInput], &[FragOut], &[[u32; 4]])> = ranges
-                .iter()
-                .map(|r| {
-                    (
-                        &inputs[r.clone()],
-                        &outs[r.clone()],
-                        &colors[r.start * targets..r.end * targets],
-                    )
-                })
-                .collect();
-            let counts = for_each_tile(tiles, &mut ins_lists, exec.threads, |_, tile, l| {
-                back.tile(tile, l)
-            });
-            for c in &counts {
-                report.stats.late_culled += c.0;
-                report.stats.samples_passed += c.1;
             }
             for l in &mut lists {
                 l.clear();

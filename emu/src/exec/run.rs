@@ -280,9 +280,6 @@ fn run_parallel<K: FragmentKernel>(
     outcome: &mut ShadeOutcome,
 ) {
     let batch = cfg.batch.max(1);
-    let threads = cfg.threads.max(1).min(inputs.len().div_ceil(batch)).max(1);
-    // Batches are handed out in API order, so the predecessors of any fragment on its pixel
-    // are in batches already taken: ordered interlock cannot deadlock.
     let mut chunks = Vec::with_capacity(inputs.len().div_ceil(batch));
     let mut outs_rest = outs;
     let mut colors_rest = colors;
@@ -293,6 +290,47 @@ fn run_parallel<K: FragmentKernel>(
         colors_rest = crest;
         chunks.push((ins, o, c));
     }
+    run_chunks(kernel, env, cfg, chunks, targets, outcome);
+}
+
+/// One batch of fragments with the slices its results go to.
+pub(crate) type Chunk<'s> = (&'s [FragInput], &'s mut [FragOut], &'s mut [[u32; 4]]);
+
+/// Shades pre-cut batches (each at most `cfg.batch` long, in API order) under the ordered
+/// or parallel executor.
+pub(crate) fn shade_chunks<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    cfg: &ExecConfig,
+    chunks: Vec<Chunk<'_>>,
+    targets: usize,
+) -> ShadeOutcome {
+    let mut outcome = ShadeOutcome::default();
+    match cfg.mode {
+        ExecMode::Parallel => run_chunks(kernel, env, cfg, chunks, targets, &mut outcome),
+        _ => {
+            let mut acc = Acc::default();
+            for (ins, o, c) in chunks {
+                run_direct(kernel, env, ins, o, c, targets, 1, false, &mut acc);
+            }
+            acc.finish(&mut outcome);
+        }
+    }
+    outcome
+}
+
+fn run_chunks<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    cfg: &ExecConfig,
+    chunks: Vec<Chunk<'_>>,
+    targets: usize,
+    outcome: &mut ShadeOutcome,
+) {
+    let batch = cfg.batch.max(1);
+    let threads = cfg.threads.max(1).min(chunks.len()).max(1);
+    // Batches are handed out in API order, so the predecessors of any fragment on its pixel
+    // are in batches already taken: ordered interlock cannot deadlock.
     let queue = pool::Mutex::new(chunks.into_iter());
     let accs: Vec<Acc> = pool::scope(|s| {
         let handles: Vec<_> = (0..threads)
