@@ -10,6 +10,8 @@ use crate::state::{Format, FragmentState};
 
 /// Largest accepted width or height (the total budget is [`MAX_SAMPLES_TOTAL`]).
 pub const MAX_DIMENSION: u32 = 16384;
+/// Largest framebuffer allocation (targets, depth and stencil, padded to whole tiles).
+pub const MAX_BYTES: u64 = 8 << 30;
 /// Largest accepted `width * height * samples`.
 pub const MAX_SAMPLES_TOTAL: u64 = 1 << 28;
 
@@ -43,8 +45,15 @@ pub struct TileMemory {
     pub samples: u32,
     /// Raw channel words per target (f32 bits for float and RGBA8 formats, u32 otherwise).
     pub color: Vec<Vec<[u32; 4]>>,
+    /// Depth per sample. Empty until a depth or stencil test first needs it (most
+    /// multi-fragment passes never test): then all samples hold `depth_clear`.
     pub depth: Vec<f32>,
+    /// Stencil per sample; empty until needed, like `depth`.
     pub stencil: Vec<u8>,
+    /// The value every sample has while `depth` is empty.
+    pub depth_clear: f32,
+    /// The value every sample has while `stencil` is empty.
+    pub stencil_clear: u8,
 }
 
 impl TileMemory {
@@ -71,6 +80,19 @@ impl TileMemory {
             color: (0..targets).map(|_| vec![[0u32; 4]; n]).collect(),
             depth: vec![1.0; n],
             stencil: vec![0; n],
+            depth_clear: 1.0,
+            stencil_clear: 0,
+        }
+    }
+
+    /// Allocates depth and stencil (at their clear values) if they are still lazy.
+    pub fn materialize(&mut self) {
+        let n = (self.tile_size * self.tile_size * self.samples) as usize;
+        if self.depth.is_empty() {
+            self.depth = vec![self.depth_clear; n];
+        }
+        if self.stencil.is_empty() {
+            self.stencil = vec![self.stencil_clear; n];
         }
     }
 
@@ -119,6 +141,7 @@ impl TileMemory {
         } else {
             &stencil.back
         };
+        self.materialize();
         let base = self.index(lx, ly, 0);
         let mut bits = mask;
         while bits != 0 {
@@ -262,6 +285,12 @@ impl Framebuffer {
         }
         let tiles_x = width.div_ceil(tile_size);
         let tiles_y = height.div_ceil(tile_size);
+        // What will really be allocated: edge tiles are full-size, each colour sample is 16
+        // bytes, depth and stencil 5 more.
+        let padded = u64::from(tiles_x * tile_size) * u64::from(tiles_y * tile_size) * n as u64;
+        if padded * (16 * formats.len() as u64 + 5) > MAX_BYTES {
+            return Err(FramebufferError::TooLarge { width, height, samples: n, max: MAX_SAMPLES_TOTAL });
+        }
         let mut tiles = Vec::with_capacity((tiles_x * tiles_y) as usize);
         for ty in 0..tiles_y {
             for tx in 0..tiles_x {
@@ -277,6 +306,11 @@ impl Framebuffer {
                     formats.len(),
                 ));
             }
+        }
+        // Depth and stencil are allocated on first use (see TileMemory::depth).
+        for t in &mut tiles {
+            t.depth = Vec::new();
+            t.stencil = Vec::new();
         }
         Ok(Framebuffer {
             width,
@@ -323,12 +357,14 @@ impl Framebuffer {
     pub fn clear_depth(&mut self, value: f32) {
         for t in &mut self.tiles {
             t.depth.fill(value);
+            t.depth_clear = value;
         }
     }
     /// Clears stencil on every sample.
     pub fn clear_stencil(&mut self, value: u8) {
         for t in &mut self.tiles {
             t.stencil.fill(value);
+            t.stencil_clear = value;
         }
     }
     /// Raw words of one sample of a target, global pixel coordinates.
@@ -339,12 +375,14 @@ impl Framebuffer {
     /// Depth of one sample, global pixel coordinates.
     pub fn depth(&self, x: u32, y: u32, sample: u32) -> f32 {
         let (t, i) = self.locate(x, y, sample);
-        self.tiles[t].depth[i]
+        let t = &self.tiles[t];
+        t.depth.get(i).copied().unwrap_or(t.depth_clear)
     }
     /// Stencil of one sample, global pixel coordinates.
     pub fn stencil(&self, x: u32, y: u32, sample: u32) -> u8 {
         let (t, i) = self.locate(x, y, sample);
-        self.tiles[t].stencil[i]
+        let t = &self.tiles[t];
+        t.stencil.get(i).copied().unwrap_or(t.stencil_clear)
     }
     /// Row-major snapshot of a target, for binding read-only in a later pass.
     pub fn image(&self, target: usize) -> Image {

@@ -910,7 +910,7 @@ fn framebuffer_errors() {
 
 #[test]
 fn framebuffer_layout_on_non_multiple_sizes() {
-    let fb = Framebuffer::new(100, 37, SampleCount::X4, 64, &[Format::RGBA32F]).unwrap();
+    let mut fb = Framebuffer::new(100, 37, SampleCount::X4, 64, &[Format::RGBA32F]).unwrap();
     assert_eq!((fb.tiles_x, fb.tiles_y), (2, 1));
     let tiles = fb.tiles();
     assert_eq!(tiles.len(), 2);
@@ -923,6 +923,13 @@ fn framebuffer_layout_on_non_multiple_sizes() {
         (64, 0, 36, 37)
     );
     for t in tiles {
+        // Depth and stencil are lazy until first needed.
+        assert!(t.depth.is_empty() && t.stencil.is_empty());
+    }
+    for t in fb.tiles_mut().iter_mut() {
+        t.materialize();
+    }
+    for t in fb.tiles() {
         // Edge tiles keep full-size buffers.
         assert_eq!(t.color[0].len(), 64 * 64 * 4);
         assert_eq!(t.depth.len(), 64 * 64 * 4);
@@ -966,6 +973,7 @@ fn clear_and_readback_round_trip() {
     let mut st = FragmentState::new();
     st.targets = vec![TargetState::new(Format::R32UI)];
     for t in fb.tiles_mut() {
+        t.materialize();
         for ly in 0..t.h {
             for lx in 0..t.w {
                 for s in 0..2 {
