@@ -42,6 +42,8 @@ pub struct FuzzConfig {
     pub shrink_budget: Duration,
     /// Largest viewport side.
     pub max_size: u32,
+    /// Built-in scenes to draw from only (empty: the random mix).
+    pub scenes: Vec<String>,
 }
 
 /// The campaign's persistent state (`DIR/campaign.json`).
@@ -89,7 +91,11 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> FuzzError + '_ {
 /// The run of iteration `i`.
 pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i: u64) -> RunSpec {
     let mut rng = SmallRng::seed_from_u64(cfg.seed ^ i.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-    let scene = match rng.gen_range(0..10) {
+    let pick = rng.gen_range(0..10);
+    let scene = if !cfg.scenes.is_empty() {
+        SceneSpec::Builtin(cfg.scenes[pick % cfg.scenes.len()].clone())
+    } else {
+        match pick {
         0 => SceneSpec::Builtin("cubes".into()),
         1 => SceneSpec::Builtin(format!("coplanar-stack:{}", rng.gen_range(2..12))),
         2 => SceneSpec::Builtin("spheres".into()),
@@ -104,6 +110,7 @@ pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i:
             rng.gen::<u32>(),
             rng.gen_range(1..48)
         )),
+        }
     };
     let algo = algos[rng.gen_range(0..algos.len())].clone();
     let size = rng.gen_range(8..=cfg.max_size.max(8));

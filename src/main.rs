@@ -74,6 +74,9 @@ struct FuzzArgs {
     /// Largest viewport side.
     #[arg(long, default_value_t = 48)]
     max_size: u32,
+    /// Only these built-in scenes (comma-separated; default: a random mix).
+    #[arg(long, value_delimiter = ',')]
+    scene: Vec<String>,
     #[arg(long)]
     json: bool,
 }
@@ -569,6 +572,7 @@ fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
         meshes: a.meshes.clone(),
         shrink_budget: std::time::Duration::from_secs(a.shrink_secs),
         max_size: a.max_size,
+        scenes: a.scene.clone(),
     };
     if cfg.time.is_none() && cfg.iterations.is_none() {
         bail!("give --time or --iterations (a campaign needs a budget)");
