@@ -75,17 +75,16 @@ fn ll_push(c: &mut Criterion) {
                     seed..seed + BATCH,
                     |e, mem| {
                         // The invariant: the list holds exactly 4 distinct nodes.
-                        let mut p = mem.read(head).unwrap()[0];
-                        let nexts = mem.read(next).unwrap();
+                        let mut p = mem.get(head, 0).unwrap();
                         let mut n = 0;
                         while p != 0 && n < 8 {
                             n += 1;
-                            p = nexts[p as usize];
+                            p = mem.get(next, p).unwrap();
                         }
                         assert_eq!(n, 4);
                         assert!(!e.schedule.is_empty());
-                        mem.write(counter, 0, &[1]).unwrap();
-                        mem.write(head, 0, &[0]).unwrap();
+                        mem.set(counter, 0, 1).unwrap();
+                        mem.set(head, 0, 0).unwrap();
                         true
                     },
                 );

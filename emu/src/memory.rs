@@ -373,6 +373,17 @@ impl Memory {
         })
     }
 
+    /// One word (host side, no allocation); `None` out of range or on a type mismatch.
+    pub fn get<T: Word>(&self, buf: Buf<T>, index: u32) -> Option<T> {
+        self.check(buf).ok()?;
+        (index < buf.len).then(|| self.word(buf.id, index).load())
+    }
+
+    /// Sets one word (host side, no allocation).
+    pub fn set<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Result<(), MemoryError> {
+        self.write(buf, index as u64, std::slice::from_ref(&value))
+    }
+
     /// Writes `data` at `offset` (host side).
     pub fn write<T: Word>(&self, buf: Buf<T>, offset: u64, data: &[T]) -> Result<(), MemoryError> {
         let b = self.check(buf)?;
@@ -463,6 +474,13 @@ pub(crate) enum WordRef<'a> {
 }
 
 impl WordRef<'_> {
+    fn load<T: Word>(&self) -> T {
+        T::from_bits(match self {
+            WordRef::W32(a) => a.load(Ordering::Relaxed) as u64,
+            WordRef::W64(a) => a.load(Ordering::Relaxed),
+        })
+    }
+
     fn store(&self, v: u64) {
         match self {
             WordRef::W32(a) => a.store(v as u32, Ordering::Relaxed),
