@@ -96,20 +96,20 @@ pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i:
         SceneSpec::Builtin(cfg.scenes[pick % cfg.scenes.len()].clone())
     } else {
         match pick {
-        0 => SceneSpec::Builtin("cubes".into()),
-        1 => SceneSpec::Builtin(format!("coplanar-stack:{}", rng.gen_range(2..12))),
-        2 => SceneSpec::Builtin("spheres".into()),
-        3 => SceneSpec::Builtin("hairball".into()),
-        4 if !meshes.is_empty() => SceneSpec::Obj {
-            path: meshes[rng.gen_range(0..meshes.len())].clone(),
-            sha256: None,
-        },
-        4 | 5 => SceneSpec::Builtin(["bunny", "teapot"][rng.gen_range(0..2)].into()),
-        _ => SceneSpec::Builtin(format!(
-            "random-triangles:{}:{}",
-            rng.gen::<u32>(),
-            rng.gen_range(1..48)
-        )),
+            0 => SceneSpec::Builtin("cubes".into()),
+            1 => SceneSpec::Builtin(format!("coplanar-stack:{}", rng.gen_range(2..12))),
+            2 => SceneSpec::Builtin("spheres".into()),
+            3 => SceneSpec::Builtin("hairball".into()),
+            4 if !meshes.is_empty() => SceneSpec::Obj {
+                path: meshes[rng.gen_range(0..meshes.len())].clone(),
+                sha256: None,
+            },
+            4 | 5 => SceneSpec::Builtin(["bunny", "teapot"][rng.gen_range(0..2)].into()),
+            _ => SceneSpec::Builtin(format!(
+                "random-triangles:{}:{}",
+                rng.gen::<u32>(),
+                rng.gen_range(1..48)
+            )),
         }
     };
     let algo = algos[rng.gen_range(0..algos.len())].clone();

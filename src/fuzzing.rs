@@ -28,8 +28,8 @@ use std::sync::OnceLock;
 
 use arbitrary::{Arbitrary, Unstructured};
 use fragrace_emu::{
-    Buf, Device, Draw, ExecConfig, ExecMode, Frag, FragmentKernel, Framebuffer, KernelInfo,
-    Mesh, PassState, Policy, RasterState, SampleCount, ScheduleConfig,
+    Buf, Device, Draw, ExecConfig, ExecMode, Frag, FragmentKernel, Framebuffer, KernelInfo, Mesh,
+    PassState, Policy, RasterState, SampleCount, ScheduleConfig,
 };
 use fragrace_kernels::abuffer::LinkedList;
 use fragrace_kernels::{Algorithm, HazardClass, Params};
@@ -158,7 +158,10 @@ enum Region {
         plane: Option<[f64; 3]>,
     },
     /// The star polygon around `centre` with vertices `ring` (positive orientation).
-    Star { centre: [i64; 2], ring: Vec<[i64; 2]> },
+    Star {
+        centre: [i64; 2],
+        ring: Vec<[i64; 2]>,
+    },
 }
 
 const QUANTA: [i64; 5] = [1, 16, 64, 128, 256];
@@ -176,7 +179,10 @@ fn place(v: i16, q: i64, span: i64) -> i64 {
 impl Grid {
     fn layer(&self, span: i64) -> Layer {
         let q = QUANTA[self.quantum as usize % QUANTA.len()];
-        let lo = [place(self.origin[0], q, span), place(self.origin[1], q, span)];
+        let lo = [
+            place(self.origin[0], q, span),
+            place(self.origin[1], q, span),
+        ];
         let sizes = |v: &[u16]| -> Vec<i64> {
             if v.is_empty() {
                 return vec![(span / 2 / q).max(1) * q];
@@ -262,7 +268,10 @@ impl Fan {
     /// (two spokes in one direction, or a gap of half a turn or more).
     fn layer(&self, span: i64) -> Option<Layer> {
         let q = QUANTA[self.quantum as usize % QUANTA.len()];
-        let c = [place(self.centre[0], q, span), place(self.centre[1], q, span)];
+        let c = [
+            place(self.centre[0], q, span),
+            place(self.centre[1], q, span),
+        ];
         let mut spokes = self.spokes.clone();
         spokes.truncate(8);
         while spokes.len() < 5 {
@@ -479,7 +488,13 @@ pub fn raster_watertight_input(input: &RasterInput) -> Result<RasterReport, Viol
             per_primitive: false,
         };
         let r = device
-            .draw(&mut fb, &Draw::new(&mesh, Mat4::IDENTITY), &state, &kernel, &exec)
+            .draw(
+                &mut fb,
+                &Draw::new(&mesh, Mat4::IDENTITY),
+                &state,
+                &kernel,
+                &exec,
+            )
             .map_err(|e| violation(T, format!("tiling {i} refused: {e}")))?;
         report.fragments += r.stats.fragments_generated;
     }
@@ -531,7 +546,10 @@ pub fn raster_watertight_input(input: &RasterInput) -> Result<RasterReport, Viol
                     if layer.interior(p) {
                         report.interior_samples += 1;
                         if c == 0 {
-                            return Err(violation(T, format!("{}: a crack (inside, not covered)", what())));
+                            return Err(violation(
+                                T,
+                                format!("{}: a crack (inside, not covered)", what()),
+                            ));
                         }
                     } else if c > 0 && layer.exterior(p) {
                         return Err(violation(
@@ -791,7 +809,9 @@ pub fn kernel_oracle_input(input: &KernelInput) -> Result<KernelOutcome, Violati
 pub enum ObjOutcome {
     Rejected,
     /// Accepted: a valid mesh of this many triangles, which round-trips.
-    Parsed { triangles: usize },
+    Parsed {
+        triangles: usize,
+    },
 }
 
 /// The mesh as OBJ text (`v` lines with shortest round-trip floats, 1-based `f` lines).
@@ -904,6 +924,7 @@ fn finite_f64(u: &mut Unstructured<'_>) -> arbitrary::Result<f64> {
 }
 
 /// A case with every field drawn from `u` (finite floats; any strings, numbers, policies).
+#[allow(clippy::needless_update)] // `..default()` is for fields added to ExecConfig later
 pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
     let scene = match u.int_in_range(0..=2)? {
         0 => SceneSpec::Builtin(String::arbitrary(u)?),
@@ -989,6 +1010,9 @@ pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
             max_steps: u64::arbitrary(u)?,
             max_waits: u64::arbitrary(u)?,
             contention: bool::arbitrary(u)?,
+            block: u32::arbitrary(u)?,
+            // Fields added later keep their defaults (and still round-trip).
+            ..ExecConfig::default()
         },
     };
     let observed = Observation {

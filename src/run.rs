@@ -322,7 +322,11 @@ pub fn summary_json(
         "seed": seed,
         "threads": spec.exec.threads,
         "k": spec.params.k,
-        "fragments": r.report.stats.fragments_generated,
+        // Rasterized fragments of the scene (truth's count when checked; otherwise per
+        // geometry pass, as multipass algorithms rasterize the scene several times).
+        "fragments": checked.map(|c| c.metrics.generated).unwrap_or(
+            r.report.stats.fragments_generated / u64::from(r.report.stats.geometry_passes.max(1))
+        ),
         "covered_pixels": covered,
         "max_depth_complexity": max_dc,
         "hazards": { "lost_updates": hz.lost_updates, "races": hz.races, "torn": hz.torn },

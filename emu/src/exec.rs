@@ -88,6 +88,18 @@ pub struct ExecConfig {
     /// screen tiles; so overlapping primitives of one block are in flight together.
     #[serde(default = "default_block")]
     pub block: u32,
+    /// Scheduled executor: interleave only where it can matter. When some runnable
+    /// invocation's next access touches an address (or pixel) another in-flight invocation
+    /// is about to touch, the policy chooses among those; otherwise the earliest runs on.
+    /// Fragments of different pixels on different addresses commute, so the steps go where
+    /// hazards can be.
+    #[serde(default)]
+    pub reduce: bool,
+    /// Per-mille probability that a weak compare-exchange
+    /// ([`crate::Frag::atomic_compare_exchange_weak`]) fails spuriously (decided by a hash
+    /// of the invocation and its step count: deterministic for a given schedule).
+    #[serde(default)]
+    pub spurious_cas_per_mille: u32,
 }
 
 fn default_block() -> u32 {
@@ -105,6 +117,8 @@ impl Default for ExecConfig {
             max_waits: 1 << 26,
             contention: false,
             block: default_block(),
+            reduce: false,
+            spurious_cas_per_mille: 0,
         }
     }
 }

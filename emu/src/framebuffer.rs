@@ -289,7 +289,12 @@ impl Framebuffer {
         // bytes, depth and stencil 5 more.
         let padded = u64::from(tiles_x * tile_size) * u64::from(tiles_y * tile_size) * n as u64;
         if padded * (16 * formats.len() as u64 + 5) > MAX_BYTES {
-            return Err(FramebufferError::TooLarge { width, height, samples: n, max: MAX_SAMPLES_TOTAL });
+            return Err(FramebufferError::TooLarge {
+                width,
+                height,
+                samples: n,
+                max: MAX_SAMPLES_TOTAL,
+            });
         }
         let mut tiles = Vec::with_capacity((tiles_x * tiles_y) as usize);
         for ty in 0..tiles_y {

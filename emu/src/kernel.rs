@@ -196,6 +196,8 @@ pub(crate) struct PassEnv<'a> {
     pub mode: Mode,
     pub max_steps: u64,
     pub max_waits: u64,
+    /// Per-mille probability of a spurious weak compare-exchange failure.
+    pub spurious_cas: u32,
     /// Collect per-address contention (costs three atomics per access).
     pub contention: Option<&'a crate::stats::ContentionTable>,
 }
@@ -613,6 +615,35 @@ impl<'a> Frag<'a> {
         } else {
             Err(prev)
         }
+    }
+
+    /// Weak compare-exchange: as [`Frag::atomic_compare_exchange`], but may fail
+    /// spuriously (returning `Err(current)` even when the word held `expected`), as
+    /// `compare_exchange_weak` may on LL/SC hardware. How often is
+    /// `ExecConfig::spurious_cas_per_mille`; the decision hashes the invocation and its step
+    /// count, so a schedule replays exactly. Loops written for weak CAS must retry.
+    pub async fn atomic_compare_exchange_weak<T: Word>(
+        &self,
+        buf: Buf<T>,
+        index: u32,
+        expected: T,
+        new: T,
+    ) -> Result<T, T> {
+        let p = self.env.spurious_cas;
+        if p > 0 {
+            let i = self.input();
+            let mut h = i.seq ^ (self.inv.steps.get() << 40) ^ 0x9E37_79B9_7F4A_7C15;
+            h ^= h >> 33;
+            h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+            h ^= h >> 33;
+            if h % 1000 < p as u64 {
+                // A failed attempt reads the word, as a real failed CAS does.
+                let cur: T = self.access(buf, index, MemOp::AtomicLoad, None).await;
+                return Err(cur);
+            }
+        }
+        self.atomic_compare_exchange(buf, index, expected, new)
+            .await
     }
 
     /// Loads a multi-word record `buf[base .. base + out.len()]` with plain loads, one step

@@ -233,6 +233,7 @@ impl Device {
             },
             max_steps: exec.max_steps,
             max_waits: exec.max_waits,
+            spurious_cas: exec.spurious_cas_per_mille,
             contention: None,
         };
         let mut inputs = inputs.to_vec();
@@ -283,6 +284,7 @@ impl Device {
             mode: Mode::Scheduled,
             max_steps,
             max_waits: max_steps,
+            spurious_cas: 0,
             contention: None,
         };
         let mut inputs = inputs.to_vec();
@@ -390,6 +392,7 @@ impl Device {
             mode,
             max_steps: exec.max_steps,
             max_waits: exec.max_waits,
+            spurious_cas: exec.spurious_cas_per_mille,
             contention: contention.as_ref(),
         };
         let tile_count = fb.tiles().len();
@@ -821,7 +824,8 @@ impl RasterFront<'_> {
             Geometry::FullScreen => {
                 for ly in 0..tile.h {
                     for lx in 0..tile.w {
-                        generated += 1;
+                        // Full-screen invocations are not rasterized fragments: not counted as generated.
+
                         let mut cov = sample_mask;
                         if tests {
                             cov =

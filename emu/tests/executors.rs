@@ -446,3 +446,82 @@ fn contention_names_the_hottest_address() {
     assert_eq!(r.stats.hotspots[0].accesses, 512);
     assert!(r.stats.hotspots[0].peak_concurrent > 1);
 }
+
+/// Increments a counter with a weak compare-exchange: retrying (correct) or not (drops an
+/// increment on every spurious failure).
+struct WeakCas {
+    counter: Buf<u32>,
+    retry: bool,
+}
+impl FragmentKernel for WeakCas {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("weak-cas")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        let mut old = f.atomic_load(self.counter, 0).await;
+        loop {
+            match f
+                .atomic_compare_exchange_weak(self.counter, 0, old, old + 1)
+                .await
+            {
+                Ok(_) => break,
+                Err(cur) if self.retry => old = cur,
+                Err(_) => break,
+            }
+        }
+    }
+}
+
+#[test]
+fn weak_compare_exchange_fails_spuriously_when_asked() {
+    let run = |retry: bool, per_mille: u32, exec: ExecConfig| {
+        let mut dev = Device::new();
+        let counter = dev.buffer::<u32>("counter", 1).unwrap();
+        let mut fb = fb(16, 16);
+        let e = ExecConfig {
+            spurious_cas_per_mille: per_mille,
+            ..exec
+        };
+        let r = dev
+            .fullscreen(
+                &mut fb,
+                &FragmentState::new(),
+                &WeakCas { counter, retry },
+                &e,
+            )
+            .unwrap();
+        (dev.memory.read(counter).unwrap()[0], r)
+    };
+    for exec in [ExecConfig::ordered(), scheduled(Policy::Random, 2)] {
+        // No spurious failures: both forms count exactly under ordered.
+        assert_eq!(run(false, 0, ExecConfig::ordered()).0, 256);
+        // Retrying loops survive spurious failures.
+        let (v, r) = run(true, 300, exec.clone());
+        assert_eq!(v, 256, "{exec:?}");
+        assert!(
+            r.stats.ops.of(fragrace_emu::memory::OpKind::AtomicLoad) > 256,
+            "spurious failures read the word"
+        );
+        // A single attempt loses increments to spurious failures (deterministically).
+        let (v1, _) = run(false, 300, exec.clone());
+        let (v2, _) = run(false, 300, exec.clone());
+        assert!(v1 < 256, "{exec:?}");
+        assert_eq!(v1, v2);
+    }
+}
+
+#[test]
+fn reduction_keeps_every_step_and_still_finds_lost_updates() {
+    let plain = |reduce: bool| {
+        let e = ExecConfig {
+            reduce,
+            ..scheduled(Policy::Random, 5)
+        };
+        run_counter(&e, false)
+    };
+    let (v_full, r_full) = plain(false);
+    let (v_red, r_red) = plain(true);
+    assert_eq!(r_full.stats.steps, r_red.stats.steps);
+    assert!(v_full < 256 && v_red < 256);
+    assert!(r_red.hazards.lost_updates > 0);
+}

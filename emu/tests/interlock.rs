@@ -248,3 +248,109 @@ fn sample_interlock_lets_disjoint_coverage_in_together() {
         );
     }
 }
+
+struct PanicsInside {
+    count: Buf<u32>,
+}
+
+impl FragmentKernel for PanicsInside {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("panics-inside").with_interlock(InterlockMode::ORDERED)
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        if f.primitive_id() == 1 {
+            // Dies before its turn: its turn must still be passed on.
+            panic!("early death");
+        }
+        f.interlock_begin().await;
+        let n = f.load(self.count, f.pixel_index()).await;
+        if f.primitive_id() == 0 {
+            panic!("death inside the critical section");
+        }
+        f.store(self.count, f.pixel_index(), n + 1).await;
+        f.interlock_end().await;
+    }
+}
+
+#[test]
+fn a_fragment_that_dies_releases_its_interlock_and_turn() {
+    let mesh = scene(4); // primitives 0..8, two per layer
+    for e in execs() {
+        let mut dev = Device::new();
+        let count = dev.buffer::<u32>("count", 30).unwrap();
+        let mut fb = Framebuffer::new(6, 5, SampleCount::X1, 8, &[]).unwrap();
+        let r = dev
+            .draw(
+                &mut fb,
+                &Draw::new(&mesh, Mat4::IDENTITY),
+                &PassState::default(),
+                &PanicsInside { count },
+                &e,
+            )
+            .unwrap();
+        assert!(
+            r.faults
+                .iter()
+                .all(|f| matches!(f.kind, fragrace_emu::FaultKind::Panic { .. })),
+            "{e:?}: {:?}",
+            r.faults
+        );
+        // Layers 1..4 (primitives 2..8) all got through on every pixel.
+        let c = dev.memory.read(count).unwrap();
+        assert!(c.iter().all(|&v| v == 3), "{e:?}: {c:?}");
+    }
+}
+
+struct Enters;
+impl FragmentKernel for Enters {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("enters").with_interlock(InterlockMode::ORDERED)
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        f.interlock_begin().await;
+        f.interlock_end().await;
+    }
+}
+
+#[test]
+fn invocations_that_can_never_enter_are_reported_as_deadlocked() {
+    // Two fragments of one pixel whose tickets skip 0: nobody's turn ever comes.
+    let frags: Vec<fragrace_emu::FragInput> = (1..3)
+        .map(|t| fragrace_emu::FragInput {
+            ticket: t,
+            coverage: 1,
+            primitive_id: t,
+            ..Default::default()
+        })
+        .collect();
+    for e in [
+        ExecConfig {
+            max_waits: 1000,
+            ..ExecConfig::ordered()
+        },
+        ExecConfig {
+            max_waits: 1000,
+            ..ExecConfig::parallel(2)
+        },
+        ExecConfig {
+            mode: ExecMode::Scheduled(ScheduleConfig {
+                policy: Policy::Random,
+                seed: 0,
+                window: 4,
+                record: false,
+            }),
+            ..ExecConfig::default()
+        },
+    ] {
+        let dev = Device::new();
+        let r = dev.invocations(1, 1, &frags, &Enters, &e);
+        assert_eq!(r.stats.faulted, 2, "{e:?}");
+        assert!(
+            r.faults
+                .iter()
+                .all(|f| matches!(f.kind, fragrace_emu::FaultKind::Deadlock { .. })),
+            "{:?}",
+            r.faults
+        );
+    }
+}

@@ -80,7 +80,22 @@ pub fn compare(
                 let want = k.min(tp.len());
                 let wrong =
                     mine.len() != want || mine.iter().zip(tp).any(|(a, b)| a.depth != b.depth);
-                (wrong, mine.len().min(want), want)
+                // Captured = kept depths that are among the true k nearest (multiset
+                // intersection of two sorted lists), so a slot filled by the wrong fragment
+                // does not count.
+                let (mut i, mut j, mut hit) = (0, 0, 0);
+                while i < mine.len() && j < want {
+                    match mine[i].depth.total_cmp(&tp[j].depth) {
+                        std::cmp::Ordering::Equal => {
+                            hit += 1;
+                            i += 1;
+                            j += 1;
+                        }
+                        std::cmp::Ordering::Less => i += 1,
+                        std::cmp::Ordering::Greater => j += 1,
+                    }
+                }
+                (wrong, hit, want)
             }
             Capacity::Nearest => {
                 let mine = sorted(result, p);

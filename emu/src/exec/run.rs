@@ -106,6 +106,50 @@ fn poll_slot<F: Future<Output = ()>>(
     }
 }
 
+/// A faulted invocation is dropped mid-kernel: release what it held of the interlock, and
+/// pass its ordered turn on, or every later fragment of its pixel would wait forever. If its
+/// turn has not come yet, the claim is returned: the executor passes it when it comes
+/// ([`pass_deferred`]).
+pub(crate) fn abandon(inv: &Invocation, env: &PassEnv<'_>) -> Option<crate::interlock::Claim> {
+    if !inv.faulted() {
+        return None;
+    }
+    let (lock, mode, claim) = (Frag { inv, env }).claim()?;
+    if inv.in_interlock.get() {
+        lock.leave_claim(mode, &claim);
+        inv.in_interlock.set(false);
+        None
+    } else if mode.ordered && !inv.entered_interlock.get() {
+        if lock.is_turn_claim(&claim) {
+            lock.pass_turn_claim(&claim);
+            None
+        } else {
+            Some(claim)
+        }
+    } else {
+        None
+    }
+}
+
+/// Passes the turns of abandoned invocations whose turn has come; returns true when none
+/// is left waiting.
+pub(crate) fn pass_deferred(
+    deferred: &mut Vec<crate::interlock::Claim>,
+    env: &PassEnv<'_>,
+) -> bool {
+    if let Some(lock) = env.interlock {
+        deferred.retain(|c| {
+            if lock.is_turn_claim(c) {
+                lock.pass_turn_claim(c);
+                false
+            } else {
+                true
+            }
+        });
+    }
+    deferred.is_empty()
+}
+
 /// Per-worker accumulation.
 #[derive(Default)]
 pub(crate) struct Acc {
@@ -196,6 +240,7 @@ pub(crate) fn shade<K: FragmentKernel>(
             colors,
             targets,
             &mut outcome,
+            cfg.reduce,
         ),
     }
     outcome
@@ -219,6 +264,7 @@ fn run_direct<K: FragmentKernel>(
     let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
     let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
     futs.resize_with(width, || None);
+    let mut deferred = Vec::new();
     let mut cx = Context::from_waker(Waker::noop());
     let mut base = 0;
     while base < inputs.len() {
@@ -243,6 +289,7 @@ fn run_direct<K: FragmentKernel>(
                     match poll_slot(&mut futs[lane], &slots[lane], &mut cx) {
                         Polled::Done => {
                             futs[lane] = None;
+                            deferred.extend(abandon(&slots[lane], env));
                             let i = base + lane;
                             acc.harvest(
                                 &slots[lane],
@@ -259,12 +306,20 @@ fn run_direct<K: FragmentKernel>(
                     }
                 }
             }
+            pass_deferred(&mut deferred, env);
             if left > 0 && n < width {
                 // Everyone left is waiting on another worker: don't burn the core.
                 std::hint::spin_loop();
             }
         }
         base += n;
+    }
+    // Abandoned turns wait for their predecessors (earlier batches, always progressing).
+    // (Bounded like any wait: a turn that never comes was a deadlock, already reported.)
+    let mut waits = 0;
+    while !pass_deferred(&mut deferred, env) && waits < env.max_waits {
+        waits += 1;
+        std::hint::spin_loop();
     }
 }
 
@@ -377,6 +432,10 @@ pub(crate) struct SchedScratch {
     cands: Vec<Candidate>,
     cand_slots: Vec<usize>,
     pub record: Vec<u8>,
+    conflicting: Vec<usize>,
+    sub_cands: Vec<Candidate>,
+    /// Interleave only conflicting invocations (ExecConfig::reduce).
+    pub reduce: bool,
 }
 
 impl SchedScratch {
@@ -390,6 +449,9 @@ impl SchedScratch {
             cands: Vec::new(),
             cand_slots: Vec::new(),
             record: Vec::new(),
+            conflicting: Vec::new(),
+            sub_cands: Vec::new(),
+            reduce: false,
         }
     }
 }
@@ -405,12 +467,14 @@ fn run_scheduled<K: FragmentKernel>(
     colors: &mut [[u32; 4]],
     targets: usize,
     outcome: &mut ShadeOutcome,
+    reduce: bool,
 ) {
     let width = sc.window.max(1);
     let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
     let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
     futs.resize_with(width, || None);
     let mut scratch = SchedScratch::new(env.width, env.height);
+    scratch.reduce = reduce;
     let mut acc = Acc::default();
     schedule_once(
         &slots,
@@ -456,6 +520,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     acc: &mut Acc,
 ) -> u64 {
     let width = slots.len();
+    let reduce = scratch.reduce;
     let SchedScratch {
         detector,
         chooser,
@@ -465,6 +530,9 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         cands,
         cand_slots,
         record,
+        conflicting,
+        sub_cands,
+        ..
     } = scratch;
     detector.reset(env.width, env.height);
     if let Some(base) = inputs.iter().map(|f| f.seq).min() {
@@ -484,6 +552,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     for f in futs.iter_mut() {
         *f = None;
     }
+    let mut deferred: Vec<crate::interlock::Claim> = Vec::new();
     let mut cx = Context::from_waker(Waker::noop());
     let mut next = 0usize;
     let mut step: u64 = 0;
@@ -492,6 +561,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         ($slot:expr) => {{
             let s = $slot;
             futs[s] = None;
+            deferred.extend(abandon(&slots[s], env));
             let i = which[s];
             let seq = inputs[i].seq;
             acc.harvest(
@@ -524,6 +594,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 retire!(s);
             }
         }
+        pass_deferred(&mut deferred, env);
         if inflight.is_empty() {
             break;
         }
@@ -560,7 +631,35 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             }
             continue;
         }
-        let k = chooser.choose(cands, step);
+        let k = if reduce {
+            // Only interleave where it can matter (see ExecConfig::reduce).
+            let key = |s: usize| match slots[s].pending.get() {
+                Some(StepKind::Mem { addr, .. }) => Some(addr.0),
+                _ => None,
+            };
+            let pixel = |s: usize| {
+                let i = slots[s].input.get();
+                (i.x, i.y)
+            };
+            conflicting.clear();
+            for (ci, &s) in cand_slots.iter().enumerate() {
+                let hot = inflight.iter().any(|&o| {
+                    o != s && ((key(s).is_some() && key(o) == key(s)) || pixel(o) == pixel(s))
+                });
+                if hot {
+                    conflicting.push(ci);
+                }
+            }
+            if conflicting.is_empty() {
+                0
+            } else {
+                sub_cands.clear();
+                sub_cands.extend(conflicting.iter().map(|&ci| cands[ci]));
+                conflicting[chooser.choose(sub_cands, step)]
+            }
+        } else {
+            chooser.choose(cands, step)
+        };
         if sc.record {
             record.push(k as u8);
         }

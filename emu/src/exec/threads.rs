@@ -53,6 +53,7 @@ pub fn run_on_threads<K: FragmentKernel + Send + 'static>(
                     mode: Mode::Direct { yield_every: 0 },
                     max_steps,
                     max_waits: max_steps,
+                    spurious_cas: 0,
                     contention: None,
                 };
                 let inv = Invocation::new();
@@ -72,6 +73,14 @@ pub fn run_on_threads<K: FragmentKernel + Send + 'static>(
                         Poll::Pending if inv.faulted() => break,
                         // Waiting (interlock): let the others run.
                         Poll::Pending => thread::yield_now(),
+                    }
+                }
+                if let Some(claim) = super::run::abandon(&inv, &env) {
+                    let mut pending = vec![claim];
+                    let mut waits = 0;
+                    while !super::run::pass_deferred(&mut pending, &env) && waits < max_steps {
+                        waits += 1;
+                        thread::yield_now();
                     }
                 }
                 let fault = inv.fault.borrow_mut().take();

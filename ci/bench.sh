@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Side-by-side performance: fragrace's parallel executor vs Mesa llvmpipe running the same
+# `count` shader (../shared/peers/llvmpipe/oit.py), same mesh, view, resolution and thread
+# count; then the scheduled executor's steps per second and explore executions per second.
+# Prints a markdown table (docs/performance.md holds the last run). Needs ../shared and,
+# for the llvmpipe column, the peer's dependencies (libegl1 libegl-mesa0 libgl1-mesa-dri;
+# pip install moderngl numpy pillow).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo build --release -q
+F=./target/release/fragrace
+M=../shared/models
+PEER=../shared/peers/llvmpipe/oit.py
+have_peer=0
+python3 -c "import moderngl" 2>/dev/null && have_peer=1
+echo "| mesh | size | threads | fragrace ms (median) | llvmpipe ms (median) | ratio |"
+echo "|---|---|---|---|---|---|"
+for case in "dragon.obj.gz 512" "dragon.obj.gz 2048" "bunny.obj.gz 2048" "dragon_res2.obj.gz 512"; do
+    set -- $case
+    for threads in 1 2; do
+        ours=$($F bench --obj "$M/$1" --algo count --threads "$threads" --width "$2" --height "$2" --frames 15 --warmup 3 --json | python3 -c "import json,sys; print(round(json.load(sys.stdin)['median_ms'], 2))")
+        theirs="-"
+        ratio="-"
+        if [ "$have_peer" = 1 ] && [ "$threads" = 2 ]; then
+            theirs=$(LP_NUM_THREADS=$threads python3 "$PEER" "$M/$1" --algo count --width "$2" --height "$2" --frames 15 --warmup 3 2>/dev/null | tail -1 | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d.get('median_ms', d.get('frame_ms_median', 0)), 2))")
+            ratio=$(python3 -c "print(f'{$ours / $theirs:.2f}' if $theirs else '-')")
+        fi
+        echo "| $1 | $2 | $threads | $ours | $theirs | $ratio |"
+    done
+done
+echo
+$F bench --scene hairball --algo count-plain --exec scheduled --width 128 --height 128 --frames 5 --warmup 1
+cargo bench --bench explore -- --warm-up-time 1 --measurement-time 5 2>&1 | grep -E "^ll-push|thrpt" | head -4
