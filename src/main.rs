@@ -7,6 +7,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use fragrace::run::{self, RunSpec, SceneSpec};
 use fragrace::scene::Camera;
+use fragrace_emu::HazardKind;
 use fragrace_kernels::Params;
 
 #[derive(Parser)]
@@ -142,6 +143,15 @@ struct RunArgs {
     /// Invocations in flight under the scheduled executor.
     #[arg(long, default_value_t = 64)]
     window: usize,
+    /// Scheduled: pixels per side of the blocks fragments are admitted by.
+    #[arg(long, default_value_t = 4)]
+    block: u32,
+    /// Scheduled: interleave only invocations about to touch the same address or pixel.
+    #[arg(long)]
+    reduce: bool,
+    /// Per-mille probability that a weak compare-exchange fails spuriously.
+    #[arg(long, default_value_t = 0)]
+    spurious_cas: u32,
     /// k of the k-buffers.
     #[arg(long, default_value_t = 8)]
     k: u32,
@@ -197,8 +207,11 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
         }
         None => SceneSpec::Builtin(a.scene.clone()),
     };
-    let exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)
+    let mut exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)
         .map_err(anyhow::Error::msg)?;
+    exec.block = a.block.max(1);
+    exec.reduce = a.reduce;
+    exec.spurious_cas_per_mille = a.spurious_cas.min(1000);
     if fragrace_kernels::algorithm(&a.algo).is_none() {
         bail!(
             "unknown algorithm `{}`; known: {}",
@@ -431,18 +444,22 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
                 totals.torn
             );
         }
-        for h in w.rendered.result.report.hazard_list.iter().take(3) {
-            println!(
-                "  {} on {}[{}] at step {}: pixel ({}, {}) primitive {} vs primitive {}",
-                h.kind.name(),
-                h.buffer,
-                h.index,
-                h.step,
-                h.victim.x,
-                h.victim.y,
-                h.victim.primitive,
-                h.other.primitive
-            );
+        // The first hazard of each kind (races are usually the most numerous).
+        let list = &w.rendered.result.report.hazard_list;
+        for kind in [HazardKind::LostUpdate, HazardKind::Torn, HazardKind::Race] {
+            if let Some(h) = list.iter().find(|h| h.kind == kind) {
+                println!(
+                    "  {} on {}[{}] at step {}: pixel ({}, {}) primitive {} vs primitive {}",
+                    h.kind.name(),
+                    h.buffer,
+                    h.index,
+                    h.step,
+                    h.victim.x,
+                    h.victim.y,
+                    h.victim.primitive,
+                    h.other.primitive
+                );
+            }
         }
         for f in w.rendered.result.report.faults.iter().take(3) {
             println!(

@@ -158,9 +158,15 @@ impl RunSpec {
         );
         if let Some(s) = self.schedule() {
             c += &format!(
-                " --policy {} --seed {} --window {}",
-                s.policy, s.seed, s.window
+                " --policy {} --seed {} --window {} --block {}",
+                s.policy, s.seed, s.window, self.exec.block
             );
+            if self.exec.reduce {
+                c += " --reduce";
+            }
+            if self.exec.spurious_cas_per_mille > 0 {
+                c += &format!(" --spurious-cas {}", self.exec.spurious_cas_per_mille);
+            }
         } else if self.exec.mode == ExecMode::Parallel {
             c += &format!(" --threads {}", self.exec.threads);
         }
