@@ -487,8 +487,8 @@ fn cmd_list(json: bool) -> Result<()> {
         return Ok(());
     }
     println!(
-        "{:<24} {:<12} {:<16} {:<26} {}",
-        "algorithm", "family", "hazard class", "passes", "memory per pixel"
+        "{:<24} {:<12} {:<16} {:<26} memory per pixel",
+        "algorithm", "family", "hazard class", "passes"
     );
     for i in &infos {
         println!(

@@ -94,6 +94,8 @@ pub fn shrink(spec: &RunSpec, observed: &Observation, budget: Duration) -> Optio
         }
     }
     let mut chunks = 2usize;
+    // ddmin: `chunks` changes inside the loop on purpose (coarser after a success).
+    #[allow(clippy::mut_range_bound)]
     while !out_of_time() {
         let n = tri_count(&cur);
         if n <= 1 || chunks > n {

@@ -131,12 +131,6 @@ struct AddrState {
     peak: u32,
 }
 
-impl Default for Addr {
-    fn default() -> Addr {
-        Addr(0)
-    }
-}
-
 #[derive(Default)]
 struct InvState {
     id: Option<InvocationId>,
@@ -145,8 +139,11 @@ struct InvState {
     /// Step of this invocation's latest plain load, per address.
     loads: Vec<(Addr, u64)>,
     /// An open record load: (base, len, interrupted by (who, step)).
-    record: Option<(Addr, u32, Option<(u64, u64)>)>,
+    record: Option<OpenRecord>,
 }
+
+/// An open record load: (base, len, interrupted by (who, step)).
+type OpenRecord = (Addr, u32, Option<(u64, u64)>);
 
 /// A hazard as recorded (buffer by id; named when read out).
 #[derive(Clone, Copy)]

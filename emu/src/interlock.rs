@@ -113,10 +113,14 @@ impl Interlock {
             n: 0,
         };
         if mode.per_sample && self.samples > 1 {
-            for s in 0..self.samples.min(8) as usize {
+            for (s, &ticket) in tickets
+                .iter()
+                .enumerate()
+                .take(self.samples.min(8) as usize)
+            {
                 if coverage & (1 << s) != 0 {
                     c.keys[c.n] = pixel * self.samples as usize + s;
-                    c.tickets[c.n] = tickets[s];
+                    c.tickets[c.n] = ticket;
                     c.n += 1;
                 }
             }

@@ -122,7 +122,17 @@ impl<T: Word> Buf<T> {
 
 /// A global word address: buffer id in the high 32 bits, word index in the low 32.
 #[derive(
-    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Hash,
+    PartialOrd,
+    Ord,
+    serde::Serialize,
+    serde::Deserialize,
 )]
 pub struct Addr(pub u64);
 

@@ -464,7 +464,7 @@ impl Device {
                     samples: env_base.samples,
                     targets,
                 };
-                let mut ins_lists: Vec<(&[FragInput], &[FragOut], &[[u32; 4]])> = lists
+                let mut ins_lists: Vec<BackItem<'_>> = lists
                     .iter()
                     .zip(&outs_lists)
                     .zip(&colors_lists)
@@ -586,7 +586,7 @@ impl Device {
                     samples: env.samples,
                     targets,
                 };
-                let mut ins_lists: Vec<(&[FragInput], &[FragOut], &[[u32; 4]])> = ranges
+                let mut ins_lists: Vec<BackItem<'_>> = ranges
                     .iter()
                     .map(|r| {
                         (
@@ -616,7 +616,7 @@ impl Device {
                 hotspots: hot,
                 ..Default::default()
             };
-            s.hotspots.sort_by(|a, b| b.accesses.cmp(&a.accesses));
+            s.hotspots.sort_by_key(|h| std::cmp::Reverse(h.accesses));
             report.stats.merge(&s);
         }
     }
@@ -659,6 +659,9 @@ fn absorb(report: &mut PassReport, outcome: ShadeOutcome, memory: &Memory) {
         });
     }
 }
+
+/// One tile's fragments, results and colours, for the late stage.
+type BackItem<'a> = (&'a [FragInput], &'a [FragOut], &'a [[u32; 4]]);
 
 /// Where a pass's fragments come from.
 enum Geometry<'a> {

@@ -132,7 +132,7 @@ fn recorded_schedule_replays_exactly() {
 fn any_byte_string_is_a_valid_schedule() {
     for bytes in [vec![], vec![0xff; 3], (0..=255u8).collect::<Vec<_>>()] {
         let (v, r) = run_counter(&scheduled(Policy::Bytes(bytes), 0), false);
-        assert!(v >= 1 && v <= 256);
+        assert!((1..=256).contains(&v));
         assert_eq!(r.stats.shaded, 256);
     }
 }
@@ -299,7 +299,7 @@ impl FragmentKernel for Record {
         KernelInfo::new("record")
     }
     async fn shade(&self, f: Frag<'_>) {
-        if self.write && f.x() % 2 == 0 {
+        if self.write && f.x().is_multiple_of(2) {
             f.store_record(self.buf, 0, &[f.x(), f.x(), f.x()]).await;
         } else {
             let mut r = [0u32; 3];

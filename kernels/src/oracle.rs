@@ -105,7 +105,11 @@ pub fn compare(
             Capacity::Image => {
                 let want = crate::common::composite_frags(tp, params.alpha, params.background);
                 let got = result.image.as_ref().map(|i| i[p]).unwrap_or([f32::NAN; 4]);
-                let wrong = (0..3).any(|c| !((got[c] - want[c]).abs() <= IMAGE_TOLERANCE));
+                // NaN counts as wrong.
+                let wrong = (0..3).any(|c| {
+                    let d = (got[c] - want[c]).abs();
+                    d.is_nan() || d > IMAGE_TOLERANCE
+                });
                 (wrong, tp.len(), tp.len())
             }
         };

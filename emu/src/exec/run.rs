@@ -54,6 +54,8 @@ fn id_of(i: &FragInput) -> InvocationId {
 }
 
 /// One invocation's whole life: the kernel, then the hand-over of an interlock turn.
+// A named `impl Future` (not `async fn`) so the future type can live in fixed slot arrays.
+#[allow(clippy::manual_async_fn)]
 fn invocation<'a, K: FragmentKernel>(
     kernel: &'a K,
     frag: Frag<'a>,
