@@ -18,7 +18,15 @@ fn env_or(name: &str, default: u64) -> u64 {
 }
 
 fn spec(scene: &str, algo: &str, size: u32, azimuth: f32) -> RunSpec {
-    let mut s = RunSpec::new(SceneSpec::Builtin(scene.into()), algo);
+    let scene_spec = if scene.contains(".obj") {
+        SceneSpec::Obj {
+            path: scene.into(),
+            sha256: None,
+        }
+    } else {
+        SceneSpec::Builtin(scene.into())
+    };
+    let mut s = RunSpec::new(scene_spec, algo);
     s.width = size;
     s.height = size;
     s.camera = Camera::new(azimuth, 15.0);
@@ -200,5 +208,24 @@ fn every_algorithm_on_bunny() {
         env_or("FRAGRACE_SIZE", 48) as u32,
         &[90.0],
         env_or("FRAGRACE_SEEDS", 2),
+    );
+}
+
+/// The acceptance sweep on a real mesh: `dragon_res2` (202K triangles) from 8 views. Needs
+/// `../shared/models` (not shipped), so it is ignored by default:
+/// `FRAGRACE_SEEDS=50 cargo test --release --test differential -- --ignored dragon`.
+#[test]
+#[ignore]
+fn every_algorithm_on_dragon_res2_from_8_views() {
+    let path = "../shared/models/dragon_res2.obj.gz";
+    if !std::path::Path::new(path).exists() {
+        eprintln!("skipped: {path} not found");
+        return;
+    }
+    sweep(
+        path,
+        env_or("FRAGRACE_SIZE", 48) as u32,
+        &[0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0],
+        env_or("FRAGRACE_SEEDS", 3),
     );
 }
