@@ -16,7 +16,9 @@
 //!   `scheduled` executor with an arbitrary schedule (`Policy::Bytes` of the remaining bytes),
 //!   checked against the truth and against the algorithm's declared hazard class. One value of
 //!   the selector byte picks the linked list with its planted bug instead
-//!   ([`KernelOutcome::Planted`]), which the fuzzer is expected to find (torn records).
+//!   ([`KernelOutcome::Planted`]), which the fuzzer is expected to find: a schedule under
+//!   which the detector reports a torn record, or the in-pass reader follows the head to a
+//!   node not written yet.
 //! - [`obj_loader`]: [`parse_obj_bytes`] on arbitrary bytes; a mesh it accepts is valid and
 //!   round-trips through OBJ text exactly.
 //! - [`case_parser`]: [`case::parse`] on arbitrary bytes; a case it accepts re-serialises
