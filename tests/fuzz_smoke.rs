@@ -523,7 +523,6 @@ fn case_parser_on_seeded_inputs() {
 }
 
 #[test]
-#[ignore = "finding F1: enable serde_json's `float_roundtrip` feature in Cargo.toml, then un-ignore"]
 fn case_files_round_trip_every_float_exactly() {
     for (i, data) in random_inputs(0x5EED_0009, 300, 0..1000).iter().enumerate() {
         ok("case_parser", i, case_parser(data));

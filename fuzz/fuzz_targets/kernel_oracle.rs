@@ -8,6 +8,10 @@
 //! it (a torn record or a half-written node seen), which measures how fast the fuzzer finds
 //! it:
 //!   FRAGRACE_FUZZ_PLANTED=1 RUSTC_BOOTSTRAP=1 cargo fuzz run --sanitizer none kernel_oracle
+//! Measured from an empty corpus (1 core): 165k to 223k executions (142 to 163 s) with
+//! libFuzzer's defaults; 40k to 80k executions (35 to 130 s) with `-- -len_control=0
+//! -max_len=256`, which lets inputs hold scenes and schedules from the start (recommended
+//! for this target).
 #![no_main]
 
 use std::sync::OnceLock;
