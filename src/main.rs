@@ -152,6 +152,17 @@ struct RunArgs {
     /// Per-mille probability that a weak compare-exchange fails spuriously.
     #[arg(long, default_value_t = 0)]
     spurious_cas: u32,
+    /// Parallel: lanes per warp (fragments shaded together by one thread).
+    #[arg(long, default_value_t = 64)]
+    lanes: usize,
+    /// Parallel: lanes run one after the other instead of in SIMT lockstep (one memory
+    /// access each per turn). Faster; races then come only from other threads.
+    #[arg(long)]
+    no_lockstep: bool,
+    /// Parallel: most triangles of one tile per unit of work; smaller units put more
+    /// threads on one tile at once (when the pass's fixed-function results commute).
+    #[arg(long, default_value_t = 128)]
+    segment: u32,
     /// k of the k-buffers.
     #[arg(long, default_value_t = 8)]
     k: u32,
@@ -212,6 +223,9 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
     exec.block = a.block.max(1);
     exec.reduce = a.reduce;
     exec.spurious_cas_per_mille = a.spurious_cas.min(1000);
+    exec.batch = a.lanes.max(1);
+    exec.lockstep = !a.no_lockstep;
+    exec.segment = a.segment.max(1);
     if fragrace_kernels::algorithm(&a.algo).is_none() {
         bail!(
             "unknown algorithm `{}`; known: {}",
@@ -517,15 +531,20 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         run::render(&spec, &loaded)?;
     }
     let mut times = Vec::new();
+    let mut pass_times = Vec::new();
     let mut last = None;
     for _ in 0..a.frames.max(1) {
         let t = Instant::now();
         let r = run::render(&spec, &loaded)?;
         times.push(t.elapsed().as_secs_f64() * 1e3);
+        pass_times.push(r.result.report.wall.as_secs_f64() * 1e3);
         last = Some(r);
     }
     let r = last.expect("one frame");
     let ms = median(&mut times);
+    // The passes alone (transform, binning, shading, fixed function), without buffer
+    // allocation, clears and read-back.
+    let pass_ms = median(&mut pass_times);
     let stats = &r.result.report.stats;
     let tris = loaded.scene.mesh.triangle_count() as f64 * stats.geometry_passes.max(1) as f64;
     let v = serde_json::json!({
@@ -537,6 +556,7 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         "threads": spec.exec.threads,
         "frames": times.len(),
         "median_ms": ms,
+        "passes_median_ms": pass_ms,
         "min_ms": times.first(),
         "max_ms": times.last(),
         "fragments": stats.fragments_generated,
@@ -549,9 +569,9 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         println!("{v}");
     } else {
         println!(
-            "{} on {} ({} triangles) {}x{}, {} with {} threads: median {:.2} ms over {} frames (min {:.2}, max {:.2})\n  {:.1} M fragments/s, {:.1} M triangles/s, {:.2} M steps/s",
+            "{} on {} ({} triangles) {}x{}, {} with {} threads: median {:.2} ms over {} frames (min {:.2}, max {:.2}); passes alone {:.2} ms\n  {:.1} M fragments/s, {:.1} M triangles/s, {:.2} M steps/s",
             spec.algo, spec.scene.name(), loaded.scene.mesh.triangle_count(), spec.width, spec.height, spec.exec.mode.name(), spec.exec.threads,
-            ms, times.len(), times[0], times[times.len() - 1],
+            ms, times.len(), times[0], times[times.len() - 1], pass_ms,
             stats.fragments_generated as f64 / (ms / 1e3) / 1e6, tris / (ms / 1e3) / 1e6, stats.steps as f64 / (ms / 1e3) / 1e6
         );
     }

@@ -168,7 +168,13 @@ impl RunSpec {
                 c += &format!(" --spurious-cas {}", self.exec.spurious_cas_per_mille);
             }
         } else if self.exec.mode == ExecMode::Parallel {
-            c += &format!(" --threads {}", self.exec.threads);
+            c += &format!(
+                " --threads {} --lanes {} --segment {}",
+                self.exec.threads, self.exec.batch, self.exec.segment
+            );
+            if !self.exec.lockstep {
+                c += " --no-lockstep";
+            }
         }
         c
     }

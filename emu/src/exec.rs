@@ -22,7 +22,9 @@ mod threads;
 pub use policy::{Policy, PolicyParseError};
 pub use run::Execution;
 pub use run::Fault;
-pub(crate) use run::{explore, shade, shade_chunks, FragOut, ShadeOutcome};
+pub(crate) use run::{
+    explore, poll_slot, record_panic, shade, shade_chunks, Acc, FragOut, Polled, ShadeOutcome,
+};
 pub use threads::{run_on_threads, ThreadOutcome};
 
 /// Configuration of the `scheduled` executor.
@@ -100,6 +102,17 @@ pub struct ExecConfig {
     /// of the invocation and its step count: deterministic for a given schedule).
     #[serde(default)]
     pub spurious_cas_per_mille: u32,
+    /// Parallel executor: most triangles of one tile in one unit of work. A tile with more
+    /// is cut into several units that different threads rasterize and shade at the same
+    /// time, so fragments of one pixel run concurrently on different threads, as on a GPU
+    /// (only in passes whose fixed-function results do not depend on order: no colour
+    /// targets, no stencil, no depth writes; other passes keep a tile on one thread).
+    #[serde(default = "default_segment")]
+    pub segment: u32,
+}
+
+fn default_segment() -> u32 {
+    128
 }
 
 fn default_block() -> u32 {
@@ -119,6 +132,7 @@ impl Default for ExecConfig {
             block: default_block(),
             reduce: false,
             spurious_cas_per_mille: 0,
+            segment: default_segment(),
         }
     }
 }

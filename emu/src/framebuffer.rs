@@ -186,6 +186,41 @@ impl TileMemory {
         mask
     }
 
+    /// The depth test of `state` alone, reading the depth plane and writing nothing: for
+    /// passes with the stencil test off and depth writes off, where the test of one fragment
+    /// does not depend on any other, so several threads may test one tile at once.
+    /// Returns the mask of samples that passed.
+    pub fn depth_test_readonly(
+        &self,
+        state: &FragmentState,
+        lx: u32,
+        ly: u32,
+        coverage: u8,
+        depths: &[f32; 8],
+    ) -> u8 {
+        debug_assert!(!state.stencil.enabled && !(state.depth.test && state.depth.write));
+        let mut mask = coverage & state.sample_mask & self.sample_bits();
+        if !state.depth.test {
+            return mask;
+        }
+        let base = self.index(lx, ly, 0);
+        let mut bits = mask;
+        while bits != 0 {
+            let s = bits.trailing_zeros();
+            bits &= bits - 1;
+            // An untouched depth plane is still all `depth_clear` (see `materialize`).
+            let stored = self
+                .depth
+                .get(base + s as usize)
+                .copied()
+                .unwrap_or(self.depth_clear);
+            if !state.depth.func.test(depths[s as usize], stored) {
+                mask &= !(1 << s);
+            }
+        }
+        mask
+    }
+
     /// Writes the shader outputs (one per target, raw words) to the samples in `mask`,
     /// through each target's blend / logic op / write mask.
     pub fn write_outputs(

@@ -86,7 +86,9 @@ pub struct FragInput {
     pub instance_id: u32,
     pub coverage: u8,
     pub front_facing: bool,
-    /// Window depth at the pixel centre.
+    /// Window depth at the pixel centre. Explicit invocations and full-screen passes take
+    /// it from here; rasterized fragments compute it from their triangle
+    /// ([`Frag::depth`]), and the fused path leaves it NaN when no test needs it.
     pub depth: f32,
     /// Rank of this fragment among the shaded fragments of its pixel (API order), for
     /// ordered interlock.
@@ -244,6 +246,16 @@ impl Invocation {
 
     /// Resets the slot for a new fragment.
     pub fn reset(&self, input: FragInput) {
+        self.reset_keep_ops(input);
+        for o in &self.ops {
+            o.set(0);
+        }
+    }
+
+    /// Resets the slot for a new fragment but lets the operation counters run on (the
+    /// fused path sums them once per worker instead of once per invocation).
+    #[inline]
+    pub fn reset_keep_ops(&self, input: FragInput) {
         self.input.set(input);
         // Only outputs the previous invocation wrote need clearing (most write none).
         let mut written = self.outputs_written.replace(0);
@@ -262,11 +274,9 @@ impl Invocation {
         *self.fault.borrow_mut() = None;
         self.in_interlock.set(false);
         self.entered_interlock.set(false);
-        for o in &self.ops {
-            o.set(0);
-        }
     }
 
+    #[inline]
     pub fn faulted(&self) -> bool {
         self.fault.borrow().is_some()
     }
@@ -297,6 +307,7 @@ pub(crate) struct Step<'a> {
 
 impl Future for Step<'_> {
     type Output = ();
+    #[inline]
     fn poll(mut self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<()> {
         let inv = self.frag.inv;
         let env = self.frag.env;
@@ -367,6 +378,111 @@ impl<F: Fn() -> bool> Future for WaitUntil<'_, F> {
     }
 }
 
+/// The future of one shared-memory access ([`Frag::load`], [`Frag::atomic_add`], ...).
+///
+/// Written by hand rather than as an `async fn`: under the `ordered` and `parallel`
+/// executors an access completes at its first poll, and this keeps that path to a bounds
+/// check, a step count and the atomic (an `async fn` would copy its arguments into its
+/// state first). Await it at once: an access that is never polled never happens.
+#[must_use = "a memory access does nothing unless awaited"]
+pub struct Access<'a, T: Word> {
+    frag: Frag<'a>,
+    buf: Buf<T>,
+    index: u32,
+    op: MemOp,
+    record: Option<RecordSpan>,
+    /// The scheduling point, once the access has had to suspend.
+    step: Option<Step<'a>>,
+}
+
+impl<T: Word> Future for Access<'_, T> {
+    type Output = T;
+    #[inline]
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<T> {
+        // `Access` is `Unpin` (references and plain data only).
+        let this = self.get_mut();
+        let frag = this.frag;
+        let (inv, env) = (frag.inv, frag.env);
+        let Some(addr) = frag.addr(this.buf, this.index) else {
+            // Faulted: never completes; the executor drops the invocation.
+            return Poll::Pending;
+        };
+        let kind = this.op.kind();
+        if this.step.is_none() && env.mode == (Mode::Direct { yield_every: 0 }) {
+            // Nothing ever suspends here: count the step for the watchdog without a step
+            // future (the hot path of the ordered and parallel executors).
+            let steps = inv.steps.get() + 1;
+            if steps > env.max_steps || inv.faulted() {
+                inv.set_fault(FaultKind::Watchdog { steps: steps - 1 });
+                return Poll::Pending;
+            }
+            inv.steps.set(steps);
+        } else {
+            let record = this.record;
+            let step = this.step.get_or_insert_with(|| {
+                frag.step(StepKind::Mem {
+                    addr,
+                    op: kind,
+                    record,
+                })
+            });
+            if Pin::new(step).poll(cx).is_pending() {
+                return Poll::Pending;
+            }
+        }
+        let k = kind as usize;
+        inv.ops[k].set(inv.ops[k].get() + 1);
+        let ordering = if kind.is_plain() {
+            crate::sync::Ordering::Relaxed
+        } else {
+            crate::sync::Ordering::AcqRel
+        };
+        let bits = if let Some(table) = env.contention {
+            let guard = table.enter(addr);
+            let bits = env.memory.apply::<T>(addr, this.op, ordering);
+            drop(guard);
+            bits
+        } else {
+            env.memory.apply::<T>(addr, this.op, ordering)
+        };
+        Poll::Ready(T::from_bits(bits))
+    }
+}
+
+/// The future of a store ([`Frag::store`], [`Frag::atomic_store`]).
+#[must_use = "a memory access does nothing unless awaited"]
+pub struct Store<'a, T: Word>(Access<'a, T>);
+
+impl<T: Word> Future for Store<'_, T> {
+    type Output = ();
+    #[inline]
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        Pin::new(&mut self.get_mut().0).poll(cx).map(|_| ())
+    }
+}
+
+/// The future of [`Frag::atomic_compare_exchange`].
+#[must_use = "a memory access does nothing unless awaited"]
+pub struct CompareExchange<'a, T: Word>(Access<'a, T>);
+
+impl<T: Word> Future for CompareExchange<'_, T> {
+    type Output = Result<T, T>;
+    #[inline]
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Result<T, T>> {
+        let access = &mut self.get_mut().0;
+        let MemOp::CompareExchange(expected, _) = access.op else {
+            unreachable!("built by Frag::atomic_compare_exchange")
+        };
+        Pin::new(access).poll(cx).map(|prev| {
+            if prev.to_bits() == expected {
+                Ok(prev)
+            } else {
+                Err(prev)
+            }
+        })
+    }
+}
+
 /// A future that never completes: the invocation has faulted and will be dropped.
 struct Halt;
 impl Future for Halt {
@@ -413,9 +529,14 @@ impl<'a> Frag<'a> {
     pub fn front_facing(&self) -> bool {
         self.input().front_facing
     }
-    /// Window depth in [0,1] at the pixel centre (`gl_FragCoord.z`).
+    /// Window depth in [0,1] at the pixel centre (`gl_FragCoord.z`), interpolated on
+    /// demand (kernels that never read it do not pay for it).
     pub fn depth(&self) -> f32 {
-        self.input().depth
+        let i = self.input();
+        match self.env.tris.get(i.tri as usize) {
+            Some(t) => t.depth_at(i.x as f32 + 0.5, i.y as f32 + 0.5),
+            None => i.depth,
+        }
     }
     /// Covered samples (bit s = sample s).
     pub fn coverage(&self) -> u8 {
@@ -500,121 +621,102 @@ impl<'a> Frag<'a> {
         }
     }
 
-    async fn access<T: Word>(
+    /// The future of one access: bounds are checked when it is first polled (an
+    /// out-of-range access faults and ends the invocation).
+    #[inline]
+    fn access<T: Word>(
         &self,
         buf: Buf<T>,
         index: u32,
         op: MemOp,
         record: Option<RecordSpan>,
-    ) -> T {
-        let Some(addr) = self.addr(buf, index) else {
-            Halt.await;
-            unreachable!("a halted invocation is never resumed")
-        };
-        let kind = op.kind();
-        self.step(StepKind::Mem {
-            addr,
-            op: kind,
+    ) -> Access<'a, T> {
+        Access {
+            frag: *self,
+            buf,
+            index,
+            op,
             record,
-        })
-        .await;
-        let k = kind as usize;
-        self.inv.ops[k].set(self.inv.ops[k].get() + 1);
-        let ordering = if kind.is_plain() {
-            crate::sync::Ordering::Relaxed
-        } else {
-            crate::sync::Ordering::AcqRel
-        };
-        if let Some(table) = self.env.contention {
-            let guard = table.enter(addr);
-            let bits = self.env.memory.apply::<T>(addr, op, ordering);
-            drop(guard);
-            T::from_bits(bits)
-        } else {
-            T::from_bits(self.env.memory.apply::<T>(addr, op, ordering))
+            step: None,
         }
     }
 
     /// Plain load (no atomicity, no ordering: as a GLSL load from a buffer).
-    pub async fn load<T: Word>(&self, buf: Buf<T>, index: u32) -> T {
-        self.access(buf, index, MemOp::Load, None).await
+    #[inline]
+    pub fn load<T: Word>(&self, buf: Buf<T>, index: u32) -> Access<'a, T> {
+        self.access(buf, index, MemOp::Load, None)
     }
     /// Plain store.
-    pub async fn store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) {
-        self.access(buf, index, MemOp::Store(value.to_bits()), None)
-            .await;
+    #[inline]
+    pub fn store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Store<'a, T> {
+        Store(self.access(buf, index, MemOp::Store(value.to_bits()), None))
     }
     /// Atomic load (acquire).
-    pub async fn atomic_load<T: Word>(&self, buf: Buf<T>, index: u32) -> T {
-        self.access(buf, index, MemOp::AtomicLoad, None).await
+    #[inline]
+    pub fn atomic_load<T: Word>(&self, buf: Buf<T>, index: u32) -> Access<'a, T> {
+        self.access(buf, index, MemOp::AtomicLoad, None)
     }
     /// Atomic store (release).
-    pub async fn atomic_store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) {
-        self.access(buf, index, MemOp::AtomicStore(value.to_bits()), None)
-            .await;
+    #[inline]
+    pub fn atomic_store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Store<'a, T> {
+        Store(self.access(buf, index, MemOp::AtomicStore(value.to_bits()), None))
     }
     /// Atomic add; returns the previous value (wrapping for integers).
-    pub async fn atomic_add<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+    #[inline]
+    pub fn atomic_add<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Add(value.to_bits()), None)
-            .await
     }
     /// Atomic subtract; returns the previous value.
-    pub async fn atomic_sub<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+    #[inline]
+    pub fn atomic_sub<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Sub(value.to_bits()), None)
-            .await
     }
     /// Atomic minimum (as `T`: signed for i32, float order for f32); returns the previous value.
-    pub async fn atomic_min<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+    #[inline]
+    pub fn atomic_min<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Min(value.to_bits()), None)
-            .await
     }
     /// Atomic maximum; returns the previous value.
-    pub async fn atomic_max<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+    #[inline]
+    pub fn atomic_max<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Max(value.to_bits()), None)
-            .await
     }
     /// Atomic bitwise and; returns the previous value.
-    pub async fn atomic_and<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+    #[inline]
+    pub fn atomic_and<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::And(value.to_bits()), None)
-            .await
     }
     /// Atomic bitwise or; returns the previous value.
-    pub async fn atomic_or<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+    #[inline]
+    pub fn atomic_or<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Or(value.to_bits()), None)
-            .await
     }
     /// Atomic bitwise xor; returns the previous value.
-    pub async fn atomic_xor<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+    #[inline]
+    pub fn atomic_xor<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Xor(value.to_bits()), None)
-            .await
     }
     /// Atomic exchange; returns the previous value.
-    pub async fn atomic_exchange<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> T {
+    #[inline]
+    pub fn atomic_exchange<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Exchange(value.to_bits()), None)
-            .await
     }
     /// Atomic compare-exchange: `Ok(previous)` if the word held `expected` and now holds
     /// `new`, `Err(current)` otherwise (bitwise comparison, as GLSL's `atomicCompSwap`).
-    pub async fn atomic_compare_exchange<T: Word>(
+    #[inline]
+    pub fn atomic_compare_exchange<T: Word>(
         &self,
         buf: Buf<T>,
         index: u32,
         expected: T,
         new: T,
-    ) -> Result<T, T> {
-        let prev: T = self
-            .access(
-                buf,
-                index,
-                MemOp::CompareExchange(expected.to_bits(), new.to_bits()),
-                None,
-            )
-            .await;
-        if prev.to_bits() == expected.to_bits() {
-            Ok(prev)
-        } else {
-            Err(prev)
-        }
+    ) -> CompareExchange<'a, T> {
+        CompareExchange(self.access(
+            buf,
+            index,
+            MemOp::CompareExchange(expected.to_bits(), new.to_bits()),
+            None,
+        ))
     }
 
     /// Weak compare-exchange: as [`Frag::atomic_compare_exchange`], but may fail

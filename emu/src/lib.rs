@@ -36,7 +36,7 @@ pub use geometry::{Draw, Mesh};
 pub use hazard::{Hazard, HazardCounts, HazardKind};
 pub use interlock::InterlockMode;
 pub use kernel::FragInput;
-pub use kernel::{FaultKind, Frag, FragmentKernel, KernelInfo};
+pub use kernel::{Access, CompareExchange, FaultKind, Frag, FragmentKernel, KernelInfo, Store};
 pub use memory::{Buf, Memory, Word};
 pub use pipeline::{Device, Fault, OcclusionQuery, PassError, PassReport, PassState};
 pub use raster::{CullMode, FrontFace, RasterState, SampleCount, Viewport};

@@ -422,7 +422,7 @@ impl Memory {
     }
 
     /// The word at (buffer, index); the caller has checked bounds.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn word(&self, buffer: u32, index: u32) -> WordRef<'_> {
         match &self.buffers[buffer as usize].words {
             Words::W32(w) => WordRef::W32(&w[index as usize]),
@@ -432,7 +432,7 @@ impl Memory {
 
     /// Performs one kernel operation on a checked address; returns the previous value (or
     /// the loaded one) as raw bits. `ordering` is the memory order of the real atomic.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn apply<T: Word>(&self, addr: Addr, op: MemOp, ordering: Ordering) -> u64 {
         self.word(addr.buffer(), addr.index())
             .apply::<T>(op, ordering)
@@ -498,7 +498,7 @@ impl WordRef<'_> {
         }
     }
 
-    #[inline]
+    #[inline(always)]
     fn apply<T: Word>(&self, op: MemOp, ord: Ordering) -> u64 {
         match self {
             WordRef::W32(a) => apply32::<T>(a, op, ord) as u64,
@@ -524,7 +524,7 @@ fn store_order(ord: Ordering) -> Ordering {
     }
 }
 
-#[inline]
+#[inline(always)]
 fn apply32<T: Word>(a: &AtomicU32, op: MemOp, ord: Ordering) -> u32 {
     match op {
         MemOp::Load => a.load(Ordering::Relaxed),

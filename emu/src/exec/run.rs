@@ -56,7 +56,7 @@ fn id_of(i: &FragInput) -> InvocationId {
 /// One invocation's whole life: the kernel, then the hand-over of an interlock turn.
 // A named `impl Future` (not `async fn`) so the future type can live in fixed slot arrays.
 #[allow(clippy::manual_async_fn)]
-fn invocation<'a, K: FragmentKernel>(
+pub(crate) fn invocation<'a, K: FragmentKernel>(
     kernel: &'a K,
     frag: Frag<'a>,
 ) -> impl Future<Output = ()> + 'a {
@@ -66,13 +66,13 @@ fn invocation<'a, K: FragmentKernel>(
     }
 }
 
-enum Polled {
+pub(crate) enum Polled {
     Done,
     Pending,
 }
 
 /// Polls the future in `slot`, turning a panic into a fault.
-fn poll_slot<F: Future<Output = ()>>(
+pub(crate) fn poll_slot<F: Future<Output = ()>>(
     slot: &mut Option<F>,
     inv: &Invocation,
     cx: &mut Context<'_>,
@@ -94,17 +94,22 @@ fn poll_slot<F: Future<Output = ()>>(
             }
         }
         Err(payload) => {
-            let message = payload
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| payload.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "panic with a non-string payload".into());
-            let mut f = inv.fault.borrow_mut();
-            if f.is_none() {
-                *f = Some(FaultKind::Panic { message });
-            }
+            record_panic(inv, payload.as_ref());
             Polled::Done
         }
+    }
+}
+
+/// Turns a kernel's panic into the invocation's fault.
+pub(crate) fn record_panic(inv: &Invocation, payload: &(dyn std::any::Any + Send)) {
+    let message = payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "panic with a non-string payload".into());
+    let mut f = inv.fault.borrow_mut();
+    if f.is_none() {
+        *f = Some(FaultKind::Panic { message });
     }
 }
 
@@ -163,26 +168,32 @@ pub(crate) struct Acc {
 impl Acc {
     /// Copies a finished invocation's results out and counts it.
     pub(crate) fn harvest(&mut self, inv: &Invocation, out: &mut FragOut, colors: &mut [[u32; 4]]) {
-        let input = inv.input.get();
-        let fault = inv.fault.borrow_mut().take();
-        out.faulted = fault.is_some();
         out.discarded = inv.discarded.get();
         out.depth = inv.depth_out.get();
         for (c, o) in colors.iter_mut().zip(&inv.outputs) {
             *c = o.get();
         }
+        out.faulted = self.count(inv);
+        for (a, o) in self.ops.iter_mut().zip(&inv.ops) {
+            *a = a.saturating_add(o.get());
+        }
+    }
+
+    /// Counts a finished invocation (steps, waits, discard, fault) and takes its
+    /// fault; returns whether it faulted. Its outputs stay in the slot.
+    pub(crate) fn count(&mut self, inv: &Invocation) -> bool {
+        let input = inv.input.get();
+        let fault = inv.fault.borrow_mut().take();
+        let faulted = fault.is_some();
         let s = &mut self.stats;
         s.shaded += 1;
-        if out.discarded {
+        if inv.discarded.get() {
             s.discarded += 1;
         }
         let steps = inv.steps.get();
         s.steps += steps;
         s.max_steps_per_invocation = s.max_steps_per_invocation.max(steps);
         s.interlock_waits += inv.waits.get();
-        for (a, o) in self.ops.iter_mut().zip(&inv.ops) {
-            *a = a.saturating_add(o.get());
-        }
         if let Some(kind) = fault {
             s.faulted += 1;
             if self.faults.len() < KEEP_FAULTS {
@@ -191,6 +202,15 @@ impl Acc {
                     kind,
                 });
             }
+        }
+        faulted
+    }
+
+    /// Adds operation counters kept across invocations (see [`Invocation::reset_keep_ops`]).
+    pub(crate) fn add_ops(&mut self, inv: &Invocation) {
+        for (a, o) in self.ops.iter_mut().zip(&inv.ops) {
+            *a = a.saturating_add(o.get());
+            o.set(0);
         }
     }
 

@@ -35,7 +35,9 @@ mod coverage;
 mod pool;
 mod setup;
 
-pub use setup::{bin_triangles, effective_tile_size, Binned, SetupTriangle, MAX_TILE, MIN_TILE};
+pub use setup::{
+    bin_triangles, effective_tile_size, Binned, Segment, SetupTriangle, MAX_TILE, MIN_TILE,
+};
 
 /// Sub-pixel precision of snapped vertex positions.
 pub const SUBPIXEL_BITS: u32 = 8;

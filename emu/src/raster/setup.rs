@@ -168,67 +168,137 @@ impl Binned {
         if tile >= self.tile_count() {
             return;
         }
+        for (c, chunk) in self.chunks.iter().enumerate() {
+            let n = chunk.tile_start[tile + 1] - chunk.tile_start[tile];
+            self.raster_segment(
+                &Segment {
+                    tile: tile as u32,
+                    chunk: c as u32,
+                    start: 0,
+                    end: n,
+                },
+                &mut emit,
+            );
+        }
+    }
+
+    /// Splits tile `tile`'s work into [`Segment`]s of at most `max_entries` bin entries
+    /// (API order: appending them in order and rastering each gives [`Binned::raster_tile`]).
+    /// The fan pieces of one clipped triangle are never split (their coverage is merged).
+    pub fn tile_segments(&self, tile: usize, max_entries: u32, out: &mut Vec<Segment>) {
+        if tile >= self.tile_count() {
+            return;
+        }
+        let max_entries = max_entries.max(1);
+        for (c, chunk) in self.chunks.iter().enumerate() {
+            let lo = chunk.tile_start[tile];
+            let list = &chunk.entries[lo as usize..chunk.tile_start[tile + 1] as usize];
+            let n = list.len() as u32;
+            let mut start = 0;
+            while start < n {
+                let mut end = (start + max_entries).min(n);
+                // Keep a piece group whole: move the cut past pieces of the same source.
+                while end < n && list[end as usize].info & PIECE != 0 && {
+                    let prev = &list[end as usize - 1];
+                    prev.info & PIECE != 0
+                        && self.tris[(chunk.base + prev.tri) as usize].source
+                            == self.tris[(chunk.base + list[end as usize].tri) as usize].source
+                } {
+                    end += 1;
+                }
+                out.push(Segment {
+                    tile: tile as u32,
+                    chunk: c as u32,
+                    start,
+                    end,
+                });
+                start = end;
+            }
+        }
+    }
+
+    /// Emits the fragments of one segment of a tile in API order (by `tri`); within one
+    /// triangle in row-major order.
+    pub fn raster_segment(&self, seg: &Segment, mut emit: impl FnMut(Fragment)) {
+        let tile = seg.tile as usize;
+        let Some(c) = self.chunks.get(seg.chunk as usize) else {
+            return;
+        };
+        if tile >= self.tile_count() {
+            return;
+        }
         let (x0, y0, x1, y1) = self.tile_rect(tile);
         if x0 >= x1 || y0 >= y1 {
             return;
         }
         let rect = [x0 as i32, y0 as i32, x1 as i32, y1 as i32];
         let si = SampleInfo::new(self.samples);
+        let lo = c.tile_start[tile] as usize;
+        let hi = c.tile_start[tile + 1] as usize;
+        let list = &c.entries[(lo + seg.start as usize).min(hi)..(lo + seg.end as usize).min(hi)];
         let mut merge: Vec<(u32, u32, u8)> = Vec::new();
-        for c in &self.chunks {
-            let list = &c.entries[c.tile_start[tile] as usize..c.tile_start[tile + 1] as usize];
-            let mut i = 0;
-            while i < list.len() {
-                let e = list[i];
-                let tri = c.base + e.tri;
-                // With several samples, the fan pieces of one clipped triangle can each cover
-                // some samples of a pixel on their shared diagonal: merge them into one
-                // fragment (the pieces are consecutive, and share the source's planes).
-                let mut j = i + 1;
-                if e.info & PIECE != 0 && si.offs.len() > 1 {
-                    let source = self.tris[tri as usize].source;
-                    while j < list.len()
-                        && list[j].info & PIECE != 0
-                        && self.tris[(c.base + list[j].tri) as usize].source == source
-                    {
-                        j += 1;
-                    }
+        let mut i = 0;
+        while i < list.len() {
+            let e = list[i];
+            let tri = c.base + e.tri;
+            // With several samples, the fan pieces of one clipped triangle can each cover
+            // some samples of a pixel on their shared diagonal: merge them into one
+            // fragment (the pieces are consecutive, and share the source's planes).
+            let mut j = i + 1;
+            if e.info & PIECE != 0 && si.offs.len() > 1 {
+                let source = self.tris[tri as usize].source;
+                while j < list.len()
+                    && list[j].info & PIECE != 0
+                    && self.tris[(c.base + list[j].tri) as usize].source == source
+                {
+                    j += 1;
                 }
-                if j == i + 1 {
-                    entry_coverage(c, &e, rect, &si, |x, y, coverage| {
-                        emit(Fragment {
-                            x,
-                            y,
-                            tri,
-                            coverage,
-                        })
-                    });
-                } else {
-                    merge.clear();
-                    for e in &list[i..j] {
-                        entry_coverage(c, e, rect, &si, |x, y, m| merge.push((y, x, m)));
-                    }
-                    merge.sort_unstable_by_key(|&(y, x, _)| (y, x));
-                    let mut k = 0;
-                    while k < merge.len() {
-                        let (y, x, mut coverage) = merge[k];
-                        k += 1;
-                        while k < merge.len() && (merge[k].0, merge[k].1) == (y, x) {
-                            coverage |= merge[k].2;
-                            k += 1;
-                        }
-                        emit(Fragment {
-                            x,
-                            y,
-                            tri,
-                            coverage,
-                        });
-                    }
-                }
-                i = j;
             }
+            if j == i + 1 {
+                entry_coverage(c, &e, rect, &si, |x, y, coverage| {
+                    emit(Fragment {
+                        x,
+                        y,
+                        tri,
+                        coverage,
+                    })
+                });
+            } else {
+                merge.clear();
+                for e in &list[i..j] {
+                    entry_coverage(c, e, rect, &si, |x, y, m| merge.push((y, x, m)));
+                }
+                merge.sort_unstable_by_key(|&(y, x, _)| (y, x));
+                let mut k = 0;
+                while k < merge.len() {
+                    let (y, x, mut coverage) = merge[k];
+                    k += 1;
+                    while k < merge.len() && (merge[k].0, merge[k].1) == (y, x) {
+                        coverage |= merge[k].2;
+                        k += 1;
+                    }
+                    emit(Fragment {
+                        x,
+                        y,
+                        tri,
+                        coverage,
+                    });
+                }
+            }
+            i = j;
         }
     }
+}
+
+/// A unit of rasterization work: entries `start..end` of one chunk's list for one tile.
+/// Segments of one tile, in order, are the tile's triangles in API order; different
+/// segments of one tile can be rasterized and shaded on different threads at once.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Segment {
+    pub tile: u32,
+    pub chunk: u32,
+    pub start: u32,
+    pub end: u32,
 }
 
 /// Calls `f(x, y, mask)` for the pixels of tile rectangle `rect` (`[x0, y0, x1, y1)`) covered

@@ -8,6 +8,8 @@
 //! ran in: the early and late stages run per tile in rasterization order, as a GPU's ROP.
 //! This module knows nothing of any algorithm.
 
+mod fused;
+
 use std::time::{Duration, Instant};
 
 use glam::Vec4;
@@ -395,6 +397,45 @@ impl Device {
             spurious_cas: exec.spurious_cas_per_mille,
             contention: contention.as_ref(),
         };
+        // Ordered and parallel draws without interlock or contention counting take the
+        // fused path (see `fused`): no fragment lists, one pass over each tile.
+        let direct = matches!(exec.mode, ExecMode::Ordered | ExecMode::Parallel);
+        if let (
+            true,
+            None,
+            None,
+            Geometry::Binned {
+                binned,
+                instance,
+                single,
+            },
+        ) = (direct, info.interlock, contention.as_ref(), geo)
+        {
+            let parallel = exec.mode == ExecMode::Parallel;
+            let pass = fused::FusedPass {
+                binned,
+                state,
+                instance: *instance,
+                single: *single,
+                early,
+                targets,
+                lanes: if parallel { exec.batch.max(1) } else { 1 },
+                lockstep: parallel && exec.lockstep,
+                threads: if parallel { exec.threads.max(1) } else { 1 },
+                segment: (parallel && fused::commutes(state, targets))
+                    .then_some(exec.segment.max(1)),
+                seq_base: *seq_base,
+            };
+            let (outcome, counts) = fused::run_fused(kernel, &env_base, &pass, fb.tiles_mut());
+            let pixels = fb.width as u64 * fb.height as u64;
+            *seq_base = seq_base.wrapping_add((binned.tris.len() as u64).wrapping_mul(pixels));
+            report.stats.fragments_generated += counts.generated;
+            report.stats.early_culled += counts.early_culled;
+            report.stats.late_culled += counts.late_culled;
+            report.stats.samples_passed += counts.samples_passed;
+            absorb(report, outcome, &self.memory);
+            return;
+        }
         let tile_count = fb.tiles().len();
         let mut wave_index = 0u64;
         let mut bytes_used = 0usize;

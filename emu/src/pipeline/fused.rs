@@ -1,0 +1,430 @@
+//! The fused path of the `ordered` and `parallel` executors: rasterize, test, shade and
+//! write one unit of tile work at a time, with no per-pass fragment lists.
+//!
+//! The general path ([`super::Device::run_waves`]) materializes every fragment of a wave
+//! (rasterize all tiles, shade all fragments, then run the late stage), which the scheduled
+//! executor needs (it interleaves invocations of many tiles) and ordered interlock needs
+//! (tickets). Direct executors need none of that: a worker takes a unit of work (a tile, or a
+//! [`Segment`] of one), rasterizes it into a warp of at most `batch` fragments, shades the
+//! warp (lanes in lockstep or one after the other, as `ExecConfig::lockstep` says), runs the
+//! late tests and target writes in API order, and goes on. Memory stays in the tile; nothing
+//! is allocated per fragment.
+//!
+//! When the pass's fixed-function results commute (no colour targets, no stencil, no depth
+//! writes: capture passes, counting), a tile's triangles are cut into segments of at most
+//! `ExecConfig::segment` and different threads take segments of the same tile at the same
+//! time: fragments of one pixel then run concurrently on different threads, as on a GPU,
+//! and races on shared memory are real races. Otherwise a tile belongs to one worker at a
+//! time, so depth, stencil and blending happen in API order.
+//!
+//! This module knows no algorithm; it does not handle interlock (ordered interlock needs the
+//! per-pixel tickets of the general path) nor the contention table.
+
+use std::future::Future;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::task::{Context, Waker};
+
+use crate::exec::{poll_slot, record_panic, Acc, Polled, ShadeOutcome};
+use crate::framebuffer::TileMemory;
+use crate::kernel::{Frag, FragInput, FragmentKernel, Invocation, PassEnv};
+use crate::raster::{Binned, SampleCount, Segment};
+use crate::state::FragmentState;
+use crate::sync::pool;
+
+/// What a fused pass needs besides the kernel and its environment.
+pub(crate) struct FusedPass<'a> {
+    pub binned: &'a Binned,
+    pub state: &'a FragmentState,
+    pub instance: u32,
+    /// Multisampling off on a multisampled target: one coverage bit covers every sample.
+    pub single: bool,
+    /// Depth and stencil tests before shading (otherwise after).
+    pub early: bool,
+    pub targets: usize,
+    /// Lanes per warp.
+    pub lanes: usize,
+    pub lockstep: bool,
+    pub threads: usize,
+    /// `Some(n)`: cut tiles into segments of at most `n` triangles shared between threads
+    /// (only when the fixed-function results commute); `None`: one tile per unit.
+    pub segment: Option<u32>,
+    /// Invocation ids of this pass start here (see [`FragInput::seq`]).
+    pub seq_base: u64,
+}
+
+/// Fixed-function counts of a fused pass.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct FusedCounts {
+    pub generated: u64,
+    pub early_culled: u64,
+    pub late_culled: u64,
+    pub samples_passed: u64,
+}
+
+impl FusedCounts {
+    fn add(&mut self, o: &FusedCounts) {
+        self.generated += o.generated;
+        self.early_culled += o.early_culled;
+        self.late_culled += o.late_culled;
+        self.samples_passed += o.samples_passed;
+    }
+}
+
+/// Whether a pass's fixed-function work commutes, so that several threads may work on one
+/// tile at once (tests read the tile and nothing writes it).
+pub(crate) fn commutes(state: &FragmentState, targets: usize) -> bool {
+    targets == 0 && !state.stencil.enabled && !(state.depth.test && state.depth.write)
+}
+
+/// A worker's view of its current tile: shared (segments; tests only read) or exclusive.
+enum TileAccess<'t> {
+    Shared(&'t TileMemory),
+    Exclusive(&'t mut TileMemory),
+}
+
+impl TileAccess<'_> {
+    fn tile(&self) -> &TileMemory {
+        match self {
+            TileAccess::Shared(t) => t,
+            TileAccess::Exclusive(t) => t,
+        }
+    }
+
+    #[inline]
+    fn test(
+        &mut self,
+        state: &FragmentState,
+        (lx, ly): (u32, u32),
+        cov: u8,
+        depths: &[f32; 8],
+        front_facing: bool,
+    ) -> u8 {
+        match self {
+            TileAccess::Shared(t) => t.depth_test_readonly(state, lx, ly, cov, depths),
+            TileAccess::Exclusive(t) => {
+                t.depth_stencil(state, lx, ly, cov, depths, front_facing, true)
+            }
+        }
+    }
+}
+
+/// Runs a fused pass over `tiles` (all of the framebuffer's tiles, in tile order).
+pub(crate) fn run_fused<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    pass: &FusedPass<'_>,
+    tiles: &mut [TileMemory],
+) -> (ShadeOutcome, FusedCounts) {
+    let threads = pass.threads.max(1);
+    if pass.state.depth.test || pass.state.stencil.enabled {
+        // Tests read the depth and stencil planes of every tile (lazily allocated).
+        for t in tiles.iter_mut() {
+            t.materialize();
+        }
+    }
+    let results: Vec<(Acc, FusedCounts)> = match pass.segment {
+        Some(max) => {
+            debug_assert!(commutes(pass.state, pass.targets));
+            let mut segments = Vec::new();
+            for t in 0..tiles.len() {
+                pass.binned.tile_segments(t, max, &mut segments);
+            }
+            let tiles: &[TileMemory] = tiles;
+            let next = crate::sync::AtomicUsize::new(0);
+            let work = || {
+                let mut w = Worker::new(kernel, env, pass);
+                loop {
+                    let i = next.fetch_add(1, crate::sync::Ordering::Relaxed);
+                    let Some(seg) = segments.get(i) else { break };
+                    let tile = TileAccess::Shared(&tiles[seg.tile as usize]);
+                    w.run_segment(seg, tile);
+                }
+                w.finish()
+            };
+            on_threads(threads.min(segments.len().max(1)), work)
+        }
+        None => {
+            let count = tiles.len();
+            let queue = pool::Mutex::new(tiles.iter_mut().enumerate());
+            let work = || {
+                let mut w = Worker::new(kernel, env, pass);
+                let mut segs = Vec::new();
+                loop {
+                    let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
+                    let Some((index, tile)) = next else { break };
+                    segs.clear();
+                    pass.binned.tile_segments(index, u32::MAX, &mut segs);
+                    let mut access = TileAccess::Exclusive(tile);
+                    for seg in &segs {
+                        access = w.run_segment(seg, access);
+                    }
+                }
+                w.finish()
+            };
+            on_threads(threads.min(count.max(1)), work)
+        }
+    };
+    let mut outcome = ShadeOutcome::default();
+    let mut counts = FusedCounts::default();
+    for (acc, c) in results {
+        acc.finish(&mut outcome);
+        counts.add(&c);
+    }
+    (outcome, counts)
+}
+
+/// Runs `work` on `threads` scoped threads (inline with one) and collects the results.
+fn on_threads<R: Send>(threads: usize, work: impl Fn() -> R + Sync) -> Vec<R> {
+    if threads <= 1 {
+        return vec![work()];
+    }
+    pool::scope(|s| {
+        let handles: Vec<_> = (0..threads).map(|_| s.spawn(&work)).collect();
+        handles
+            .into_iter()
+            .map(|h| match h.join() {
+                Ok(r) => r,
+                // Kernel panics are caught per invocation; a panic here is a bug of ours.
+                Err(p) => std::panic::resume_unwind(p),
+            })
+            .collect()
+    })
+}
+
+/// One worker thread's state: its warp of invocation slots and its tallies.
+struct Worker<'a, K> {
+    kernel: &'a K,
+    env: &'a PassEnv<'a>,
+    pass: &'a FusedPass<'a>,
+    slots: Vec<Invocation>,
+    /// Fragments gathered for the next warp (API order).
+    warp: Vec<FragInput>,
+    acc: Acc,
+    counts: FusedCounts,
+    /// Sample positions (pixel-relative) for per-sample depths.
+    positions: &'static [(f32, f32)],
+    all_samples: u8,
+    pixels: u64,
+}
+
+impl<'a, K: FragmentKernel> Worker<'a, K> {
+    fn new(kernel: &'a K, env: &'a PassEnv<'a>, pass: &'a FusedPass<'a>) -> Self {
+        let lanes = pass.lanes.max(1);
+        let samples = env.samples;
+        Worker {
+            kernel,
+            env,
+            pass,
+            slots: (0..lanes).map(|_| Invocation::new()).collect(),
+            warp: Vec::with_capacity(lanes),
+            acc: Acc::default(),
+            counts: FusedCounts::default(),
+            positions: SampleCount::from_count(samples)
+                .map(|c| c.positions())
+                .unwrap_or(&[(0.5, 0.5)]),
+            all_samples: if samples >= 8 {
+                0xff
+            } else {
+                (1u8 << samples) - 1
+            },
+            pixels: env.width as u64 * env.height as u64,
+        }
+    }
+
+    fn finish(mut self) -> (Acc, FusedCounts) {
+        for slot in &self.slots {
+            self.acc.add_ops(slot);
+        }
+        (self.acc, self.counts)
+    }
+
+    /// Rasterizes, tests, shades and writes one segment; hands the tile access back.
+    fn run_segment<'t>(&mut self, seg: &Segment, mut tile: TileAccess<'t>) -> TileAccess<'t> {
+        let pass = self.pass;
+        let state = pass.state;
+        let binned = pass.binned;
+        let tests = pass.early && (state.depth.test || state.stencil.enabled);
+        let sample_mask = state.sample_mask & self.all_samples;
+        let per_sample_depth = self.env.samples > 1 && !pass.single;
+        let (x0, y0) = (tile.tile().x0, tile.tile().y0);
+        let lanes = self.slots.len();
+        // Without lockstep, lanes run one after the other: shade each fragment as it is
+        // rasterized (no warp to gather).
+        let inline = lanes == 1 || !pass.lockstep;
+        binned.raster_segment(seg, |f| {
+            let cov = if pass.single && f.coverage & 1 != 0 {
+                self.all_samples
+            } else {
+                f.coverage
+            };
+            let mut cov = cov & sample_mask;
+            if cov == 0 {
+                return;
+            }
+            self.counts.generated += 1;
+            let t = &binned.tris[f.tri as usize];
+            let (fx, fy) = (f.x as f32, f.y as f32);
+            // Interpolated here only for the tests (`Frag::depth` does it on demand).
+            let mut depth = f32::NAN;
+            if tests {
+                depth = t.depth_at(fx + 0.5, fy + 0.5);
+                let mut depths = [depth; 8];
+                if per_sample_depth {
+                    for (s, p) in self.positions.iter().enumerate() {
+                        depths[s] = t.depth_at(fx + p.0, fy + p.1);
+                    }
+                }
+                cov = tile.test(state, (f.x - x0, f.y - y0), cov, &depths, t.front_facing);
+                if cov == 0 {
+                    self.counts.early_culled += 1;
+                    return;
+                }
+            }
+            let input = FragInput {
+                // Unique and increasing in API order (triangle, then pixel).
+                seq: pass
+                    .seq_base
+                    .wrapping_add(f.tri as u64 * self.pixels)
+                    .wrapping_add(f.y as u64 * self.env.width as u64 + f.x as u64),
+                x: f.x,
+                y: f.y,
+                tri: f.tri,
+                primitive_id: t.source,
+                instance_id: pass.instance,
+                coverage: cov,
+                front_facing: t.front_facing,
+                depth,
+                ticket: 0,
+            };
+            if inline {
+                let slot = &self.slots[0];
+                slot.reset_keep_ops(input);
+                run_to_end(self.kernel, slot, self.env);
+                late(
+                    pass,
+                    self.env,
+                    self.positions,
+                    &mut self.acc,
+                    &mut self.counts,
+                    slot,
+                    &mut tile,
+                );
+            } else {
+                self.warp.push(input);
+                if self.warp.len() == lanes {
+                    self.flush(&mut tile);
+                }
+            }
+        });
+        self.flush(&mut tile);
+        tile
+    }
+
+    /// Shades the gathered warp with its lanes in lockstep (every lane takes one step per
+    /// turn), then runs the late stage in API order.
+    fn flush(&mut self, tile: &mut TileAccess<'_>) {
+        let n = self.warp.len();
+        if n == 0 {
+            return;
+        }
+        let env = self.env;
+        let mut cx = Context::from_waker(Waker::noop());
+        for (slot, input) in self.slots.iter().zip(&self.warp) {
+            slot.reset_keep_ops(*input);
+        }
+        // Interlock is not used on this path, so the kernel is the whole invocation.
+        let mut futs: Vec<Option<_>> = self.slots[..n]
+            .iter()
+            .map(|slot| Some(self.kernel.shade(Frag { inv: slot, env })))
+            .collect();
+        let mut left = n;
+        while left > 0 {
+            for (fut, slot) in futs.iter_mut().zip(&self.slots) {
+                if fut.is_some() {
+                    if let Polled::Done = poll_slot(fut, slot, &mut cx) {
+                        *fut = None;
+                        left -= 1;
+                    }
+                }
+            }
+        }
+        for slot in &self.slots[..n] {
+            late(
+                self.pass,
+                env,
+                self.positions,
+                &mut self.acc,
+                &mut self.counts,
+                slot,
+                tile,
+            );
+        }
+        self.warp.clear();
+    }
+}
+
+/// Runs one invocation to its end on this thread (direct mode: an access completes at
+/// once; a spin loop runs until it gets in or the watchdog ends it). A panic becomes the
+/// invocation's fault.
+#[inline]
+fn run_to_end<K: FragmentKernel>(kernel: &K, inv: &Invocation, env: &PassEnv<'_>) {
+    // Interlock is not used on this path, so the kernel is the whole invocation.
+    let mut fut = std::pin::pin!(kernel.shade(Frag { inv, env }));
+    let mut cx = Context::from_waker(Waker::noop());
+    let r = catch_unwind(AssertUnwindSafe(|| {
+        while fut.as_mut().poll(&mut cx).is_pending() && !inv.faulted() {}
+    }));
+    if let Err(payload) = r {
+        record_panic(inv, payload.as_ref());
+    }
+}
+
+/// Counts a shaded fragment and runs its late tests and target writes.
+#[inline]
+fn late(
+    pass: &FusedPass<'_>,
+    env: &PassEnv<'_>,
+    positions: &[(f32, f32)],
+    acc: &mut Acc,
+    counts: &mut FusedCounts,
+    slot: &Invocation,
+    tile: &mut TileAccess<'_>,
+) {
+    let faulted = acc.count(slot);
+    if faulted || slot.discarded.get() {
+        return;
+    }
+    let state = pass.state;
+    let late_tests = !pass.early && (state.depth.test || state.stencil.enabled);
+    let f = slot.input.get();
+    let (lx, ly) = (f.x - tile.tile().x0, f.y - tile.tile().y0);
+    let mut mask = f.coverage;
+    if late_tests {
+        let centre = || {
+            let t = &pass.binned.tris[f.tri as usize];
+            t.depth_at(f.x as f32 + 0.5, f.y as f32 + 0.5)
+        };
+        let mut depths = [slot.depth_out.get().unwrap_or_else(centre); 8];
+        if slot.depth_out.get().is_none() && env.samples > 1 && !pass.single {
+            let t = &pass.binned.tris[f.tri as usize];
+            for (s, p) in positions.iter().enumerate() {
+                depths[s] = t.depth_at(f.x as f32 + p.0, f.y as f32 + p.1);
+            }
+        }
+        mask = tile.test(state, (lx, ly), mask, &depths, f.front_facing);
+        if mask == 0 {
+            counts.late_culled += 1;
+            return;
+        }
+    }
+    counts.samples_passed += mask.count_ones() as u64;
+    if pass.targets > 0 {
+        if let TileAccess::Exclusive(t) = tile {
+            let mut colors = [[0u32; 4]; 8];
+            for (c, o) in colors.iter_mut().zip(&slot.outputs).take(pass.targets) {
+                *c = o.get();
+            }
+            t.write_outputs(state, lx, ly, mask, &colors[..pass.targets]);
+        }
+    }
+}
