@@ -22,9 +22,7 @@ mod threads;
 pub use policy::{Policy, PolicyParseError};
 pub use run::Execution;
 pub use run::Fault;
-pub(crate) use run::{
-    explore, poll_slot, record_panic, shade, shade_chunks, Acc, FragOut, Polled, ShadeOutcome,
-};
+pub(crate) use run::{explore, record_panic, shade, shade_chunks, Acc, FragOut, ShadeOutcome};
 pub use threads::{run_on_threads, ThreadOutcome};
 
 /// Configuration of the `scheduled` executor.

@@ -198,7 +198,7 @@ impl TileMemory {
         coverage: u8,
         depths: &[f32; 8],
     ) -> u8 {
-        debug_assert!(!state.stencil.enabled && !(state.depth.test && state.depth.write));
+        debug_assert!(!(state.stencil.enabled || state.depth.test && state.depth.write));
         let mut mask = coverage & state.sample_mask & self.sample_bits();
         if !state.depth.test {
             return mask;

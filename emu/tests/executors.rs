@@ -1,5 +1,5 @@
-//! Executors, faults and the hazard detector, on full-screen passes (one invocation per
-//! pixel, no rasterizer involved).
+//! Executors, faults and the hazard detector, mostly on full-screen passes (one invocation
+//! per pixel, no rasterizer involved); draws for the fused path of the direct executors.
 
 use fragrace_emu::{
     Buf, Device, ExecConfig, ExecMode, FaultKind, Format, Frag, FragmentKernel, FragmentState,
@@ -524,4 +524,134 @@ fn reduction_keeps_every_step_and_still_finds_lost_updates() {
     assert_eq!(r_full.stats.steps, r_red.stats.steps);
     assert!(v_full < 256 && v_red < 256);
     assert!(r_red.hazards.lost_updates > 0);
+}
+
+/// Two full-screen quads (four triangles) in NDC: a draw, so the ordered and parallel
+/// executors take the fused path (rasterize and shade per tile) rather than the
+/// full-screen one.
+fn two_layers() -> fragrace_emu::Mesh {
+    use glam::Vec3;
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    for z in [0.2f32, 0.4] {
+        let b = positions.len() as u32;
+        positions.extend([
+            Vec3::new(-1.0, -1.0, z),
+            Vec3::new(1.0, -1.0, z),
+            Vec3::new(1.0, 1.0, z),
+            Vec3::new(-1.0, 1.0, z),
+        ]);
+        indices.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
+    }
+    fragrace_emu::Mesh {
+        positions,
+        normals: None,
+        indices,
+    }
+}
+
+/// The direct executors in every shape the fused path has: one lane, lockstep warps,
+/// independent lanes, several threads on one tile (segments of one triangle).
+fn direct_execs() -> Vec<ExecConfig> {
+    let mut v = Vec::new();
+    for (threads, lockstep, segment) in
+        [(2, true, 128), (2, false, 128), (3, true, 1), (2, false, 1)]
+    {
+        let mut e = ExecConfig::parallel(threads);
+        e.lockstep = lockstep;
+        e.segment = segment;
+        e.batch = 5;
+        v.push(e);
+    }
+    v.push(ExecConfig::ordered());
+    for e in &mut v {
+        e.max_steps = 10_000;
+    }
+    v
+}
+
+fn draw_with<K: FragmentKernel>(
+    dev: &Device,
+    kernel: &K,
+    e: &ExecConfig,
+) -> (Framebuffer, fragrace_emu::PassReport) {
+    let mesh = two_layers();
+    let mut fb = Framebuffer::new(16, 8, SampleCount::X1, 8, &[Format::RGBA32F]).unwrap();
+    let mut st = FragmentState::new();
+    st.targets = vec![TargetState::new(Format::RGBA32F)];
+    let draw = fragrace_emu::Draw::new(&mesh, glam::Mat4::IDENTITY);
+    let state = fragrace_emu::PassState {
+        fragment: st,
+        ..Default::default()
+    };
+    let r = dev.draw(&mut fb, &draw, &state, kernel, e).unwrap();
+    (fb, r)
+}
+
+struct PanicsInDraw {
+    counter: Buf<u32>,
+}
+impl FragmentKernel for PanicsInDraw {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("panics-in-draw")
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        f.atomic_add(self.counter, 0, 1).await;
+        if f.x() == 3 {
+            panic!("kernel bug at x=3");
+        }
+        f.output(0, [1.0; 4]);
+    }
+}
+
+#[test]
+fn faults_in_draws_are_reported_under_the_direct_executors() {
+    for e in direct_execs() {
+        // Panics: the fragments of column 3 (8 rows x 2 layers) fault, the others finish.
+        let mut dev = Device::new();
+        let counter = dev.buffer::<u32>("counter", 1).unwrap();
+        let (fb, r) = draw_with(&dev, &PanicsInDraw { counter }, &e);
+        assert_eq!(r.stats.fragments_generated, 256, "{e:?}");
+        assert_eq!(r.stats.shaded, 256, "{e:?}");
+        assert_eq!(r.stats.faulted, 16, "{e:?}");
+        assert!(r.faults.iter().all(
+            |f| matches!(&f.kind, FaultKind::Panic { message } if message.contains("x=3"))
+                && f.invocation.x == 3
+        ));
+        assert_eq!(dev.memory.read(counter).unwrap()[0], 256, "{e:?}");
+        assert_eq!(fb.color(0, 3, 2, 0), [0; 4], "{e:?}");
+        assert_eq!(fb.color(0, 4, 2, 0), [1f32.to_bits(); 4], "{e:?}");
+
+        // Out of bounds: pixel indices + 100 >= 120 fault (the last 28 pixels, both layers).
+        let mut dev = Device::new();
+        let buf = dev.buffer::<u32>("small", 120).unwrap();
+        struct Oob {
+            buf: Buf<u32>,
+        }
+        impl FragmentKernel for Oob {
+            fn info(&self) -> KernelInfo {
+                KernelInfo::new("oob-draw")
+            }
+            async fn shade(&self, f: Frag<'_>) {
+                f.store(self.buf, f.pixel_index() + 100, 1).await;
+                f.output(0, [1.0; 4]);
+            }
+        }
+        let (_, r) = draw_with(&dev, &Oob { buf }, &e);
+        assert_eq!(r.stats.faulted, 2 * 108, "{e:?}");
+        assert!(r
+            .faults
+            .iter()
+            .all(|f| matches!(f.kind, FaultKind::OutOfBounds { .. })));
+
+        // A spin that never ends: every fragment but the lock's taker is stopped.
+        let mut dev = Device::new();
+        let lock = dev.buffer::<u32>("lock", 1).unwrap();
+        let (_, r) = draw_with(&dev, &SpinsForever { lock }, &e);
+        assert!(r.stats.faulted >= 255, "{e:?}: {}", r.stats.faulted);
+        assert!(r
+            .faults
+            .iter()
+            .all(|f| matches!(f.kind, FaultKind::Watchdog { .. })));
+    }
 }

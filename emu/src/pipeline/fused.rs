@@ -22,9 +22,10 @@
 
 use std::future::Future;
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::task::{Context, Waker};
+use std::pin::Pin;
+use std::task::{Context, Poll, Waker};
 
-use crate::exec::{poll_slot, record_panic, Acc, Polled, ShadeOutcome};
+use crate::exec::{record_panic, Acc, ShadeOutcome};
 use crate::framebuffer::TileMemory;
 use crate::kernel::{Frag, FragInput, FragmentKernel, Invocation, PassEnv};
 use crate::raster::{Binned, SampleCount, Segment};
@@ -337,15 +338,42 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             .iter()
             .map(|slot| Some(self.kernel.shade(Frag { inv: slot, env })))
             .collect();
+        let slots = &self.slots[..n];
         let mut left = n;
+        // Next lane to poll in the current round. One `catch_unwind` covers many polls; a
+        // panic ends the lane being polled (`lane - 1`) and the rounds go on after it.
+        let mut lane = 0;
         while left > 0 {
-            for (fut, slot) in futs.iter_mut().zip(&self.slots) {
-                if fut.is_some() {
-                    if let Polled::Done = poll_slot(fut, slot, &mut cx) {
-                        *fut = None;
+            let rounds = catch_unwind(AssertUnwindSafe(|| loop {
+                while lane < n {
+                    let i = lane;
+                    lane += 1;
+                    let Some(fut) = futs[i].as_mut() else {
+                        continue;
+                    };
+                    // SAFETY: the futures live in `futs`, which is not resized or moved
+                    // until every one of them is dropped in place (`= None`), so a future
+                    // is never moved after this pin.
+                    let pinned = unsafe { Pin::new_unchecked(fut) };
+                    let done = match pinned.poll(&mut cx) {
+                        Poll::Ready(()) => true,
+                        Poll::Pending => slots[i].faulted(),
+                    };
+                    if done {
+                        futs[i] = None;
                         left -= 1;
                     }
                 }
+                if left == 0 {
+                    break;
+                }
+                lane = 0;
+            }));
+            if let Err(payload) = rounds {
+                let i = lane - 1;
+                record_panic(&slots[i], payload.as_ref());
+                futs[i] = None;
+                left -= 1;
             }
         }
         for slot in &self.slots[..n] {
