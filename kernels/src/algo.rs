@@ -118,6 +118,17 @@ pub struct CapturedFrag {
     pub prim: u32,
 }
 
+impl CapturedFrag {
+    /// A fragment from the two words the kernels store it as: the depth's f32 bits and the
+    /// primitive id (list nodes, k-buffer slots, SRAB samples all keep this pair).
+    pub fn from_bits(depth_bits: u32, prim: u32) -> CapturedFrag {
+        CapturedFrag {
+            depth: f32::from_bits(depth_bits),
+            prim,
+        }
+    }
+}
+
 impl Capture {
     /// Builds a capture from per-pixel lists.
     pub fn from_lists(

@@ -13,9 +13,12 @@ use crate::algo::{
 };
 use crate::common::{self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments};
 
-/// Per-pixel fragment count with an atomic add (depth complexity).
-struct CountKernel {
-    counts: Buf<u32>,
+/// Per-pixel fragment count with an atomic add (depth complexity): the kernel of `count` and
+/// `truth`, and the count pass of every algorithm that sizes or accounts by it (DFB and SB,
+/// the exactly sized linked-list pool as the llvmpipe peer's `count` pass, SRAB's loss
+/// accounting).
+pub struct CountKernel {
+    pub counts: Buf<u32>,
 }
 
 impl FragmentKernel for CountKernel {

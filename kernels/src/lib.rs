@@ -17,6 +17,9 @@ pub mod kbuffer;
 pub mod oracle;
 pub mod protocols;
 pub mod registry;
+pub(crate) mod resolve;
+#[cfg(test)]
+mod test_scenes;
 
 pub use algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, Check, Frame, HazardClass,

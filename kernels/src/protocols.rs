@@ -14,9 +14,10 @@
 //!   atomic-min chains, with their [`Census`]), [`SpinStore`] (spinlock), [`InterlockStore`]
 //!   (pixel interlock), all on [`SplitSlots`] or key buffers.
 
-pub use crate::abuffer::dfb::{CountKernel, DfbStore};
+pub use crate::abuffer::dfb::DfbStore;
 pub use crate::abuffer::ll::{ListPool, LlInsert, NODE_WORDS};
 pub use crate::abuffer::sb::{SbStore, SparseAllocate};
+pub use crate::basic::CountKernel;
 pub use crate::kbuffer::atomic::{Census, Claim32, Depth32, Store64};
 pub use crate::kbuffer::interlock::InterlockStore;
 pub use crate::kbuffer::rmw::{RmwStore, SplitSlots};

@@ -24,15 +24,12 @@
 
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
-use super::dfb::{
-    duplicate_check, fault_check, image_check, read_image, resolve_framebuffer, resolve_state,
-    sorted_check, storage,
-};
 use super::ll::{insert, pool_from_params, ListPool, ListResolve, Walk, MAX_POOL_NODES};
+use super::run::AbRun;
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
 };
-use crate::common::{self, capture_state, geometry_pass, pixels};
+use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![Box::new(BunLl)]
@@ -143,43 +140,29 @@ impl Algorithm for BunLl {
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
-        let n = pixels(frame);
+        let mut run = AbRun::new(frame, params, exec)?;
+        let n = run.n;
         let buckets = params.buckets.max(1);
-        let mut device = common::fresh();
-        let mut fb = resolve_framebuffer(frame)?;
-        let zmin = device.buffer::<f32>("bun-ll-zmin", n as u64)?;
-        let zmax = device.buffer::<f32>("bun-ll-zmax", n as u64)?;
-        device.memory.fill(zmin, f32::INFINITY)?;
-        device.memory.fill(zmax, f32::NEG_INFINITY)?;
-        let mut report = geometry_pass(
-            &device,
-            &mut fb,
-            frame,
-            &capture_state(),
-            &RangeKernel { zmin, zmax },
-            exec,
-        )?;
+        let zmin = run.device.buffer::<f32>("bun-ll-zmin", n as u64)?;
+        let zmax = run.device.buffer::<f32>("bun-ll-zmax", n as u64)?;
+        run.device.memory.fill(zmin, f32::INFINITY)?;
+        run.device.memory.fill(zmax, f32::NEG_INFINITY)?;
+        let mut report = run.capture(&RangeKernel { zmin, zmax })?;
 
         let mut counted = None;
         let region = match params.pool_per_pixel {
             Some(per_pixel) => pool_from_params(per_pixel, n) / buckets as u64,
             None => {
-                let counts = device.buffer::<u32>("bun-ll-bucket-counts", buckets as u64)?;
-                let k = BucketCount {
+                let counts = run
+                    .device
+                    .buffer::<u32>("bun-ll-bucket-counts", buckets as u64)?;
+                report.merge(&run.capture(&BucketCount {
                     zmin,
                     zmax,
                     counts,
                     buckets,
-                };
-                report.merge(&geometry_pass(
-                    &device,
-                    &mut fb,
-                    frame,
-                    &capture_state(),
-                    &k,
-                    exec,
-                )?);
-                let c = device.memory.read(counts)?;
+                })?);
+                let c = run.device.memory.read(counts)?;
                 let max = c.iter().copied().max().unwrap_or(0) as u64;
                 counted = Some(c);
                 max
@@ -193,13 +176,13 @@ impl Algorithm for BunLl {
         }
         let region = region as u32;
         let pool = ListPool::new(
-            &mut device,
+            &mut run.device,
             "bun-ll",
             n as u64 * buckets as u64,
             pool_nodes,
             buckets as u64,
         )?;
-        let faults = device.buffer::<u32>("bun-ll-resolve-faults", 2)?;
+        let faults = run.device.buffer::<u32>("bun-ll-resolve-faults", 2)?;
 
         let store = BunInsert {
             zmin,
@@ -208,34 +191,30 @@ impl Algorithm for BunLl {
             buckets,
             region,
         };
-        let store_report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
-        let generated = store_report.stats.fragments_generated;
-        report.merge(&store_report);
         let resolve = ListResolve {
             pool,
             lists: buckets,
             pool_nodes: pool_nodes as u32,
             faults,
-            alpha: params.alpha,
-            background: params.background,
+            composite: Composite::of(params),
         };
-        report.merge(&device.fullscreen(&mut fb, &resolve_state(), &resolve, exec)?);
+        let generated = run.store_and_resolve(&mut report, &store, &resolve)?;
 
-        let counters = device.memory.read(pool.counters)?;
-        let dropped_counters = device.memory.read(pool.dropped)?;
+        let memory = &run.device.memory;
+        let counters = memory.read(pool.counters)?;
+        let dropped_counters = memory.read(pool.dropped)?;
         let regions: Vec<(u32, u32)> = (0..buckets)
             .map(|b| (b * region, b * region + counters[b as usize].min(region)))
             .collect();
         let walk = Walk::new(
-            &device.memory.read(pool.heads)?,
-            &device.memory.read(pool.nodes)?,
+            &memory.read(pool.heads)?,
+            &memory.read(pool.nodes)?,
             buckets,
             &regions,
         );
         let capture = walk.capture(frame, buckets);
-        let image = read_image(&fb);
-        let zmin_v = device.memory.read(zmin)?;
-        let zmax_v = device.memory.read(zmax)?;
+        let zmin_v = memory.read(zmin)?;
+        let zmax_v = memory.read(zmax)?;
 
         let per_bucket_stored: Vec<u64> = (0..buckets as usize)
             .map(|b| {
@@ -266,7 +245,7 @@ impl Algorithm for BunLl {
                 }
             }
         }
-        let mut checks = vec![
+        let checks = vec![
             Check::new(
                 "every generated fragment stored exactly once unless its bucket overflowed",
                 walk.stored + dropped == generated && all_linked && walk.revisits == 0,
@@ -280,7 +259,7 @@ impl Algorithm for BunLl {
                 dropped_counters.iter().zip(&overflow).all(|(&d, &o)| d as u64 == o),
                 format!("dropped counters {dropped_counters:?}, max(counter - region, 0) {overflow:?}"),
             ),
-            walk.integrity_check(&device.memory.read(faults)?),
+            walk.integrity_check(&memory.read(faults)?),
             Check::new(
                 "every fragment in its pixel's depth range and in the bucket of its depth",
                 misplaced == 0,
@@ -289,27 +268,15 @@ impl Algorithm for BunLl {
                     first_misplaced.map(|(p, b, d)| format!("; first: pixel {p}, bucket {b}, depth {d}")).unwrap_or_default()
                 ),
             ),
-            duplicate_check(&capture),
-            sorted_check(&capture),
-            image_check(&image, &capture, params),
-            fault_check(&report),
         ];
-        if let Some(c) = &counted {
-            checks.push(Check::new(
+        let later = counted.map(|c| {
+            Check::new(
                 "count pass equals store pass (per bucket)",
-                c == &counters,
+                c == counters,
                 format!("counted {c:?}, stored {counters:?}"),
-            ));
-        }
-        Ok(AlgoResult {
-            capture: Some(capture),
-            image: Some(image),
-            storage_bytes: storage(&device, frame),
-            report,
-            checks,
-            dropped,
-            ..Default::default()
-        })
+            )
+        });
+        Ok(run.finish(capture, report, dropped, checks, later))
     }
 }
 
@@ -317,25 +284,16 @@ impl Algorithm for BunLl {
 mod tests {
     use fragrace_emu::Policy;
 
-    use super::super::dfb::test_support::*;
+    use super::super::test_support::*;
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
 
     #[test]
     fn bun_ll_is_exact_and_hazard_free_under_every_executor() {
+        assert_exact_and_hazard_free_everywhere(&BunLl);
         let mesh = layers();
         let f = frame(&mesh, 24, 20);
-        for exec in executors() {
-            let r = assert_exact(&BunLl, &f, &Params::default(), &exec);
-            assert_eq!(
-                r.report.hazards.total(),
-                0,
-                "{:?}: {:?}",
-                exec.mode,
-                r.report.hazard_list.first()
-            );
-        }
         for buckets in [1, 2, 7] {
             let params = Params {
                 buckets,

@@ -11,14 +11,13 @@
 
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
-use super::dfb::{
-    capture_ranges, duplicate_check, fault_check, image_check, read_image, resolve_framebuffer,
-    resolve_state, sorted_check, storage, ArrayResolve, Layout,
-};
+use super::array::{ArrayResolve, FragmentArrays, Layout};
+use super::run::AbRun;
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
 };
-use crate::common::{self, capture_state, geometry_pass, pixels};
+use crate::common::pixels;
+use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![Box::new(Fab)]
@@ -83,45 +82,34 @@ impl Algorithm for Fab {
                 "FAB needs {slots} slots ({n} pixels x {cap}): more than a buffer can index"
             )));
         }
-        let mut device = common::fresh();
-        let mut fb = resolve_framebuffer(frame)?;
-        let counts = device.buffer::<u32>("fab-counts", n as u64)?;
-        let depth = device.buffer::<f32>("fab-depth", slots.max(1))?;
-        let prim = device.buffer::<u32>("fab-prim", slots.max(1))?;
-        let dropped_buf = device.buffer::<u32>("fab-dropped", 1)?;
+        let mut run = AbRun::new(frame, params, exec)?;
+        let counts = run.device.buffer::<u32>("fab-counts", n as u64)?;
+        let arrays = FragmentArrays::new(&mut run.device, "fab", slots)?;
+        let dropped_buf = run.device.buffer::<u32>("fab-dropped", 1)?;
 
         let store = FabStore {
             counts,
-            depth,
-            prim,
+            depth: arrays.depth,
+            prim: arrays.prim,
             dropped: dropped_buf,
             cap,
         };
-        let mut report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
+        let mut report = run.capture(&store)?;
         let generated = report.stats.fragments_generated;
-        let resolve = ArrayResolve {
+        report.merge(&run.resolve(&ArrayResolve {
             layout: Layout::Fixed { cap },
             lens: counts,
             limit: None,
-            depth,
-            prim,
-            alpha: params.alpha,
-            background: params.background,
-        };
-        report.merge(&device.fullscreen(&mut fb, &resolve_state(), &resolve, exec)?);
+            arrays,
+            composite: Composite::of(params),
+        })?);
 
-        let counts_v = device.memory.read(counts)?;
+        let counts_v = run.device.memory.read(counts)?;
         let ranges: Vec<(u32, u32)> = (0..n)
             .map(|p| (p as u32 * cap, counts_v[p].min(cap)))
             .collect();
-        let capture = capture_ranges(
-            frame,
-            &ranges,
-            &device.memory.read(depth)?,
-            &device.memory.read(prim)?,
-        );
-        let image = read_image(&fb);
-        let dropped = device.memory.read(dropped_buf)?[0] as u64;
+        let capture = arrays.capture(&run.device, frame, &ranges)?;
+        let dropped = run.device.memory.read(dropped_buf)?[0] as u64;
         let overflow: u64 = counts_v.iter().map(|&c| c.saturating_sub(cap) as u64).sum();
         let counted: u64 = counts_v.iter().map(|&c| c as u64).sum();
         let stored = capture.frags.len() as u64;
@@ -138,20 +126,8 @@ impl Algorithm for Fab {
                 dropped == overflow,
                 format!("dropped counter {dropped}, sum of max(count - {cap}, 0) = {overflow}"),
             ),
-            duplicate_check(&capture),
-            sorted_check(&capture),
-            image_check(&image, &capture, params),
-            fault_check(&report),
         ];
-        Ok(AlgoResult {
-            capture: Some(capture),
-            image: Some(image),
-            storage_bytes: storage(&device, frame),
-            report,
-            checks,
-            dropped,
-            ..Default::default()
-        })
+        Ok(run.finish(capture, report, dropped, checks, []))
     }
 }
 
@@ -159,24 +135,16 @@ impl Algorithm for Fab {
 mod tests {
     use fragrace_emu::Policy;
 
-    use super::super::dfb::test_support::*;
+    use super::super::test_support::*;
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
 
     #[test]
     fn fab_is_exact_under_every_executor() {
+        assert_exact_and_hazard_free_everywhere(&Fab);
         let mesh = layers();
         let f = frame(&mesh, 24, 20);
-        for exec in executors() {
-            let r = assert_exact(&Fab, &f, &Params::default(), &exec);
-            assert_eq!(
-                r.report.hazards.total(),
-                0,
-                "{:?}",
-                r.report.hazard_list.first()
-            );
-        }
         // Exactly sized arrays: capacity = the deepest pixel.
         let params = Params {
             fab_capacity: 6,

@@ -26,19 +26,16 @@
 //! ([`LinkedList::concurrent_reader`]), where the hazard detector reports the reader's
 //! payload record as torn and the reader itself counts half-written nodes.
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
+use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo, PassReport};
 
-use super::dfb::{
-    duplicate_check, fault_check, image_check, read_image, resolve_framebuffer, resolve_state,
-    sorted_check, storage, CountKernel,
-};
+use super::run::AbRun;
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
     HazardClass, Params,
 };
-use crate::common::{
-    self, capture_state, composite_frags, geometry_pass, pixels, sort_fragments, EMPTY,
-};
+use crate::basic::CountKernel;
+use crate::common::{sort_fragments, EMPTY};
+use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![Box::new(LinkedList::correct())]
@@ -146,8 +143,7 @@ pub(super) struct ListResolve {
     pub pool_nodes: u32,
     /// `[links out of the pool, walks cut at the pool size]`.
     pub faults: Buf<u32>,
-    pub alpha: f32,
-    pub background: [f32; 3],
+    pub composite: Composite,
 }
 
 impl FragmentKernel for ListResolve {
@@ -174,10 +170,7 @@ impl FragmentKernel for ListResolve {
                 f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec)
                     .await;
                 nodes.push(cur);
-                frags.push(CapturedFrag {
-                    depth: f32::from_bits(rec[0]),
-                    prim: rec[1],
-                });
+                frags.push(CapturedFrag::from_bits(rec[0], rec[1]));
                 cur = rec[NEXT as usize];
             }
             sort_fragments(&mut frags);
@@ -191,7 +184,7 @@ impl FragmentKernel for ListResolve {
             }
             all.extend(frags);
         }
-        f.output(0, composite_frags(&all, self.alpha, self.background));
+        self.composite.output(&f, &all);
     }
 }
 
@@ -241,10 +234,7 @@ impl Walk {
                 }
                 visited[cur as usize] = true;
                 let at = (cur * NODE_WORDS) as usize;
-                list.push(CapturedFrag {
-                    depth: f32::from_bits(nodes[at]),
-                    prim: nodes[at + 1],
-                });
+                list.push(CapturedFrag::from_bits(nodes[at], nodes[at + 1]));
                 w.stored += 1;
                 cur = nodes[at + NEXT as usize];
             }
@@ -409,32 +399,26 @@ impl Algorithm for LinkedList {
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
-        let n = pixels(frame);
-        let mut device = common::fresh();
-        let mut fb = resolve_framebuffer(frame)?;
-        let mut report = fragrace_emu::PassReport::default();
+        let mut run = AbRun::new(frame, params, exec)?;
+        let n = run.n;
+        // The count pass is optional: the report starts empty.
+        let mut report = PassReport::default();
 
         // Pool size: nodes per pixel x pixels, or exactly the count pass's total.
         let mut counted = None;
         let capacity = match params.pool_per_pixel {
             Some(per_pixel) => pool_from_params(per_pixel, n),
             None => {
-                let counts = device.buffer::<u32>("ll-counts", n as u64)?;
-                report.merge(&geometry_pass(
-                    &device,
-                    &mut fb,
-                    frame,
-                    &capture_state(),
-                    &CountKernel { counts },
-                    exec,
-                )?);
-                let c = device.memory.read(counts)?;
+                let counts = run.device.buffer::<u32>("ll-counts", n as u64)?;
+                report.merge(&run.capture(&CountKernel { counts })?);
+                let c = run.device.memory.read(counts)?;
                 let total = c.iter().map(|&x| x as u64).sum();
                 counted = Some(c);
                 total
             }
         };
-        let pool = ListPool::new(&mut device, "ll", n as u64, capacity, 1)?;
+        let device = &mut run.device;
+        let pool = ListPool::new(device, "ll", n as u64, capacity, 1)?;
         let cap = capacity as u32;
         let reader = if self.concurrent_reader {
             Some(device.buffer::<u32>("ll-reader-half-written", 1)?)
@@ -449,34 +433,29 @@ impl Algorithm for LinkedList {
             publish_before_write: self.publish_before_write,
             reader,
         };
-        let capture_report =
-            geometry_pass(&device, &mut fb, frame, &capture_state(), &insert, exec)?;
-        let generated = capture_report.stats.fragments_generated;
-        report.merge(&capture_report);
         let resolve = ListResolve {
             pool,
             lists: 1,
             pool_nodes: cap,
             faults,
-            alpha: params.alpha,
-            background: params.background,
+            composite: Composite::of(params),
         };
-        report.merge(&device.fullscreen(&mut fb, &resolve_state(), &resolve, exec)?);
+        let generated = run.store_and_resolve(&mut report, &insert, &resolve)?;
 
-        let counter = device.memory.read(pool.counters)?[0];
-        let dropped_counter = device.memory.read(pool.dropped)?[0] as u64;
+        let memory = &run.device.memory;
+        let counter = memory.read(pool.counters)?[0];
+        let dropped_counter = memory.read(pool.dropped)?[0] as u64;
         let allocated = counter.min(cap);
         let walk = Walk::new(
-            &device.memory.read(pool.heads)?,
-            &device.memory.read(pool.nodes)?,
+            &memory.read(pool.heads)?,
+            &memory.read(pool.nodes)?,
             1,
             &[(0, allocated)],
         );
         let capture = walk.capture(frame, 1);
-        let image = read_image(&fb);
         let dropped = counter.saturating_sub(cap) as u64;
 
-        let mut checks = vec![
+        let checks = vec![
             Check::new(
                 "every generated fragment stored exactly once unless the pool overflowed",
                 walk.stored + dropped == generated && walk.stored == allocated as u64 && walk.revisits == 0,
@@ -490,39 +469,28 @@ impl Algorithm for LinkedList {
                 dropped_counter == dropped,
                 format!("dropped counter {dropped_counter}, max(node counter {counter} - capacity {cap}, 0) = {dropped}"),
             ),
-            walk.integrity_check(&device.memory.read(faults)?),
-            duplicate_check(&capture),
-            sorted_check(&capture),
-            image_check(&image, &capture, params),
-            fault_check(&report),
+            walk.integrity_check(&memory.read(faults)?),
         ];
+        let mut later = Vec::new();
         if let Some(c) = &counted {
             let bad = (0..n)
                 .filter(|&p| walk.lists[p].len() as u32 != c[p])
                 .count();
-            checks.push(Check::new(
+            later.push(Check::new(
                 "list lengths equal the count pass (per pixel)",
                 bad == 0,
                 format!("{bad} pixels differ"),
             ));
         }
         if let Some(r) = reader {
-            let half = device.memory.read(r)?[0];
-            checks.push(Check::new(
+            let half = memory.read(r)?[0];
+            later.push(Check::new(
                 "the in-pass reader never saw a half-written node",
                 half == 0,
                 format!("{half} half-written node payloads seen"),
             ));
         }
-        Ok(AlgoResult {
-            capture: Some(capture),
-            image: Some(image),
-            storage_bytes: storage(&device, frame),
-            report,
-            checks,
-            dropped,
-            ..Default::default()
-        })
+        Ok(run.finish(capture, report, dropped, checks, later))
     }
 }
 
@@ -530,25 +498,16 @@ impl Algorithm for LinkedList {
 mod tests {
     use fragrace_emu::Policy;
 
-    use super::super::dfb::test_support::*;
+    use super::super::test_support::*;
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
 
     #[test]
     fn ll_is_exact_and_hazard_free_under_every_executor() {
+        assert_exact_and_hazard_free_everywhere(&LinkedList::default());
         let mesh = layers();
         let f = frame(&mesh, 24, 20);
-        for exec in executors() {
-            let r = assert_exact(&LinkedList::default(), &f, &Params::default(), &exec);
-            assert_eq!(
-                r.report.hazards.total(),
-                0,
-                "{:?}: {:?}",
-                exec.mode,
-                r.report.hazard_list.first()
-            );
-        }
         // A roomy pool from pool_per_pixel instead of the count pass.
         let params = Params {
             pool_per_pixel: Some(8.0),

@@ -19,17 +19,18 @@
 //! allocate invocations ran), but they are disjoint and cover `[0, total)` exactly, which is
 //! checked on every run together with "the count pass equals the store pass".
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, FragmentState, KernelInfo};
+use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
-use super::dfb::{
-    capture_ranges, count_store_check, duplicate_check, fault_check, image_check, ranges_check,
-    read_image, resolve_framebuffer, resolve_state, sorted_check, storage, ArrayResolve,
-    CountKernel, Layout,
-};
+use super::array::{ArrayResolve, FragmentArrays, Layout};
+use super::checks::{count_store_check, ranges_check, stored_once_check};
+use super::dfb::claim_slot;
+use super::run::AbRun;
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
 };
-use crate::common::{self, capture_state, geometry_pass, pixels, EMPTY};
+use crate::basic::CountKernel;
+use crate::common::EMPTY;
+use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![Box::new(SBuffer)]
@@ -89,7 +90,7 @@ impl FragmentKernel for GroupScan {
 
 /// Store pass: `slot = group_base[g] + offset[p] + atomicAdd(fill[p], 1)`; a fragment past its
 /// pixel's counted range (the passes disagree) is dropped and counted, never written into
-/// another pixel's range.
+/// another pixel's range (the claim is DFB's, [`claim_slot`]).
 pub struct SbStore {
     pub counts: Buf<u32>,
     pub offsets: Buf<u32>,
@@ -106,12 +107,10 @@ impl FragmentKernel for SbStore {
         KernelInfo::new("sb-store")
     }
     async fn shade(&self, f: Frag<'_>) {
-        let p = f.pixel_index();
-        let i = f.atomic_add(self.fill, p, 1).await;
-        if i >= f.load(self.counts, p).await {
-            f.atomic_add(self.overflow, 0, 1).await;
+        let Some(i) = claim_slot(&f, self.counts, self.fill, self.overflow).await else {
             return;
-        }
+        };
+        let p = f.pixel_index();
         let base = f
             .load(self.group_base, p % self.groups)
             .await
@@ -146,10 +145,10 @@ impl Algorithm for SBuffer {
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
-        let n = pixels(frame);
+        let mut run = AbRun::new(frame, params, exec)?;
+        let n = run.n;
         let groups = GROUPS.min(n.max(1) as u32);
-        let mut device = common::fresh();
-        let mut fb = resolve_framebuffer(frame)?;
+        let device = &mut run.device;
         let counts = device.buffer::<u32>("sb-counts", n as u64)?;
         let offsets = device.buffer::<u32>("sb-offsets", n as u64)?;
         device.memory.fill(offsets, EMPTY)?;
@@ -159,54 +158,32 @@ impl Algorithm for SBuffer {
         let total_buf = device.buffer::<u32>("sb-total", 1)?;
         let overflow = device.buffer::<u32>("sb-overflow", 1)?;
 
-        let mut report = geometry_pass(
-            &device,
-            &mut fb,
-            frame,
-            &capture_state(),
-            &CountKernel { counts },
-            exec,
-        )?;
-        let none = FragmentState::new();
-        report.merge(&device.fullscreen(
-            &mut fb,
-            &none,
-            &SparseAllocate {
-                counts,
-                offsets,
-                group_total,
-                groups,
-            },
-            exec,
-        )?);
-        report.merge(&device.fullscreen(
-            &mut fb,
-            &none,
-            &GroupScan {
-                group_total,
-                group_base,
-                total: total_buf,
-                groups,
-            },
-            exec,
-        )?);
-        let total = device.memory.read(total_buf)?[0];
+        let mut report = run.capture(&CountKernel { counts })?;
+        report.merge(&run.fullscreen(&SparseAllocate {
+            counts,
+            offsets,
+            group_total,
+            groups,
+        })?);
+        report.merge(&run.fullscreen(&GroupScan {
+            group_total,
+            group_base,
+            total: total_buf,
+            groups,
+        })?);
+        let total = run.device.memory.read(total_buf)?[0];
 
-        let depth = device.buffer::<f32>("sb-depth", total.max(1) as u64)?;
-        let prim = device.buffer::<u32>("sb-prim", total.max(1) as u64)?;
+        let arrays = FragmentArrays::new(&mut run.device, "sb", total as u64)?;
         let store = SbStore {
             counts,
             offsets,
             group_base,
             fill,
-            depth,
-            prim,
+            depth: arrays.depth,
+            prim: arrays.prim,
             overflow,
             groups,
         };
-        let store_report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
-        let generated = store_report.stats.fragments_generated;
-        report.merge(&store_report);
         let resolve = ArrayResolve {
             layout: Layout::Grouped {
                 offsets,
@@ -215,18 +192,16 @@ impl Algorithm for SBuffer {
             },
             lens: fill,
             limit: Some(counts),
-            depth,
-            prim,
-            alpha: params.alpha,
-            background: params.background,
+            arrays,
+            composite: Composite::of(params),
         };
-        report.merge(&device.fullscreen(&mut fb, &resolve_state(), &resolve, exec)?);
+        let generated = run.store_and_resolve(&mut report, &store, &resolve)?;
 
-        let counts_v = device.memory.read(counts)?;
-        let offsets_v = device.memory.read(offsets)?;
-        let bases_v = device.memory.read(group_base)?;
-        let fill_v = device.memory.read(fill)?;
-        let dropped = device.memory.read(overflow)?[0] as u64;
+        let counts_v = run.device.memory.read(counts)?;
+        let offsets_v = run.device.memory.read(offsets)?;
+        let bases_v = run.device.memory.read(group_base)?;
+        let fill_v = run.device.memory.read(fill)?;
+        let dropped = run.device.memory.read(overflow)?[0] as u64;
         let start = |p: usize| bases_v[p % groups as usize].wrapping_add(offsets_v[p]);
         let uncovered_with_range = (0..n)
             .filter(|&p| counts_v[p] == 0 && offsets_v[p] != EMPTY)
@@ -244,13 +219,7 @@ impl Algorithm for SBuffer {
                 }
             })
             .collect();
-        let capture = capture_ranges(
-            frame,
-            &ranges,
-            &device.memory.read(depth)?,
-            &device.memory.read(prim)?,
-        );
-        let image = read_image(&fb);
+        let capture = arrays.capture(&run.device, frame, &ranges)?;
         let stored = capture.frags.len() as u64;
         let checks = vec![
             count_store_check(&counts_v, &fill_v),
@@ -263,25 +232,9 @@ impl Algorithm for SBuffer {
                     covered.len()
                 ),
             ),
-            Check::new(
-                "every generated fragment stored exactly once",
-                stored + dropped == generated && dropped == 0,
-                format!("stored {stored}, dropped {dropped}, generated {generated}"),
-            ),
-            duplicate_check(&capture),
-            sorted_check(&capture),
-            image_check(&image, &capture, params),
-            fault_check(&report),
+            stored_once_check(stored, dropped, generated),
         ];
-        Ok(AlgoResult {
-            capture: Some(capture),
-            image: Some(image),
-            storage_bytes: storage(&device, frame),
-            report,
-            checks,
-            dropped,
-            ..Default::default()
-        })
+        Ok(run.finish(capture, report, dropped, checks, []))
     }
 }
 
@@ -289,22 +242,12 @@ impl Algorithm for SBuffer {
 mod tests {
     use fragrace_emu::Policy;
 
-    use super::super::dfb::test_support::*;
+    use super::super::test_support::*;
     use super::*;
 
     #[test]
     fn sb_is_exact_under_every_executor() {
-        let mesh = layers();
-        let f = frame(&mesh, 24, 20);
-        for exec in executors() {
-            let r = assert_exact(&SBuffer, &f, &Params::default(), &exec);
-            assert_eq!(
-                r.report.hazards.total(),
-                0,
-                "{:?}",
-                r.report.hazard_list.first()
-            );
-        }
+        assert_exact_and_hazard_free_everywhere(&SBuffer);
     }
 
     #[test]

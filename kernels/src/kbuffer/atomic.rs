@@ -21,7 +21,7 @@
 //! - `kb-atomic64`: one pass on 64-bit keys `depth bits << 32 | primitive id`; keys are unique
 //!   per pixel, so the kept set is exactly the k nearest in the truth's order.
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
+use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo, Word};
 
 use super::rmw::{depth_key, pack64, KbRun, Shape, Slots};
 use crate::algo::{
@@ -79,21 +79,12 @@ impl Census {
 }
 
 /// The atomic-min insertion chain of `v` into the k slots at `base` (`oit.py`'s
-/// `FS_KBUF_ATOMIC_DEPTH`, on 32- or 64-bit words).
-async fn chain32(f: Frag<'_>, key: Buf<u32>, base: u32, k: u32, mut v: u32) {
+/// `FS_KBUF_ATOMIC_DEPTH`, on 32- or 64-bit words); `empty` is the key of an empty slot,
+/// the largest of its width.
+async fn chain<T: Word + Ord>(f: Frag<'_>, key: Buf<T>, base: u32, k: u32, mut v: T, empty: T) {
     for i in 0..k {
         let old = f.atomic_min(key, base + i, v).await;
-        if old == EMPTY {
-            return;
-        }
-        v = v.max(old);
-    }
-}
-
-async fn chain64(f: Frag<'_>, key: Buf<u64>, base: u32, k: u32, mut v: u64) {
-    for i in 0..k {
-        let old = f.atomic_min(key, base + i, v).await;
-        if old == u64::MAX {
+        if old == empty {
             return;
         }
         v = v.max(old);
@@ -113,12 +104,13 @@ impl FragmentKernel for Depth32 {
     }
     async fn shade(&self, f: Frag<'_>) {
         self.census.record(f).await;
-        chain32(
+        chain(
             f,
             self.key,
             f.pixel_index() * self.k,
             self.k,
             depth_key(f.depth()),
+            EMPTY,
         )
         .await;
     }
@@ -178,12 +170,13 @@ impl FragmentKernel for Store64 {
     }
     async fn shade(&self, f: Frag<'_>) {
         self.census.record(f).await;
-        chain64(
+        chain(
             f,
             self.key,
             f.pixel_index() * self.k,
             self.k,
             pack64(f.depth(), f.primitive_id()),
+            u64::MAX,
         )
         .await;
     }

@@ -133,13 +133,7 @@ impl Algorithm for KbInterlock {
         let report = run.capture(&store)?;
         let slots = Slots::Split(kb);
         let shape = Shape::of(&slots.read(&run.device, run.k)?, true, None);
-        let entered: u64 = run
-            .device
-            .memory
-            .read(entries)?
-            .iter()
-            .map(|&e| e as u64)
-            .sum();
+        let entered = run.total(entries)?;
         let shaded = report.stats.shaded;
         let disorder = run.device.memory.read(out_of_order)?[0];
         let mut checks = vec![

@@ -25,18 +25,14 @@
 //! still the k smallest (which of two equal depths is kept is not an error for the
 //! oracle's `KNearest` comparison).
 
-use fragrace_emu::{
-    Buf, ExecConfig, Format, Frag, FragmentKernel, FragmentState, InterlockMode, KernelInfo,
-    SampleCount, TargetState,
-};
+use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, InterlockMode, KernelInfo};
 
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
     HazardClass, Params,
 };
-use crate::common::{
-    self, capture_state, composite_frags, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
-};
+use crate::common::{self, capture_state, geometry_pass, pixels, sort_fragments, EMPTY};
+use crate::resolve::{self, Composite};
 
 /// Words per slot: depth (f32 bits) and primitive id.
 const SLOT_WORDS: u32 = 2;
@@ -242,8 +238,7 @@ struct Resolve {
     k: u32,
     slots: Buf<u32>,
     count: Buf<u32>,
-    alpha: f32,
-    background: [f32; 3],
+    composite: Composite,
 }
 
 impl FragmentKernel for Resolve {
@@ -258,13 +253,10 @@ impl FragmentKernel for Resolve {
             let mut rec = [0u32; 2];
             f.load_record(self.slots, (p * self.k + i) * SLOT_WORDS, &mut rec)
                 .await;
-            frags.push(CapturedFrag {
-                depth: f32::from_bits(rec[0]),
-                prim: rec[1],
-            });
+            frags.push(CapturedFrag::from_bits(rec[0], rec[1]));
         }
         sort_fragments(&mut frags);
-        f.output(0, composite_frags(&frags, self.alpha, self.background));
+        self.composite.output(&f, &frags);
     }
 }
 
@@ -367,23 +359,19 @@ fn run(
         bound,
         evicted,
     };
-    let mut fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA32F])?;
+    let mut fb = resolve::framebuffer(frame)?;
     let mut report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
     let store_stats = report.stats.clone();
     let store_faults = report.faults.len();
 
-    let resolve = Resolve {
+    let kernel = Resolve {
         k,
         slots,
         count,
-        alpha: params.alpha,
-        background: params.background,
+        composite: Composite::of(params),
     };
-    let mut state = FragmentState::new();
-    state.targets = vec![TargetState::new(Format::RGBA32F)];
-    report.merge(&device.fullscreen(&mut fb, &state, &resolve, exec)?);
-    let out = fb.image(0);
-    let image: Vec<[f32; 4]> = (0..n).map(|p| out.texels[p].map(f32::from_bits)).collect();
+    report.merge(&resolve::pass(&device, &mut fb, &kernel, exec)?);
+    let image = resolve::read_image(&fb);
 
     // Read back what the structure really holds.
     let slot_words = device.memory.read(slots)?;
@@ -397,10 +385,7 @@ fn run(
     let k_us = k as usize;
     let record = |p: usize, i: usize| {
         let w = (p * k_us + i) * SLOT_WORDS as usize;
-        CapturedFrag {
-            depth: f32::from_bits(slot_words[w]),
-            prim: slot_words[w + 1],
-        }
+        CapturedFrag::from_bits(slot_words[w], slot_words[w + 1])
     };
 
     let mut lists = Vec::with_capacity(n);
@@ -480,7 +465,7 @@ fn run(
             unused_bad.unwrap_or_else(|| format!("{n} pixels")),
         ),
     ];
-    let storage_bytes = device.memory.bytes() + n as u64 * 16;
+    let storage_bytes = device.memory.bytes() + n as u64 * resolve::TARGET_BYTES;
     Ok(AlgoResult {
         capture: Some(Capture::from_lists(frame.width, frame.height, lists)),
         image: Some(image),
@@ -494,22 +479,12 @@ fn run(
 #[cfg(test)]
 mod tests {
     use fragrace_emu::{Mesh, Policy};
-    use glam::{Mat4, Vec3};
+    use glam::Vec3;
 
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
-
-    /// A quad of two triangles over NDC `[x0, x1] x [y0, y1]`, depth `z` (NDC) tilted by `tilt`
-    /// along x.
-    fn quad(mesh: &mut Mesh, r: [f32; 4], z: f32, tilt: f32) {
-        let b = mesh.positions.len() as u32;
-        for (x, y) in [(r[0], r[2]), (r[1], r[2]), (r[1], r[3]), (r[0], r[3])] {
-            mesh.positions.push(Vec3::new(x, y, z + tilt * x));
-        }
-        mesh.indices.push([b, b + 1, b + 2]);
-        mesh.indices.push([b, b + 2, b + 3]);
-    }
+    use crate::test_scenes::{frame, tilted_quad};
 
     /// Overlapping quads in shuffled depth order (up to 14 layers per pixel), two pairs of
     /// exactly coplanar layers, and diagonal edges.
@@ -521,7 +496,7 @@ mod tests {
         for (i, &z) in zs.iter().enumerate() {
             let o = (i % 4) as f32 * 0.1;
             let tilt = if i % 3 == 0 { 0.0 } else { 0.05 };
-            quad(
+            tilted_quad(
                 &mut m,
                 [-0.9 + o, 0.8 - o, -0.85 + o * 0.5, 0.9 - o],
                 z,
@@ -551,12 +526,7 @@ mod tests {
 
     fn check_exact(algo: &dyn Algorithm, k: u32) {
         let mesh = scene();
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 24,
-            height: 20,
-        };
+        let frame = frame(&mesh, 24, 20);
         let truth = Truth::capture(&frame, 1).unwrap();
         let params = Params {
             k,
@@ -620,12 +590,7 @@ mod tests {
         // As the paper notes, k = 1 behaves as a Z-buffer and k >= depth complexity as an
         // A-buffer (every fragment kept, nothing culled or evicted).
         let mesh = scene();
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 16,
-            height: 16,
-        };
+        let frame = frame(&mesh, 16, 16);
         let truth = Truth::capture(&frame, 1).unwrap();
         for algo in [&KPlus as &dyn Algorithm, &KPlusHeap] {
             let p1 = Params {
@@ -656,19 +621,14 @@ mod tests {
         // API order is nearest-last here, and the result must stay exact.
         let mut mesh = Mesh::default();
         for i in 0..12 {
-            quad(
+            tilted_quad(
                 &mut mesh,
                 [-1.0, 1.0, -1.0, 1.0],
                 0.9 - i as f32 * 0.15,
                 0.0,
             );
         }
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 8,
-            height: 8,
-        };
+        let frame = frame(&mesh, 8, 8);
         let truth = Truth::capture(&frame, 1).unwrap();
         let params = Params {
             k: 4,
@@ -702,12 +662,7 @@ mod tests {
     #[test]
     fn k_zero_is_rejected() {
         let mesh = scene();
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 4,
-            height: 4,
-        };
+        let frame = frame(&mesh, 4, 4);
         let params = Params {
             k: 0,
             ..Params::default()

@@ -14,8 +14,7 @@
 //! exact.
 
 use fragrace_emu::{
-    Buf, Device, ExecConfig, Format, Frag, FragmentKernel, FragmentState, KernelInfo, PassReport,
-    SampleCount, TargetState,
+    Buf, Device, ExecConfig, Frag, FragmentKernel, KernelInfo, PassReport, SampleCount,
 };
 
 use crate::algo::{
@@ -25,6 +24,7 @@ use crate::algo::{
 use crate::common::{
     self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
 };
+use crate::resolve::{self, Composite};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![Box::new(KbRmw)]
@@ -131,10 +131,7 @@ impl Slots {
             Slots::Key32 { key, prim } => {
                 let k = f.load(key, i).await;
                 let prim = f.load(prim, i).await;
-                (k != EMPTY).then_some(CapturedFrag {
-                    depth: f32::from_bits(k),
-                    prim,
-                })
+                (k != EMPTY).then_some(CapturedFrag::from_bits(k, prim))
             }
             Slots::Key64 { key } => {
                 let k = f.load(key, i).await;
@@ -165,12 +162,7 @@ impl Slots {
                 let p = device.memory.read(prim)?;
                 d.iter()
                     .zip(&p)
-                    .map(|(&k, &prim)| {
-                        (k != EMPTY).then_some(CapturedFrag {
-                            depth: f32::from_bits(k),
-                            prim,
-                        })
-                    })
+                    .map(|(&k, &prim)| (k != EMPTY).then_some(CapturedFrag::from_bits(k, prim)))
                     .collect()
             }
             Slots::Key64 { key } => device
@@ -191,10 +183,7 @@ pub(super) fn pack64(depth: f32, prim: u32) -> u64 {
 }
 
 fn unpack64(k: u64) -> CapturedFrag {
-    CapturedFrag {
-        depth: f32::from_bits((k >> 32) as u32),
-        prim: k as u32,
-    }
+    CapturedFrag::from_bits((k >> 32) as u32, k as u32)
 }
 
 /// The f32 bits of a depth as an unsigned key. For depth >= 0 the unsigned order of the bits
@@ -213,8 +202,7 @@ pub(super) fn depth_key(depth: f32) -> u32 {
 struct Resolve {
     slots: Slots,
     k: u32,
-    alpha: f32,
-    background: [f32; 3],
+    composite: Composite,
 }
 
 impl FragmentKernel for Resolve {
@@ -235,17 +223,13 @@ impl FragmentKernel for Resolve {
             }
         }
         sort_fragments(&mut frags[..n]);
-        f.output(
-            0,
-            common::composite_frags(&frags[..n], self.alpha, self.background),
-        );
+        self.composite.output(&f, &frags[..n]);
     }
 }
 
-/// Bytes of the resolve's RGBA32F target per pixel.
-pub(super) const RESOLVE_TARGET_BYTES: u64 = 16;
-
-/// One run of a k-buffer: the device, the frame, the parameters and the executor.
+/// One run of a k-buffer: the device, the frame, the parameters and the executor, and the
+/// steps every k-buffer of this folder shares (capture pass, resolve, readback, result). The
+/// A-buffers' counterpart is `abuffer::run::AbRun`.
 pub(super) struct KbRun<'a> {
     pub device: Device,
     pub frame: Frame<'a>,
@@ -284,6 +268,17 @@ impl<'a> KbRun<'a> {
         )
     }
 
+    /// The sum of a per-pixel counter buffer (the instrumentation counts of the invariants).
+    pub(super) fn total(&self, counter: Buf<u32>) -> Result<u64, AlgoError> {
+        Ok(self
+            .device
+            .memory
+            .read(counter)?
+            .iter()
+            .map(|&c| c as u64)
+            .sum())
+    }
+
     /// Resolves `slots` with the full-screen kernel (the image), reads them back (the
     /// capture: what the buffers hold, sorted front to back) and assembles the result.
     /// `target_bytes` are the per-pixel bytes of render targets of earlier passes.
@@ -295,26 +290,14 @@ impl<'a> KbRun<'a> {
         dropped: u64,
         target_bytes: u64,
     ) -> Result<AlgoResult, AlgoError> {
-        let mut fb = framebuffer(&self.frame, SampleCount::X1, &[Format::RGBA32F])?;
-        let mut state = FragmentState::new();
-        state.targets = vec![TargetState::new(Format::RGBA32F)];
-        let resolve = Resolve {
+        let mut fb = resolve::framebuffer(&self.frame)?;
+        let kernel = Resolve {
             slots,
             k: self.k,
-            alpha: self.params.alpha,
-            background: self.params.background,
+            composite: Composite::of(self.params),
         };
-        report.merge(
-            &self
-                .device
-                .fullscreen(&mut fb, &state, &resolve, self.exec)?,
-        );
-        let image = fb
-            .image(0)
-            .texels
-            .iter()
-            .map(|t| t.map(f32::from_bits))
-            .collect();
+        report.merge(&resolve::pass(&self.device, &mut fb, &kernel, self.exec)?);
+        let image = resolve::read_image(&fb);
         let lists = slots.read(&self.device, self.k)?.into_iter().map(|l| {
             let mut v: Vec<CapturedFrag> = l.into_iter().flatten().collect();
             sort_fragments(&mut v);
@@ -328,7 +311,7 @@ impl<'a> KbRun<'a> {
             checks,
             dropped,
             storage_bytes: self.device.memory.bytes()
-                + self.n as u64 * (target_bytes + RESOLVE_TARGET_BYTES),
+                + self.n as u64 * (target_bytes + resolve::TARGET_BYTES),
             ..Default::default()
         })
     }
@@ -506,7 +489,7 @@ impl Algorithm for KbRmw {
 #[cfg(test)]
 pub(super) mod testing {
     use fragrace_emu::{ExecConfig, ExecMode, Mesh, Policy, ScheduleConfig};
-    use glam::{Mat4, Vec3};
+    use glam::Vec3;
 
     use crate::algo::{AlgoResult, Algorithm, Frame, Params};
     use crate::basic::Truth;
@@ -548,13 +531,9 @@ pub(super) mod testing {
         m
     }
 
+    /// `mesh` at `size` x `size` pixels.
     pub fn frame(mesh: &Mesh, size: u32) -> Frame<'_> {
-        Frame {
-            mesh,
-            view_proj: Mat4::IDENTITY,
-            width: size,
-            height: size,
-        }
+        crate::test_scenes::frame(mesh, size, size)
     }
 
     /// Scheduled executor with `policy`, `seed` and the default window.

@@ -119,13 +119,7 @@ impl KbSpinlock {
         let shape = Shape::of(&slots.read(&run.device, run.k)?, true, None);
         let given_up = run.device.memory.read(gave_up)?;
         let dropped: u64 = given_up.iter().map(|&g| g as u64).sum();
-        let entered: u64 = run
-            .device
-            .memory
-            .read(entries)?
-            .iter()
-            .map(|&e| e as u64)
-            .sum();
+        let entered = run.total(entries)?;
         let held = run
             .device
             .memory

@@ -49,9 +49,11 @@ use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
     HazardClass, Params,
 };
+use crate::basic::CountKernel;
 use crate::common::{
-    self, capture_state, composite_frags, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
+    self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
 };
+use crate::resolve::{self, Composite};
 
 /// Slots per pixel: the samples of the MSAA framebuffer.
 const SAMPLES: usize = 8;
@@ -104,20 +106,6 @@ impl FragmentKernel for StencilInit {
     async fn shade(&self, _f: Frag<'_>) {}
 }
 
-/// Loss accounting: the truth's fragments per pixel (single-sample rasterization).
-struct Count {
-    counts: Buf<u32>,
-}
-
-impl FragmentKernel for Count {
-    fn info(&self) -> KernelInfo {
-        KernelInfo::new("srab-count")
-    }
-    async fn shade(&self, f: Frag<'_>) {
-        f.atomic_add(self.counts, f.pixel_index(), 1).await;
-    }
-}
-
 /// The capture: depth and primitive id to the one sample the stencil test lets through.
 /// Partially covering fragments are discarded before the late stencil test (see the
 /// module notes); the routed ones are counted per pixel (instrumentation).
@@ -143,8 +131,7 @@ impl FragmentKernel for Capture8 {
 /// composite front to back.
 struct Resolve<'a> {
     image: &'a Image,
-    alpha: f32,
-    background: [f32; 3],
+    composite: Composite,
 }
 
 impl FragmentKernel for Resolve<'_> {
@@ -156,14 +143,11 @@ impl FragmentKernel for Resolve<'_> {
         for s in 0..SAMPLES as u32 {
             let t = f.texel(self.image, f.x(), f.y(), s);
             if t[1] != EMPTY {
-                frags.push(CapturedFrag {
-                    depth: f32::from_bits(t[0]),
-                    prim: t[1],
-                });
+                frags.push(CapturedFrag::from_bits(t[0], t[1]));
             }
         }
         sort_fragments(&mut frags);
-        f.output(0, composite_frags(&frags, self.alpha, self.background));
+        self.composite.output(&f, &frags);
     }
 }
 
@@ -239,7 +223,8 @@ fn run(
     let (w, h) = (frame.width, frame.height);
     let mut device = common::fresh();
 
-    // 1. Count pass (instrumentation): the truth's fragments per pixel.
+    // 1. Count pass (instrumentation, loss accounting): the truth's fragments per pixel
+    //    (single-sample rasterization).
     let counts = device.buffer::<u32>("srab-counts", n as u64)?;
     let mut count_fb = framebuffer(frame, SampleCount::X1, &[])?;
     let mut report = geometry_pass(
@@ -247,7 +232,7 @@ fn run(
         &mut count_fb,
         frame,
         &capture_state(),
-        &Count { counts },
+        &CountKernel { counts },
         exec,
     )?;
     let frag_counts = device.memory.read(counts)?;
@@ -294,17 +279,13 @@ fn run(
     let routed = device.memory.read(routed)?;
 
     // 4. Resolve.
-    let mut out_fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA32F])?;
-    let mut st = FragmentState::new();
-    st.targets = vec![TargetState::new(Format::RGBA32F)];
-    let resolve = Resolve {
+    let mut out_fb = resolve::framebuffer(frame)?;
+    let kernel = Resolve {
         image: &image,
-        alpha: params.alpha,
-        background: params.background,
+        composite: Composite::of(params),
     };
-    report.merge(&device.fullscreen(&mut out_fb, &st, &resolve, exec)?);
-    let out = out_fb.image(0);
-    let resolved: Vec<[f32; 4]> = (0..n).map(|p| out.texels[p].map(f32::from_bits)).collect();
+    report.merge(&resolve::pass(&device, &mut out_fb, &kernel, exec)?);
+    let resolved = resolve::read_image(&out_fb);
 
     // Read back what the samples hold, and check the routing.
     let mut lists = Vec::with_capacity(n);
@@ -327,10 +308,7 @@ fn run(
         let samples: Vec<Option<CapturedFrag>> = (0..SAMPLES)
             .map(|s| {
                 let t = image.texels[p * SAMPLES + s];
-                (t[1] != EMPTY).then(|| CapturedFrag {
-                    depth: f32::from_bits(t[0]),
-                    prim: t[1],
-                })
+                (t[1] != EMPTY).then(|| CapturedFrag::from_bits(t[0], t[1]))
             })
             .collect();
         let stored: Vec<CapturedFrag> = samples.iter().flatten().copied().collect();
@@ -401,7 +379,7 @@ fn run(
             ),
         ),
     ];
-    let storage_bytes = fb_bytes(&fb) + n as u64 * 16 + device.memory.bytes();
+    let storage_bytes = fb_bytes(&fb) + n as u64 * resolve::TARGET_BYTES + device.memory.bytes();
     Ok(AlgoResult {
         capture: Some(Capture::from_lists(w, h, lists)),
         image: Some(resolved),
@@ -416,11 +394,12 @@ fn run(
 #[cfg(test)]
 mod tests {
     use fragrace_emu::{Mesh, Policy};
-    use glam::{Mat4, Vec3};
+    use glam::Vec3;
 
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
+    use crate::test_scenes::frame;
 
     /// A triangle covering the whole viewport (every sample of every pixel), NDC depth
     /// `z + tilt * x`.
@@ -471,12 +450,7 @@ mod tests {
         corner(&mut mesh, 0.5, 0.5, 0.15, 0.0);
         corner(&mut mesh, 0.25, 0.25, 0.55, 0.0);
         corner(&mut mesh, 0.5, -1.0, 0.05, 0.0);
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 16,
-            height: 16,
-        };
+        let frame = frame(&mesh, 16, 16);
         let truth = Truth::capture(&frame, 1).unwrap();
         let t = truth.capture.as_ref().unwrap();
         let params = Params::default();
@@ -519,12 +493,7 @@ mod tests {
         for i in 0..10 {
             cover_all(&mut mesh, 0.8 - 0.15 * i as f32, 0.01);
         }
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 8,
-            height: 8,
-        };
+        let frame = frame(&mesh, 8, 8);
         let truth = Truth::capture(&frame, 1).unwrap();
         let params = Params::default();
         for exec in execs() {
@@ -549,12 +518,7 @@ mod tests {
         for i in 0..260 {
             cover_all(&mut mesh, -0.9 + 1.8 * (i as f32 / 260.0), 0.0);
         }
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 4,
-            height: 4,
-        };
+        let frame = frame(&mesh, 4, 4);
         let params = Params::default();
         let exec = ExecConfig::ordered();
         let good = run(&frame, &params, &exec, Routing::Saturate).unwrap();
@@ -596,12 +560,7 @@ mod tests {
             mesh.indices.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
         }
         cover_all(&mut mesh, 0.2, 0.0);
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 16,
-            height: 16,
-        };
+        let frame = frame(&mesh, 16, 16);
         let truth = Truth::capture(&frame, 1).unwrap();
         let t = truth.capture.as_ref().unwrap();
         let params = Params::default();

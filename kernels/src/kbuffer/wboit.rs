@@ -29,8 +29,8 @@
 //! overflowed RGBA16F.
 
 use fragrace_emu::{
-    BlendEquation, BlendFactor, BlendState, ExecConfig, Format, Frag, FragmentKernel,
-    FragmentState, Image, KernelInfo, SampleCount, TargetState,
+    BlendEquation, BlendFactor, BlendState, ExecConfig, Format, Frag, FragmentKernel, Image,
+    KernelInfo, SampleCount, TargetState,
 };
 
 use crate::algo::{
@@ -39,6 +39,7 @@ use crate::algo::{
 use crate::common::{
     self, capture_state, framebuffer, geometry_pass, pixels, prim_color_packed, unpack_color,
 };
+use crate::resolve;
 
 /// Largest finite half float: what the paper's RGBA16F accumulator can hold.
 pub const F16_MAX: f32 = 65504.0;
@@ -166,17 +167,14 @@ impl Algorithm for Wboit {
         let accum = fb.image(0);
         let revealage = fb.image(1);
 
-        let mut out_fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA32F])?;
-        let mut st = FragmentState::new();
-        st.targets = vec![TargetState::new(Format::RGBA32F)];
-        let resolve = Resolve {
+        let mut out_fb = resolve::framebuffer(frame)?;
+        let kernel = Resolve {
             accum: &accum,
             revealage: &revealage,
             background: params.background,
         };
-        report.merge(&device.fullscreen(&mut out_fb, &st, &resolve, exec)?);
-        let out = out_fb.image(0);
-        let image: Vec<[f32; 4]> = (0..n).map(|p| out.texels[p].map(f32::from_bits)).collect();
+        report.merge(&resolve::pass(&device, &mut out_fb, &kernel, exec)?);
+        let image = resolve::read_image(&out_fb);
 
         let acc: Vec<[f32; 4]> = accum.texels.iter().map(|t| t.map(f32::from_bits)).collect();
         let rev: Vec<f32> = revealage
@@ -227,7 +225,8 @@ impl Algorithm for Wboit {
             image: Some(image),
             report,
             checks,
-            storage_bytes: n as u64 * (16 + 4 + 16),
+            // Accumulation targets (RGBA32F + R32F) and the resolve target.
+            storage_bytes: n as u64 * (16 + 4 + resolve::TARGET_BYTES),
             ..Default::default()
         })
     }
@@ -236,21 +235,11 @@ impl Algorithm for Wboit {
 #[cfg(test)]
 mod tests {
     use fragrace_emu::{Mesh, Policy};
-    use glam::{Mat4, Vec3};
 
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
-
-    /// A quad over NDC `[x0, x1] x [y0, y1]` at NDC depth `z + tilt * x`.
-    fn quad(mesh: &mut Mesh, r: [f32; 4], z: f32, tilt: f32) {
-        let b = mesh.positions.len() as u32;
-        for (x, y) in [(r[0], r[2]), (r[1], r[2]), (r[1], r[3]), (r[0], r[3])] {
-            mesh.positions.push(Vec3::new(x, y, z + tilt * x));
-        }
-        mesh.indices.push([b, b + 1, b + 2]);
-        mesh.indices.push([b, b + 2, b + 3]);
-    }
+    use crate::test_scenes::{frame, tilted_quad};
 
     fn execs() -> Vec<ExecConfig> {
         let mut v = vec![ExecConfig::ordered(), ExecConfig::parallel(2)];
@@ -263,14 +252,9 @@ mod tests {
     #[test]
     fn one_layer_is_exact_under_every_executor() {
         let mut mesh = Mesh::default();
-        quad(&mut mesh, [-0.8, 0.3, -0.9, 0.1], 0.2, 0.05);
-        quad(&mut mesh, [0.35, 0.9, -0.2, 0.8], -0.4, 0.05);
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 20,
-            height: 16,
-        };
+        tilted_quad(&mut mesh, [-0.8, 0.3, -0.9, 0.1], 0.2, 0.05);
+        tilted_quad(&mut mesh, [0.35, 0.9, -0.2, 0.8], -0.4, 0.05);
+        let frame = frame(&mesh, 20, 16);
         let truth = Truth::capture(&frame, 1).unwrap();
         for alpha in [0.3, 0.75, 1.0] {
             let params = Params {
@@ -305,19 +289,14 @@ mod tests {
         let mut mesh = Mesh::default();
         for i in 0..40 {
             let o = (i % 5) as f32 * 0.08;
-            quad(
+            tilted_quad(
                 &mut mesh,
                 [-0.9 + o, 0.9 - o, -0.9 + o, 0.9],
                 -0.95 + 0.045 * i as f32,
                 0.05,
             );
         }
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 16,
-            height: 16,
-        };
+        let frame = frame(&mesh, 16, 16);
         let truth = Truth::capture(&frame, 1).unwrap();
         let t = truth.capture.as_ref().unwrap();
         let params = Params::default();
@@ -369,19 +348,14 @@ mod tests {
         // 400 layers near the camera: accum.a = sum a * w ~ 400 * 0.3 * 0.3 * 3e3 * (1 - d)^3 ~ 1e5.
         let mut mesh = Mesh::default();
         for i in 0..400 {
-            quad(
+            tilted_quad(
                 &mut mesh,
                 [-1.0, 1.0, -1.0, 1.0],
                 -0.99 + 0.0001 * i as f32,
                 0.0,
             );
         }
-        let frame = Frame {
-            mesh: &mesh,
-            view_proj: Mat4::IDENTITY,
-            width: 4,
-            height: 4,
-        };
+        let frame = frame(&mesh, 4, 4);
         let r = Wboit
             .run(&frame, &Params::default(), &ExecConfig::ordered())
             .unwrap();
