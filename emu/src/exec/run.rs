@@ -430,9 +430,10 @@ pub(crate) struct SchedScratch {
     chooser: Option<Chooser>,
     which: Vec<usize>,
     free: Vec<usize>,
+    /// Slots in flight, in admission order.
     inflight: Vec<usize>,
+    /// The runnable ones, in the same order (see `schedule_once`).
     cands: Vec<Candidate>,
-    cand_slots: Vec<usize>,
     pub record: Vec<u8>,
     conflicting: Vec<usize>,
     sub_cands: Vec<Candidate>,
@@ -449,12 +450,20 @@ impl SchedScratch {
             free: Vec::new(),
             inflight: Vec::new(),
             cands: Vec::new(),
-            cand_slots: Vec::new(),
             record: Vec::new(),
             conflicting: Vec::new(),
             sub_cands: Vec::new(),
             reduce: false,
         }
+    }
+}
+
+fn candidate(inv: &Invocation, slot: usize) -> Candidate {
+    let i = inv.input.get();
+    Candidate {
+        seq: i.seq,
+        depth: i.depth,
+        slot: slot as u32,
     }
 }
 
@@ -499,7 +508,7 @@ fn run_scheduled<K: FragmentKernel>(
         .detector
         .hazards(|b| memory.buffer_name(b).to_string());
     outcome.scheduled_hotspots = scratch.detector.hotspots(crate::stats::HOTSPOTS);
-    outcome.heat = std::mem::take(&mut scratch.detector.heat);
+    outcome.heat = scratch.detector.take_heat();
     outcome.schedule = sc.record.then(|| std::mem::take(&mut scratch.record));
     outcome.bytes_used = scratch.chooser.as_ref().map_or(0, |c| c.bytes_used());
 }
@@ -523,6 +532,10 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
 ) -> u64 {
     let width = slots.len();
     let reduce = scratch.reduce;
+    // Without interlock every in-flight invocation with a pending step is runnable, and
+    // stays so until its own next poll: the candidates are kept up to date as invocations
+    // are admitted, stepped and retired instead of being rebuilt before every step.
+    let simple = env.interlock.is_none();
     let SchedScratch {
         detector,
         chooser,
@@ -530,7 +543,6 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         free,
         inflight,
         cands,
-        cand_slots,
         record,
         conflicting,
         sub_cands,
@@ -551,6 +563,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     free.clear();
     free.extend((0..width).rev());
     inflight.clear();
+    cands.clear();
     for f in futs.iter_mut() {
         *f = None;
     }
@@ -572,9 +585,13 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 &mut colors[i * targets..(i + 1) * targets],
             );
             detector.finish(seq, step);
-            chooser.retire(seq);
             if let Some(p) = inflight.iter().position(|&x| x == s) {
                 inflight.remove(p);
+            }
+            if simple {
+                if let Some(p) = cands.iter().position(|c| c.slot as usize == s) {
+                    cands.remove(p);
+                }
             }
             free.push(s);
         }};
@@ -588,39 +605,37 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             which[s] = next;
             futs[s] = Some(make(&slots[s]));
             detector.start(id_of(&inputs[next]), step);
-            chooser.admit(inputs[next].seq);
+            chooser.admit(s as u32);
             inflight.push(s);
             next += 1;
             // Run up to the first step.
             if let Polled::Done = poll_slot(&mut futs[s], &slots[s], &mut cx) {
                 retire!(s);
+            } else if simple && slots[s].pending.get().is_some() {
+                cands.push(candidate(&slots[s], s));
             }
         }
         pass_deferred(&mut deferred, env);
         if inflight.is_empty() {
             break;
         }
-        cands.clear();
-        cand_slots.clear();
-        for &s in inflight.iter() {
-            let inv = &slots[s];
-            let runnable = match inv.pending.get() {
-                Some(StepKind::InterlockBegin) => Frag { inv, env }
-                    .claim()
-                    .is_none_or(|(l, m, c)| l.can_enter_claim(m, &c)),
-                Some(StepKind::PassTurn) => Frag { inv, env }
-                    .claim()
-                    .is_none_or(|(l, _, c)| l.is_turn_claim(&c)),
-                Some(_) => true,
-                None => false,
-            };
-            if runnable {
-                let i = inv.input.get();
-                cands.push(Candidate {
-                    seq: i.seq,
-                    depth: i.depth,
-                });
-                cand_slots.push(s);
+        if !simple {
+            cands.clear();
+            for &s in inflight.iter() {
+                let inv = &slots[s];
+                let runnable = match inv.pending.get() {
+                    Some(StepKind::InterlockBegin) => Frag { inv, env }
+                        .claim()
+                        .is_none_or(|(l, m, c)| l.can_enter_claim(m, &c)),
+                    Some(StepKind::PassTurn) => Frag { inv, env }
+                        .claim()
+                        .is_none_or(|(l, _, c)| l.is_turn_claim(&c)),
+                    Some(_) => true,
+                    None => false,
+                };
+                if runnable {
+                    cands.push(candidate(inv, s));
+                }
             }
         }
         if cands.is_empty() {
@@ -644,7 +659,8 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 (i.x, i.y)
             };
             conflicting.clear();
-            for (ci, &s) in cand_slots.iter().enumerate() {
+            for (ci, c) in cands.iter().enumerate() {
+                let s = c.slot as usize;
                 let hot = inflight.iter().any(|&o| {
                     o != s && ((key(s).is_some() && key(o) == key(s)) || pixel(o) == pixel(s))
                 });
@@ -665,15 +681,15 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         if sc.record {
             record.push(k as u8);
         }
-        let s = cand_slots[k];
+        let s = cands[k].slot as usize;
         let inv = &slots[s];
-        let input = inv.input.get();
         if let Some(StepKind::Mem {
             addr,
             op,
             record: rec,
         }) = inv.pending.get()
         {
+            let input = inv.input.get();
             let lock = match env.interlock {
                 Some(l) if inv.in_interlock.get() => Some(l.key(input.x, input.y)),
                 _ => None,
@@ -697,6 +713,9 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             retire!(s);
         } else if done {
             retire!(s);
+        } else if simple && inv.pending.get().is_none() {
+            // Suspended on something other than a step: it will never be granted one.
+            cands.remove(k);
         }
     }
     step
