@@ -267,6 +267,7 @@ impl Invocation {
         }
     }
 
+    #[inline]
     pub fn faulted(&self) -> bool {
         self.fault.borrow().is_some()
     }
@@ -297,6 +298,7 @@ pub(crate) struct Step<'a> {
 
 impl Future for Step<'_> {
     type Output = ();
+    #[inline]
     fn poll(mut self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<()> {
         let inv = self.frag.inv;
         let env = self.frag.env;
@@ -331,7 +333,8 @@ impl Future for Step<'_> {
                     inv.steps.set(inv.steps.get() + 1);
                     Poll::Ready(())
                 } else {
-                    inv.pending.set(Some(self.kind));
+                    // `pending` was set when the step was made (`Frag::step`).
+                    debug_assert_eq!(inv.pending.get(), Some(self.kind));
                     Poll::Pending
                 }
             }
@@ -479,6 +482,11 @@ impl<'a> Frag<'a> {
     }
 
     fn step(&self, kind: StepKind) -> Step<'a> {
+        if self.env.mode == Mode::Scheduled {
+            // Announced here, from registers: copying it out of the future's state in
+            // `Step::poll` stalled on store forwarding (a fifth of a step's time).
+            self.inv.pending.set(Some(kind));
+        }
         Step {
             frag: *self,
             kind,
@@ -525,7 +533,10 @@ impl<'a> Frag<'a> {
         } else {
             crate::sync::Ordering::AcqRel
         };
-        if let Some(table) = self.env.contention {
+        if self.env.mode == Mode::Scheduled {
+            // One thread runs every invocation: no locked instruction needed.
+            T::from_bits(self.env.memory.apply_exclusive::<T>(addr, op))
+        } else if let Some(table) = self.env.contention {
             let guard = table.enter(addr);
             let bits = self.env.memory.apply::<T>(addr, op, ordering);
             drop(guard);

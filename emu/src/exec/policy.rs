@@ -224,6 +224,7 @@ impl Chooser {
 
     /// Picks one of `cands` (sorted by seq, non-empty) at global step `step`; returns its
     /// position in `cands`.
+    #[inline]
     pub fn choose(&mut self, cands: &[Candidate], step: u64) -> usize {
         debug_assert!(!cands.is_empty());
         match &self.policy {
