@@ -114,10 +114,13 @@ pub(crate) type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<AddrHasher>>;
 struct Access {
     seq: u64,
     step: u64,
+    /// The interlock key held at the time, [`NO_LOCK`] if none (not an `Option`: this
+    /// keeps an access at 24 bytes, and `Option<Access>` too).
+    lock: u64,
     plain: bool,
-    /// The interlock key held at the time, if any.
-    lock: Option<usize>,
 }
+
+const NO_LOCK: u64 = u64::MAX;
 
 #[derive(Default)]
 struct AddrState {
@@ -137,16 +140,28 @@ struct AddrState {
 
 impl AddrState {
     /// Adds `lane` to the touchers; returns false if it was there.
+    #[inline]
     fn touch(&mut self, lane: u32) -> bool {
+        if lane >= 64 {
+            return self.touch_high(lane);
+        }
+        let bit = 1u64 << lane;
+        if self.touch & bit != 0 {
+            return false;
+        }
+        self.touch |= bit;
+        self.live += 1;
+        true
+    }
+
+    /// [`AddrState::touch`] for lanes past the first 64 (windows over 64).
+    #[cold]
+    fn touch_high(&mut self, lane: u32) -> bool {
         let (word, bit) = (lane as usize / 64, 1u64 << (lane % 64));
-        let w = if word == 0 {
-            &mut self.touch
-        } else {
-            if self.touch_hi.len() < word {
-                self.touch_hi.resize(word, 0);
-            }
-            &mut self.touch_hi[word - 1]
-        };
+        if self.touch_hi.len() < word {
+            self.touch_hi.resize(word, 0);
+        }
+        let w = &mut self.touch_hi[word - 1];
         if *w & bit != 0 {
             return false;
         }
@@ -373,9 +388,8 @@ impl Reports {
 /// after they finish), and per-invocation scratch lives in those lanes.
 pub struct Detector {
     invs: Invs,
-    /// Per lane (see above); `free_lanes` are those not in flight.
+    /// Per lane (see above).
     lanes: Vec<Lane>,
-    free_lanes: Vec<u32>,
     table: AddrTable,
     /// `slab[..slab_len]` are the addresses touched in this pass.
     slab: Vec<AddrState>,
@@ -394,7 +408,6 @@ impl Detector {
                 base: None,
             },
             lanes: Vec::new(),
-            free_lanes: Vec::new(),
             table: AddrTable::new(),
             slab: Vec::new(),
             slab_len: 0,
@@ -435,12 +448,10 @@ impl Detector {
             a.peak = 0;
         }
         self.slab_len = 0;
-        self.free_lanes.clear();
-        for (i, l) in self.lanes.iter_mut().enumerate().rev() {
+        for l in &mut self.lanes {
             l.loads.clear();
             l.touched.clear();
             l.record = None;
-            self.free_lanes.push(i as u32);
         }
         let n = width as usize * height as usize;
         if self.rep.heat.len() != n {
@@ -464,8 +475,9 @@ impl Detector {
     }
 
     /// An invocation was admitted at `step` (its `seq` at least the base, see
-    /// [`Detector::set_base`]; without a base, the first admitted sets it).
-    pub fn start(&mut self, id: InvocationId, step: u64) {
+    /// [`Detector::set_base`]; without a base, the first admitted sets it) into `lane`:
+    /// the executor's slot, which no other invocation in flight holds.
+    pub fn start(&mut self, id: InvocationId, step: u64, lane: usize) {
         let base = *self.invs.base.get_or_insert(id.seq);
         let Some(i) = id.seq.checked_sub(base).map(|i| i as usize) else {
             return;
@@ -473,20 +485,12 @@ impl Detector {
         if self.invs.all.len() <= i {
             self.invs.all.resize(i + 1, InvState::default());
         }
-        let lane = match self.invs.lane(id.seq) {
-            // Started twice while in flight: keep its lane, forget what it did.
-            Some(l) => {
-                self.clear_lane(l);
-                l
-            }
-            None => match self.free_lanes.pop() {
-                Some(l) => l,
-                None => {
-                    self.lanes.push(Lane::default());
-                    self.lanes.len() as u32 - 1
-                }
-            },
-        };
+        if self.lanes.len() <= lane {
+            self.lanes.resize_with(lane + 1, Lane::default);
+        }
+        // (Normally empty: it was cleared when its last invocation finished.)
+        self.clear_lane(lane as u32);
+        let lane = lane as u32;
         self.invs.all[i] = InvState {
             id: Some(id),
             start: step,
@@ -515,7 +519,6 @@ impl Detector {
         }
         if let Some(l) = lane {
             self.clear_lane(l);
-            self.free_lanes.push(l);
         }
         self.open_records.retain(|&o| o != seq);
     }
@@ -534,10 +537,14 @@ impl Detector {
         i as usize
     }
 
-    /// A memory access by `seq` at `step`; `lock` is the interlock key it holds, if any;
-    /// `record` is `(base, len, word)` for record accesses.
+    /// A memory access at `step` by `seq`, started in `lane` (see [`Detector::start`]);
+    /// `lock` is the interlock key it holds, if any; `record` is `(base, len, word)` for
+    /// record accesses.
+    #[allow(clippy::too_many_arguments)] // one call site, in the executor's hot loop
+    #[inline]
     pub fn access(
         &mut self,
+        lane: usize,
         seq: u64,
         addr: Addr,
         op: OpKind,
@@ -547,14 +554,16 @@ impl Detector {
     ) {
         let plain = op.is_plain();
         let write = op.is_write();
+        let lock = lock.map_or(NO_LOCK, |l| l as u64);
         let me = Access {
             seq,
             step,
-            plain,
             lock,
+            plain,
         };
         let slot = self.slot(addr);
-        let lane = self.invs.lane(seq);
+        // The lane only counts if `seq` is the invocation started in it and in flight.
+        let lane = (self.invs.lane(seq) == Some(lane as u32)).then_some(lane as u32);
         let Detector {
             invs,
             lanes,
@@ -574,27 +583,31 @@ impl Detector {
         // Races: conflicts with the last write and, for a write, with the reads since it,
         // in that order (the order hazards are reported in).
         let race = |rep: &mut Reports, c: &Access| {
-            let ordered = matches!((c.lock, lock), (Some(a), Some(b)) if a == b);
+            let ordered = (c.lock == lock) & (lock != NO_LOCK);
             if !ordered && invs.overlapped(c.seq, seq) {
                 rep.report(invs, HazardKind::Race, addr, seq, c.seq, step);
             }
         };
+        // (Conditions combined with `&` and `|`: one rarely taken branch, where `&&` made
+        // several that random schedules mispredict.)
         let prev_write = st.last_write;
         if let Some(w) = &prev_write {
-            if w.seq != seq && (plain || w.plain) {
+            if (w.seq != seq) & (plain | w.plain) {
                 race(rep, w);
             }
         }
         if write {
             for r in &st.reads {
-                if r.seq != seq && (plain || r.plain) {
+                if (r.seq != seq) & (plain | r.plain) {
                     race(rep, r);
                 }
             }
             st.reads.clear();
             st.last_write = Some(me);
         } else {
-            st.reads.retain(|r| r.seq != seq);
+            if !st.reads.is_empty() {
+                st.reads.retain(|r| r.seq != seq);
+            }
             st.reads.push(me);
         }
         // Lost update: my plain store after my plain load, with another's write between.
@@ -604,7 +617,7 @@ impl Detector {
                 OpKind::Store => {
                     let my_load = loads.iter().find(|l| l.0 == addr).map(|l| l.1);
                     if let (Some(load_step), Some(w)) = (my_load, prev_write) {
-                        if w.seq != seq && w.step > load_step {
+                        if (w.seq != seq) & (w.step > load_step) {
                             rep.report(invs, HazardKind::LostUpdate, addr, seq, w.seq, step);
                         }
                     }

@@ -227,6 +227,16 @@ impl Chooser {
     #[inline]
     pub fn choose(&mut self, cands: &[Candidate], step: u64) -> usize {
         debug_assert!(!cands.is_empty());
+        // The cheapest and commonest policy inline, the others out of line: a call to the
+        // whole match cost a few dozen instructions per step in saved registers alone.
+        match &self.policy {
+            Policy::Random => self.rng.gen_range(0..cands.len()),
+            _ => self.choose_other(cands, step),
+        }
+    }
+
+    #[inline(never)]
+    fn choose_other(&mut self, cands: &[Candidate], step: u64) -> usize {
         match &self.policy {
             Policy::Random => self.rng.gen_range(0..cands.len()),
             // The ordering policies take turns like a GPU's resident warps do: every

@@ -604,7 +604,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             slots[s].reset(inputs[next]);
             which[s] = next;
             futs[s] = Some(make(&slots[s]));
-            detector.start(id_of(&inputs[next]), step);
+            detector.start(id_of(&inputs[next]), step, s);
             chooser.admit(s as u32);
             inflight.push(s);
             next += 1;
@@ -615,7 +615,9 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 cands.push(candidate(&slots[s], s));
             }
         }
-        pass_deferred(&mut deferred, env);
+        if !deferred.is_empty() {
+            pass_deferred(&mut deferred, env);
+        }
         if inflight.is_empty() {
             break;
         }
@@ -695,6 +697,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 _ => None,
             };
             detector.access(
+                s,
                 input.seq,
                 addr,
                 op,
