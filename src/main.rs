@@ -152,6 +152,15 @@ struct RunArgs {
     /// Per-mille probability that a weak compare-exchange fails spuriously.
     #[arg(long, default_value_t = 0)]
     spurious_cas: u32,
+    /// Scheduled: lockstep forward progress in warps of N lanes (no independent thread
+    /// scheduling, as on pre-Volta GPUs): lanes spinning in a loop hold back their
+    /// warp-mates past it, so a spinlock whose holder shares their warp deadlocks.
+    /// 0: lanes progress independently.
+    #[arg(long, default_value_t = 0)]
+    simt: u32,
+    /// kb-spinlock: lock attempts before a fragment gives up (4294967295: never).
+    #[arg(long, default_value_t = Params::default().spin_cap)]
+    spin_cap: u32,
     /// k of the k-buffers.
     #[arg(long, default_value_t = 8)]
     k: u32,
@@ -212,6 +221,7 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
     exec.block = a.block.max(1);
     exec.reduce = a.reduce;
     exec.spurious_cas_per_mille = a.spurious_cas.min(1000);
+    exec.simt = a.simt;
     if fragrace_kernels::algorithm(&a.algo).is_none() {
         bail!(
             "unknown algorithm `{}`; known: {}",
@@ -228,6 +238,7 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
         params: Params {
             k: a.k.max(1),
             alpha: a.alpha,
+            spin_cap: a.spin_cap.max(1),
             ..Params::default()
         },
         exec,

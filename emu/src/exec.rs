@@ -17,6 +17,7 @@
 
 mod policy;
 mod run;
+mod simt;
 mod threads;
 
 pub use policy::{Policy, PolicyParseError};
@@ -100,6 +101,14 @@ pub struct ExecConfig {
     /// of the invocation and its step count: deterministic for a given schedule).
     #[serde(default)]
     pub spurious_cas_per_mille: u32,
+    /// Scheduled executor: lockstep forward progress, as on GPUs without independent thread
+    /// scheduling (pre-Volta SIMT). Invocations form warps of `simt` lanes in admission
+    /// order, and within a warp, lanes that keep spinning in a loop run before lanes past
+    /// it, so a lock holder whose warp-mates spin on its lock never gets to release it: a
+    /// [`crate::FaultKind::SimtDeadlock`]. 0: lanes progress independently (the default).
+    /// See `docs/verification.md` for the rule and what it cannot see.
+    #[serde(default)]
+    pub simt: u32,
 }
 
 fn default_block() -> u32 {
@@ -119,6 +128,7 @@ impl Default for ExecConfig {
             block: default_block(),
             reduce: false,
             spurious_cas_per_mille: 0,
+            simt: 0,
         }
     }
 }

@@ -108,6 +108,15 @@ pub enum FaultKind {
     /// The invocation waited on interlock (or for its ordered turn) for too long, or every
     /// invocation in flight was blocked.
     Deadlock { waits: u64 },
+    /// Lockstep forward-progress mode (`ExecConfig::simt`): lanes of one warp share a
+    /// program counter, the `spinning` ones kept looping, and the `held` ones (past the
+    /// loop, possibly holding what the spinners wait for) could not run until they leave
+    /// it. Invocations by `seq`; the warp is its number in admission order.
+    SimtDeadlock {
+        warp: u64,
+        spinning: Vec<u64>,
+        held: Vec<u64>,
+    },
     /// The kernel panicked.
     Panic { message: String },
     /// Misuse of the kernel API (e.g. interlock without declaring it, nested interlock).
@@ -133,6 +142,18 @@ impl std::fmt::Display for FaultKind {
                 write!(
                     f,
                     "deadlock: the invocation waited {waits} times without getting in"
+                )
+            }
+            FaultKind::SimtDeadlock {
+                warp,
+                spinning,
+                held,
+            } => {
+                write!(
+                    f,
+                    "SIMT deadlock in warp {warp}: invocations {spinning:?} spin in a loop while \
+                     {held:?} of the same warp, past the loop, cannot run until they leave it \
+                     (the lanes of a warp share one program counter)"
                 )
             }
             FaultKind::Panic { message } => write!(f, "kernel panicked: {message}"),

@@ -430,6 +430,15 @@ impl Memory {
         }
     }
 
+    /// The raw bits of the word at a checked address (for the executor: did a step change
+    /// memory?).
+    pub(crate) fn bits(&self, addr: Addr) -> u64 {
+        match self.word(addr.buffer(), addr.index()) {
+            WordRef::W32(a) => a.load(Ordering::Relaxed) as u64,
+            WordRef::W64(a) => a.load(Ordering::Relaxed),
+        }
+    }
+
     /// [`Memory::apply`] for a caller that is the only thread touching this memory (the
     /// scheduled executor): the same result, computed with a plain load and store of the
     /// word instead of a locked read-modify-write.

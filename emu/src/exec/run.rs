@@ -6,6 +6,7 @@ use std::pin::Pin;
 use std::task::{Context, Poll, Waker};
 
 use super::policy::{Candidate, Chooser};
+use super::simt::Simt;
 use super::{ExecConfig, ExecMode, ScheduleConfig};
 use crate::hazard::{Detector, Hazard, HazardCounts, InvocationId};
 use crate::kernel::{FaultKind, Frag, FragInput, FragmentKernel, Invocation, PassEnv, StepKind};
@@ -243,6 +244,7 @@ pub(crate) fn shade<K: FragmentKernel>(
             targets,
             &mut outcome,
             cfg.reduce,
+            cfg.simt,
         ),
     }
     outcome
@@ -439,6 +441,8 @@ pub(crate) struct SchedScratch {
     sub_cands: Vec<Candidate>,
     /// Interleave only conflicting invocations (ExecConfig::reduce).
     pub reduce: bool,
+    /// Lockstep forward progress (ExecConfig::simt).
+    pub simt: Option<Simt>,
 }
 
 impl SchedScratch {
@@ -454,6 +458,7 @@ impl SchedScratch {
             conflicting: Vec::new(),
             sub_cands: Vec::new(),
             reduce: false,
+            simt: None,
         }
     }
 }
@@ -479,6 +484,7 @@ fn run_scheduled<K: FragmentKernel>(
     targets: usize,
     outcome: &mut ShadeOutcome,
     reduce: bool,
+    simt: u32,
 ) {
     let width = sc.window.max(1);
     let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
@@ -486,6 +492,7 @@ fn run_scheduled<K: FragmentKernel>(
     futs.resize_with(width, || None);
     let mut scratch = SchedScratch::new(env.width, env.height);
     scratch.reduce = reduce;
+    scratch.simt = (simt > 0).then(|| Simt::new(simt));
     let mut acc = Acc::default();
     schedule_once(
         &slots,
@@ -535,7 +542,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     // Without interlock every in-flight invocation with a pending step is runnable, and
     // stays so until its own next poll: the candidates are kept up to date as invocations
     // are admitted, stepped and retired instead of being rebuilt before every step.
-    let simple = env.interlock.is_none();
+    let simple = env.interlock.is_none() && scratch.simt.is_none();
     let SchedScratch {
         detector,
         chooser,
@@ -546,8 +553,12 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         record,
         conflicting,
         sub_cands,
+        simt,
         ..
     } = scratch;
+    if let Some(m) = simt.as_mut() {
+        m.reset(width);
+    }
     detector.reset(env.width, env.height);
     if let Some(base) = inputs.iter().map(|f| f.seq).min() {
         detector.set_base(base);
@@ -593,6 +604,9 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                     cands.remove(p);
                 }
             }
+            if let Some(m) = simt.as_mut() {
+                m.retired();
+            }
             free.push(s);
         }};
     }
@@ -606,6 +620,9 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             futs[s] = Some(make(&slots[s]));
             detector.start(id_of(&inputs[next]), step, s);
             chooser.admit(s as u32);
+            if let Some(m) = simt.as_mut() {
+                m.admit(s);
+            }
             inflight.push(s);
             next += 1;
             // Run up to the first step.
@@ -637,6 +654,16 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 };
                 if runnable {
                     cands.push(candidate(inv, s));
+                }
+            }
+            if let Some(m) = simt.as_mut() {
+                m.filter(cands, slots, which);
+                if m.deadlocked(cands) {
+                    for (s, fault) in m.deadlock_faults(cands, slots, which) {
+                        *slots[s].fault.borrow_mut() = Some(fault);
+                        retire!(s);
+                    }
+                    continue;
                 }
             }
         }
@@ -706,9 +733,16 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 rec.map(|r| (r.base, r.len, r.word)),
             );
         }
+        let taken = inv.pending.get();
+        if let Some(m) = simt.as_mut() {
+            m.before_step(k, s, inv, env.memory);
+        }
         inv.granted.set(true);
         step += 1;
         let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
+        if let Some(m) = simt.as_mut() {
+            m.after_step(taken, env.memory);
+        }
         if !done && inv.steps.get() > max_steps {
             *inv.fault.borrow_mut() = Some(FaultKind::Watchdog {
                 steps: inv.steps.get(),
