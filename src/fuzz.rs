@@ -136,9 +136,15 @@ pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i:
         ExecConfig::parallel(2)
     };
     let k = [1, 2, 4, 8, 16][rng.gen_range(0..5)];
+    let camera = Camera::new(rng.gen_range(0.0..360.0), rng.gen_range(-60.0..60.0));
+    let mut exec = exec;
+    // Drawn last, so the rest of every spec is what it was before the mode existed.
+    if exec.mode != ExecMode::Parallel && rng.gen_bool(0.1) {
+        exec.simt = [4, 32][rng.gen_range(0..2)];
+    }
     RunSpec {
         scene,
-        camera: Camera::new(rng.gen_range(0.0..360.0), rng.gen_range(-60.0..60.0)),
+        camera,
         width: size,
         height: size,
         algo,
@@ -151,7 +157,7 @@ pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i:
 }
 
 fn policy_name(spec: &RunSpec) -> String {
-    match &spec.exec.mode {
+    let name: String = match &spec.exec.mode {
         ExecMode::Scheduled(s) => match &s.policy {
             Policy::Bytes(_) => "bytes".into(),
             Policy::Pct { .. } => "pct".into(),
@@ -159,6 +165,11 @@ fn policy_name(spec: &RunSpec) -> String {
             p => p.to_string(),
         },
         m => m.name().into(),
+    };
+    if spec.exec.simt > 0 {
+        name + "+simt"
+    } else {
+        name
     }
 }
 

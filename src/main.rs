@@ -163,6 +163,15 @@ struct RunArgs {
     /// threads on one tile at once (when the pass's fixed-function results commute).
     #[arg(long, default_value_t = 128)]
     segment: u32,
+    /// Scheduled: lockstep forward progress in warps of N lanes (no independent thread
+    /// scheduling, as on pre-Volta GPUs): lanes spinning in a loop hold back their
+    /// warp-mates past it, so a spinlock whose holder shares their warp deadlocks.
+    /// 0: lanes progress independently.
+    #[arg(long, default_value_t = 0)]
+    simt: u32,
+    /// kb-spinlock: lock attempts before a fragment gives up (4294967295: never).
+    #[arg(long, default_value_t = Params::default().spin_cap)]
+    spin_cap: u32,
     /// k of the k-buffers.
     #[arg(long, default_value_t = 8)]
     k: u32,
@@ -226,6 +235,7 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
     exec.batch = a.lanes.max(1);
     exec.lockstep = !a.no_lockstep;
     exec.segment = a.segment.max(1);
+    exec.simt = a.simt;
     if fragrace_kernels::algorithm(&a.algo).is_none() {
         bail!(
             "unknown algorithm `{}`; known: {}",
@@ -242,6 +252,7 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
         params: Params {
             k: a.k.max(1),
             alpha: a.alpha,
+            spin_cap: a.spin_cap.max(1),
             ..Params::default()
         },
         exec,

@@ -156,6 +156,9 @@ impl RunSpec {
             self.algo, self.width, self.height, self.camera.azimuth, self.camera.elevation, self.params.k,
             self.exec.mode.name()
         );
+        if self.params.spin_cap != Params::default().spin_cap {
+            c += &format!(" --spin-cap {}", self.params.spin_cap);
+        }
         if let Some(s) = self.schedule() {
             c += &format!(
                 " --policy {} --seed {} --window {} --block {}",
@@ -166,6 +169,9 @@ impl RunSpec {
             }
             if self.exec.spurious_cas_per_mille > 0 {
                 c += &format!(" --spurious-cas {}", self.exec.spurious_cas_per_mille);
+            }
+            if self.exec.simt > 0 {
+                c += &format!(" --simt {}", self.exec.simt);
             }
         } else if self.exec.mode == ExecMode::Parallel {
             c += &format!(

@@ -117,6 +117,60 @@ fn check_reports_epr_and_a_replay_command() {
     assert_eq!(v["epr"], 0.0);
 }
 
+#[test]
+fn check_under_lockstep_forward_progress_reports_the_spinlock_deadlock() {
+    let args = |simt: &str, algo: &str| {
+        vec![
+            "check".to_string(),
+            "--scene".into(),
+            "coplanar-stack".into(),
+            "--algo".into(),
+            algo.into(),
+            "--exec".into(),
+            "scheduled".into(),
+            "--simt".into(),
+            simt.into(),
+            "--spin-cap".into(),
+            "4294967295".into(),
+            "--width".into(),
+            "16".into(),
+            "--height".into(),
+            "16".into(),
+        ]
+    };
+    let run = |a: Vec<String>| fragrace(&a.iter().map(|s| s.as_str()).collect::<Vec<_>>());
+    let mut a = args("32", "kb-spinlock");
+    a.push("--json".into());
+    let v = json(&run(a));
+    assert!(v["faults"].as_u64().unwrap() > 0, "{v}");
+    let f = &v["faults_list"][0]["kind"]["SimtDeadlock"];
+    assert!(f["warp"].is_u64(), "{v}");
+    assert!(!f["spinning"].as_array().unwrap().is_empty(), "{f}");
+    assert!(!f["held"].as_array().unwrap().is_empty(), "{f}");
+    let replay = v["replay"].as_str().unwrap();
+    assert!(
+        replay.contains("--simt 32") && replay.contains("--spin-cap 4294967295"),
+        "{replay}"
+    );
+    // In text, the fault says what happened.
+    let o = run(args("32", "kb-spinlock"));
+    assert!(o.status.success());
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("SIMT deadlock in warp"), "{text}");
+    // Independent scheduling: the holder releases, nothing faults.
+    let mut a = args("0", "kb-spinlock");
+    a.push("--json".into());
+    assert_eq!(json(&run(a))["faults"], 0);
+    // A lock-free algorithm is unaffected.
+    let mut a = args("32", "kb-atomic64");
+    a.push("--json".into());
+    let v = json(&run(a));
+    assert_eq!(
+        (v["faults"].as_u64(), v["epr"].as_f64()),
+        (Some(0), Some(0.0))
+    );
+}
+
 fn fails_with(args: &[&str], needle: &str) {
     let o = fragrace(args);
     assert!(!o.status.success(), "{args:?} should fail");

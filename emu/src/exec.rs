@@ -17,6 +17,7 @@
 
 mod policy;
 mod run;
+mod simt;
 mod threads;
 
 pub use policy::{Policy, PolicyParseError};
@@ -107,6 +108,14 @@ pub struct ExecConfig {
     /// targets, no stencil, no depth writes; other passes keep a tile on one thread).
     #[serde(default = "default_segment")]
     pub segment: u32,
+    /// Scheduled executor: lockstep forward progress, as on GPUs without independent thread
+    /// scheduling (pre-Volta SIMT). Invocations form warps of `simt` lanes in admission
+    /// order, and within a warp, lanes that keep spinning in a loop run before lanes past
+    /// it, so a lock holder whose warp-mates spin on its lock never gets to release it: a
+    /// [`crate::FaultKind::SimtDeadlock`]. 0: lanes progress independently (the default).
+    /// See `docs/verification.md` for the rule and what it cannot see.
+    #[serde(default)]
+    pub simt: u32,
 }
 
 fn default_segment() -> u32 {
@@ -131,6 +140,7 @@ impl Default for ExecConfig {
             reduce: false,
             spurious_cas_per_mille: 0,
             segment: default_segment(),
+            simt: 0,
         }
     }
 }

@@ -114,10 +114,13 @@ pub(crate) type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<AddrHasher>>;
 struct Access {
     seq: u64,
     step: u64,
+    /// The interlock key held at the time, [`NO_LOCK`] if none (not an `Option`: this
+    /// keeps an access at 24 bytes, and `Option<Access>` too).
+    lock: u64,
     plain: bool,
-    /// The interlock key held at the time, if any.
-    lock: Option<usize>,
 }
+
+const NO_LOCK: u64 = u64::MAX;
 
 #[derive(Default)]
 struct AddrState {
@@ -125,19 +128,80 @@ struct AddrState {
     last_write: Option<Access>,
     /// Reads since the last write (one entry per invocation, latest).
     reads: Vec<Access>,
-    /// Invocations in flight that touched it (for peak concurrency).
-    touchers: Vec<u64>,
+    /// In-flight invocations that touched it, as a set of detector lanes (see
+    /// [`Detector::lanes`]): lanes 0..64 in `touch`, the rest in `touch_hi`.
+    touch: u64,
+    touch_hi: Vec<u64>,
+    /// Members of that set (for peak concurrency).
+    live: u32,
     accesses: u64,
     peak: u32,
 }
 
-#[derive(Default)]
+impl AddrState {
+    /// Adds `lane` to the touchers; returns false if it was there.
+    #[inline]
+    fn touch(&mut self, lane: u32) -> bool {
+        if lane >= 64 {
+            return self.touch_high(lane);
+        }
+        let bit = 1u64 << lane;
+        if self.touch & bit != 0 {
+            return false;
+        }
+        self.touch |= bit;
+        self.live += 1;
+        true
+    }
+
+    /// [`AddrState::touch`] for lanes past the first 64 (windows over 64).
+    #[cold]
+    fn touch_high(&mut self, lane: u32) -> bool {
+        let (word, bit) = (lane as usize / 64, 1u64 << (lane % 64));
+        if self.touch_hi.len() < word {
+            self.touch_hi.resize(word, 0);
+        }
+        let w = &mut self.touch_hi[word - 1];
+        if *w & bit != 0 {
+            return false;
+        }
+        *w |= bit;
+        self.live += 1;
+        true
+    }
+
+    fn untouch(&mut self, lane: u32) {
+        let (word, bit) = (lane as usize / 64, 1u64 << (lane % 64));
+        let w = if word == 0 {
+            &mut self.touch
+        } else {
+            &mut self.touch_hi[word - 1]
+        };
+        debug_assert!(*w & bit != 0);
+        *w &= !bit;
+        self.live -= 1;
+    }
+}
+
+/// What the detector keeps of an invocation for the whole pass (its lifetime decides
+/// races with accesses that outlive it).
+#[derive(Default, Clone, Copy)]
 struct InvState {
     id: Option<InvocationId>,
     start: u64,
     end: Option<u64>,
+    /// Its lane while in flight.
+    lane: u32,
+}
+
+/// What the detector keeps of an invocation only while it is in flight. Lanes are reused
+/// (at most the executor's window are live at once), so their vectors are allocated once.
+#[derive(Default)]
+struct Lane {
     /// Step of this invocation's latest plain load, per address.
     loads: Vec<(Addr, u64)>,
+    /// Slab entries whose toucher set holds this lane (cleared when it finishes).
+    touched: Vec<u32>,
     /// An open record load: (base, len, interrupted by (who, step)).
     record: Option<OpenRecord>,
 }
@@ -155,146 +219,148 @@ struct RawHazard {
     step: u64,
 }
 
-/// Watches the steps of one scheduled pass. Reusable: [`Detector::reset`] keeps every
-/// allocation, so exploring many schedules of a small model allocates nothing per run.
-pub struct Detector {
-    /// Per invocation, indexed by `seq - base_seq`.
-    invs: Vec<InvState>,
-    base_seq: Option<u64>,
-    /// Address -> slot in `slab`; `slab[..slab_len]` are live.
-    index: FastMap<Addr, u32>,
-    slab: Vec<AddrState>,
-    slab_len: usize,
+/// Address -> slab index: open addressing (linear probing, power-of-two capacity) with a
+/// generation per entry, so that forgetting every address between two executions of an
+/// exploration costs one increment, not a pass over the table.
+struct AddrTable {
+    /// (address, slab index, generation); an entry is live if its generation is `gen`.
+    entries: Vec<(u64, u32, u32)>,
+    gen: u32,
+    len: usize,
+}
+
+impl AddrTable {
+    fn new() -> AddrTable {
+        AddrTable {
+            entries: vec![(0, 0, 0); 16],
+            gen: 1,
+            len: 0,
+        }
+    }
+
+    fn clear(&mut self) {
+        self.len = 0;
+        self.gen = self.gen.wrapping_add(1);
+        if self.gen == 0 {
+            // Generations wrapped: stale entries could look live again.
+            self.entries.fill((0, 0, 0));
+            self.gen = 1;
+        }
+    }
+
+    #[inline]
+    fn home(&self, addr: u64) -> usize {
+        // Fibonacci hashing: the high bits of the product mix buffer and index.
+        let bits = self.entries.len().trailing_zeros();
+        (addr.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> (64 - bits)) as usize
+    }
+
+    /// The slab index of `addr`, inserting `fresh` if it is absent; second: inserted.
+    #[inline]
+    fn get_or_insert(&mut self, addr: u64, fresh: u32) -> (u32, bool) {
+        let mask = self.entries.len() - 1;
+        let mut i = self.home(addr);
+        loop {
+            let e = self.entries[i];
+            if e.2 != self.gen {
+                self.entries[i] = (addr, fresh, self.gen);
+                self.len += 1;
+                if self.len * 2 > self.entries.len() {
+                    self.grow();
+                }
+                return (fresh, true);
+            }
+            if e.0 == addr {
+                return (e.1, false);
+            }
+            i = (i + 1) & mask;
+        }
+    }
+
+    fn grow(&mut self) {
+        let doubled = vec![(0, 0, 0); self.entries.len() * 2];
+        let old = std::mem::replace(&mut self.entries, doubled);
+        let (gen, mask) = (self.gen, self.entries.len() - 1);
+        for e in old.into_iter().filter(|e| e.2 == gen) {
+            let mut i = self.home(e.0);
+            while self.entries[i].2 == gen {
+                i = (i + 1) & mask;
+            }
+            self.entries[i] = e;
+        }
+    }
+}
+
+/// Counting and keeping hazards (apart from the per-address state, so a report can be
+/// made while that state is borrowed).
+struct Reports {
     counts: HazardCounts,
     hazards: Vec<RawHazard>,
     /// Per-pixel hazard counts (row-major).
-    pub heat: Vec<u32>,
+    heat: Vec<u32>,
     width: u32,
     /// How many hazards are kept in detail (all are counted).
-    pub keep: usize,
+    keep: usize,
     /// Pairs already reported, so a spin loop is one hazard, not thousands.
     seen: FastMap<(u8, u64, u64, u64), ()>,
-    /// Invocations with an open record load (few at a time).
-    open_records: Vec<u64>,
 }
 
-impl Detector {
-    /// A detector for a `width` x `height` pass.
-    pub fn new(width: u32, height: u32) -> Detector {
-        Detector {
-            invs: Vec::new(),
-            base_seq: None,
-            index: FastMap::default(),
-            slab: Vec::new(),
-            slab_len: 0,
-            counts: HazardCounts::default(),
-            hazards: Vec::new(),
-            heat: vec![0; width as usize * height as usize],
-            width,
-            keep: 256,
-            seen: FastMap::default(),
-            open_records: Vec::new(),
-        }
+/// The invocations of a pass, indexed by `seq - base`.
+struct Invs {
+    all: Vec<InvState>,
+    base: Option<u64>,
+}
+
+impl Invs {
+    #[inline]
+    fn get(&self, seq: u64) -> Option<&InvState> {
+        let i = seq.checked_sub(self.base?)? as usize;
+        self.all.get(i).filter(|s| s.id.is_some())
     }
 
-    /// Forgets everything, keeping allocations.
-    pub fn reset(&mut self, width: u32, height: u32) {
-        for s in &mut self.invs {
-            s.id = None;
-            s.end = None;
-            s.loads.clear();
-            s.record = None;
-        }
-        self.base_seq = None;
-        self.index.clear();
-        for a in &mut self.slab[..self.slab_len] {
-            a.last_write = None;
-            a.reads.clear();
-            a.touchers.clear();
-            a.accesses = 0;
-            a.peak = 0;
-        }
-        self.slab_len = 0;
-        self.counts = HazardCounts::default();
-        self.hazards.clear();
-        let n = width as usize * height as usize;
-        if self.heat.len() != n {
-            self.heat = vec![0; n];
-        } else {
-            self.heat.fill(0);
-        }
-        self.width = width;
-        self.seen.clear();
-        self.open_records.clear();
+    #[inline]
+    fn get_mut(&mut self, seq: u64) -> Option<&mut InvState> {
+        let i = seq.checked_sub(self.base?)? as usize;
+        self.all.get_mut(i).filter(|s| s.id.is_some())
     }
 
-    fn inv(&self, seq: u64) -> Option<&InvState> {
-        let i = seq.checked_sub(self.base_seq?)? as usize;
-        self.invs.get(i).filter(|s| s.id.is_some())
-    }
-
-    fn inv_mut(&mut self, seq: u64) -> Option<&mut InvState> {
-        let i = seq.checked_sub(self.base_seq?)? as usize;
-        self.invs.get_mut(i).filter(|s| s.id.is_some())
-    }
-
-    /// Sets the smallest `seq` this run will admit (invocations are indexed from it).
-    pub fn set_base(&mut self, base: u64) {
-        self.base_seq = Some(base);
-    }
-
-    /// An invocation was admitted at `step` (its `seq` at least the base, see
-    /// [`Detector::set_base`]; without a base, the first admitted sets it).
-    pub fn start(&mut self, id: InvocationId, step: u64) {
-        let base = *self.base_seq.get_or_insert(id.seq);
-        let Some(i) = id.seq.checked_sub(base).map(|i| i as usize) else {
-            return;
-        };
-        if self.invs.len() <= i {
-            self.invs.resize_with(i + 1, InvState::default);
-        }
-        let s = &mut self.invs[i];
-        s.id = Some(id);
-        s.start = step;
-        s.end = None;
-        s.loads.clear();
-        s.record = None;
-    }
-
-    /// An invocation finished (or was dropped after a fault) at `step`.
-    pub fn finish(&mut self, seq: u64, step: u64) {
-        if let Some(s) = self.inv_mut(seq) {
-            s.end = Some(step);
-            s.loads.clear();
-            s.record = None;
-        }
-        self.open_records.retain(|&o| o != seq);
-    }
-
-    fn live(&self, seq: u64) -> bool {
-        self.inv(seq).is_some_and(|s| s.end.is_none())
+    /// The lane of `seq` if it is in flight.
+    #[inline]
+    fn lane(&self, seq: u64) -> Option<u32> {
+        self.get(seq).filter(|s| s.end.is_none()).map(|s| s.lane)
     }
 
     /// Whether invocations `a` and `b` overlapped in time (neither finished before the
     /// other started).
+    #[inline]
     fn overlapped(&self, a: u64, b: u64) -> bool {
-        match (self.inv(a), self.inv(b)) {
+        match (self.get(a), self.get(b)) {
             (Some(x), Some(y)) => {
                 x.end.is_none_or(|e| e > y.start) && y.end.is_none_or(|e| e > x.start)
             }
             _ => false,
         }
     }
+}
 
-    fn report(&mut self, kind: HazardKind, addr: Addr, victim: u64, other: u64, step: u64) {
+impl Reports {
+    fn report(
+        &mut self,
+        invs: &Invs,
+        kind: HazardKind,
+        addr: Addr,
+        victim: u64,
+        other: u64,
+        step: u64,
+    ) {
         let key = (kind as u8, addr.0, victim.min(other), victim.max(other));
         if self.seen.insert(key, ()).is_some() {
             return;
         }
         self.counts.bump(kind);
         let (Some(v), Some(o)) = (
-            self.inv(victim).and_then(|s| s.id),
-            self.inv(other).and_then(|s| s.id),
+            invs.get(victim).and_then(|s| s.id),
+            invs.get(other).and_then(|s| s.id),
         ) else {
             return;
         };
@@ -311,25 +377,174 @@ impl Detector {
             });
         }
     }
+}
 
-    fn slot(&mut self, addr: Addr) -> usize {
-        if let Some(&i) = self.index.get(&addr) {
-            return i as usize;
+/// Watches the steps of one scheduled pass. Reusable: [`Detector::reset`] keeps every
+/// allocation, so exploring many schedules of a small model allocates nothing per run.
+///
+/// Cost per access is a few loads and compares: the address table is a generation-tagged
+/// open-addressing table, the in-flight invocations that touched an address are a bitset
+/// over *lanes* (dense ids the detector gives invocations while they are in flight, reused
+/// after they finish), and per-invocation scratch lives in those lanes.
+pub struct Detector {
+    invs: Invs,
+    /// Per lane (see above).
+    lanes: Vec<Lane>,
+    table: AddrTable,
+    /// `slab[..slab_len]` are the addresses touched in this pass.
+    slab: Vec<AddrState>,
+    slab_len: usize,
+    rep: Reports,
+    /// Invocations with an open record load (few at a time).
+    open_records: Vec<u64>,
+}
+
+impl Detector {
+    /// A detector for a `width` x `height` pass.
+    pub fn new(width: u32, height: u32) -> Detector {
+        Detector {
+            invs: Invs {
+                all: Vec::new(),
+                base: None,
+            },
+            lanes: Vec::new(),
+            table: AddrTable::new(),
+            slab: Vec::new(),
+            slab_len: 0,
+            rep: Reports {
+                counts: HazardCounts::default(),
+                hazards: Vec::new(),
+                heat: vec![0; width as usize * height as usize],
+                width,
+                keep: 256,
+                seen: FastMap::default(),
+            },
+            open_records: Vec::new(),
         }
-        let i = self.slab_len;
-        if self.slab.len() <= i {
-            self.slab.push(AddrState::default());
-        }
-        self.slab[i].addr = addr;
-        self.slab_len += 1;
-        self.index.insert(addr, i as u32);
-        i
     }
 
-    /// A memory access by `seq` at `step`; `lock` is the interlock key it holds, if any;
-    /// `record` is `(base, len, word)` for record accesses.
+    /// Forgets everything, keeping allocations.
+    pub fn reset(&mut self, width: u32, height: u32) {
+        // Only the invocations of the last run were set (the vector is as long as the
+        // longest run; clearing the rest would cost as much again).
+        for s in &mut self.invs.all {
+            if s.id.is_none() {
+                continue;
+            }
+            *s = InvState::default();
+        }
+        self.invs.base = None;
+        self.table.clear();
+        for a in &mut self.slab[..self.slab_len] {
+            a.last_write = None;
+            a.reads.clear();
+            a.touch = 0;
+            // (Guarded: even an empty `fill` is a call to memset, which showed in profiles.)
+            if !a.touch_hi.is_empty() {
+                a.touch_hi.fill(0);
+            }
+            a.live = 0;
+            a.accesses = 0;
+            a.peak = 0;
+        }
+        self.slab_len = 0;
+        for l in &mut self.lanes {
+            l.loads.clear();
+            l.touched.clear();
+            l.record = None;
+        }
+        let n = width as usize * height as usize;
+        if self.rep.heat.len() != n {
+            self.rep.heat = vec![0; n];
+        } else if self.rep.counts.total() > 0 {
+            // Heat is only ever bumped with a count: no hazard, nothing to clear.
+            self.rep.heat.fill(0);
+        }
+        self.rep.counts = HazardCounts::default();
+        self.rep.hazards.clear();
+        self.rep.width = width;
+        if !self.rep.seen.is_empty() {
+            self.rep.seen.clear();
+        }
+        self.open_records.clear();
+    }
+
+    /// Sets the smallest `seq` this run will admit (invocations are indexed from it).
+    pub fn set_base(&mut self, base: u64) {
+        self.invs.base = Some(base);
+    }
+
+    /// An invocation was admitted at `step` (its `seq` at least the base, see
+    /// [`Detector::set_base`]; without a base, the first admitted sets it) into `lane`:
+    /// the executor's slot, which no other invocation in flight holds.
+    pub fn start(&mut self, id: InvocationId, step: u64, lane: usize) {
+        let base = *self.invs.base.get_or_insert(id.seq);
+        let Some(i) = id.seq.checked_sub(base).map(|i| i as usize) else {
+            return;
+        };
+        if self.invs.all.len() <= i {
+            self.invs.all.resize(i + 1, InvState::default());
+        }
+        if self.lanes.len() <= lane {
+            self.lanes.resize_with(lane + 1, Lane::default);
+        }
+        // (Normally empty: it was cleared when its last invocation finished.)
+        self.clear_lane(lane as u32);
+        let lane = lane as u32;
+        self.invs.all[i] = InvState {
+            id: Some(id),
+            start: step,
+            end: None,
+            lane,
+        };
+    }
+
+    /// Forgets what a lane holds (its loads, open record, and its place in the toucher
+    /// sets of the addresses it touched).
+    fn clear_lane(&mut self, lane: u32) {
+        let l = &mut self.lanes[lane as usize];
+        for &a in &l.touched {
+            self.slab[a as usize].untouch(lane);
+        }
+        l.touched.clear();
+        l.loads.clear();
+        l.record = None;
+    }
+
+    /// An invocation finished (or was dropped after a fault) at `step`.
+    pub fn finish(&mut self, seq: u64, step: u64) {
+        let lane = self.invs.lane(seq);
+        if let Some(s) = self.invs.get_mut(seq) {
+            s.end = Some(step);
+        }
+        if let Some(l) = lane {
+            self.clear_lane(l);
+        }
+        self.open_records.retain(|&o| o != seq);
+    }
+
+    /// The slab index of `addr`, creating its state on first touch.
+    #[inline]
+    fn slot(&mut self, addr: Addr) -> usize {
+        let (i, fresh) = self.table.get_or_insert(addr.0, self.slab_len as u32);
+        if fresh {
+            if self.slab.len() <= self.slab_len {
+                self.slab.push(AddrState::default());
+            }
+            self.slab[self.slab_len].addr = addr;
+            self.slab_len += 1;
+        }
+        i as usize
+    }
+
+    /// A memory access at `step` by `seq`, started in `lane` (see [`Detector::start`]);
+    /// `lock` is the interlock key it holds, if any; `record` is `(base, len, word)` for
+    /// record accesses.
+    #[allow(clippy::too_many_arguments)] // one call site, in the executor's hot loop
+    #[inline]
     pub fn access(
         &mut self,
+        lane: usize,
         seq: u64,
         addr: Addr,
         op: OpKind,
@@ -339,139 +554,133 @@ impl Detector {
     ) {
         let plain = op.is_plain();
         let write = op.is_write();
+        let lock = lock.map_or(NO_LOCK, |l| l as u64);
         let me = Access {
             seq,
             step,
-            plain,
             lock,
+            plain,
         };
         let slot = self.slot(addr);
-        // Conflicts with the last write (and, for a write, with the reads since it).
-        let mut conflicts: [Option<Access>; 8] = [None; 8];
-        let mut more: Vec<Access> = Vec::new();
-        let mut n = 0;
-        let prev_write;
-        {
-            let st = &mut self.slab[slot];
-            st.accesses += 1;
-            if !st.touchers.contains(&seq) {
-                st.touchers.push(seq);
-            }
-            prev_write = st.last_write;
-            let mut push = |a: Access| {
-                if n < conflicts.len() {
-                    conflicts[n] = Some(a);
-                    n += 1;
-                } else {
-                    more.push(a);
-                }
-            };
-            if let Some(w) = prev_write {
-                if w.seq != seq && (plain || w.plain) {
-                    push(w);
-                }
-            }
-            if write {
-                for r in &st.reads {
-                    if r.seq != seq && (plain || r.plain) {
-                        push(*r);
-                    }
-                }
-                st.reads.clear();
-                st.last_write = Some(me);
-            } else {
-                st.reads.retain(|r| r.seq != seq);
-                st.reads.push(me);
+        // The lane only counts if `seq` is the invocation started in it and in flight.
+        let lane = (self.invs.lane(seq) == Some(lane as u32)).then_some(lane as u32);
+        let Detector {
+            invs,
+            lanes,
+            slab,
+            rep,
+            ..
+        } = self;
+        let st = &mut slab[slot];
+        st.accesses += 1;
+        // Peak concurrency: in-flight invocations that touched it, this one included.
+        if let Some(l) = lane {
+            if st.touch(l) {
+                lanes[l as usize].touched.push(slot as u32);
             }
         }
-        for c in conflicts.iter().flatten().copied().chain(more) {
-            let ordered = matches!((c.lock, lock), (Some(a), Some(b)) if a == b);
-            if !ordered && self.overlapped(c.seq, seq) {
-                self.report(HazardKind::Race, addr, seq, c.seq, step);
+        st.peak = st.peak.max(st.live);
+        // Races: conflicts with the last write and, for a write, with the reads since it,
+        // in that order (the order hazards are reported in).
+        let race = |rep: &mut Reports, c: &Access| {
+            let ordered = (c.lock == lock) & (lock != NO_LOCK);
+            if !ordered && invs.overlapped(c.seq, seq) {
+                rep.report(invs, HazardKind::Race, addr, seq, c.seq, step);
             }
+        };
+        // (Conditions combined with `&` and `|`: one rarely taken branch, where `&&` made
+        // several that random schedules mispredict.)
+        let prev_write = st.last_write;
+        if let Some(w) = &prev_write {
+            if (w.seq != seq) & (plain | w.plain) {
+                race(rep, w);
+            }
+        }
+        if write {
+            for r in &st.reads {
+                if (r.seq != seq) & (plain | r.plain) {
+                    race(rep, r);
+                }
+            }
+            st.reads.clear();
+            st.last_write = Some(me);
+        } else {
+            if !st.reads.is_empty() {
+                st.reads.retain(|r| r.seq != seq);
+            }
+            st.reads.push(me);
         }
         // Lost update: my plain store after my plain load, with another's write between.
-        if op == OpKind::Store {
-            let my_load = self
-                .inv(seq)
-                .and_then(|s| s.loads.iter().rev().find(|l| l.0 == addr).map(|l| l.1));
-            if let (Some(load_step), Some(w)) = (my_load, prev_write) {
-                if w.seq != seq && w.step > load_step {
-                    self.report(HazardKind::LostUpdate, addr, seq, w.seq, step);
+        if let Some(l) = lane {
+            let loads = &mut lanes[l as usize].loads;
+            match op {
+                OpKind::Store => {
+                    let my_load = loads.iter().find(|l| l.0 == addr).map(|l| l.1);
+                    if let (Some(load_step), Some(w)) = (my_load, prev_write) {
+                        if (w.seq != seq) & (w.step > load_step) {
+                            rep.report(invs, HazardKind::LostUpdate, addr, seq, w.seq, step);
+                        }
+                    }
                 }
-            }
-        }
-        if op == OpKind::Load {
-            if let Some(s) = self.inv_mut(seq) {
-                match s.loads.iter_mut().find(|l| l.0 == addr) {
+                OpKind::Load => match loads.iter_mut().find(|l| l.0 == addr) {
                     Some(l) => l.1 = step,
-                    None => s.loads.push((addr, step)),
-                }
+                    None => loads.push((addr, step)),
+                },
+                _ => {}
             }
         }
         // Torn records: my record load interrupted by another's write.
-        if let Some((base, len, word)) = record {
-            if op == OpKind::Load {
-                let mut torn_by = None;
-                let mut opened = false;
-                let mut closed = false;
-                if let Some(s) = self.inv_mut(seq) {
-                    if word == 0 && len > 1 {
-                        s.record = Some((base, len, None));
-                        opened = true;
-                    } else if let Some((b, _, hit)) = s.record {
-                        if b == base && word + 1 == len {
-                            torn_by = hit;
-                            s.record = None;
-                            closed = true;
-                        }
-                    }
-                }
-                if opened && !self.open_records.contains(&seq) {
+        if let (Some((base, len, word)), OpKind::Load, Some(l)) = (record, op, lane) {
+            let open = &mut lanes[l as usize].record;
+            if word == 0 && len > 1 {
+                *open = Some((base, len, None));
+                if !self.open_records.contains(&seq) {
                     self.open_records.push(seq);
                 }
-                if closed {
+            } else if let Some((b, _, hit)) = *open {
+                if b == base && word + 1 == len {
+                    *open = None;
                     self.open_records.retain(|&o| o != seq);
-                }
-                if let Some((other, _)) = torn_by {
-                    self.report(HazardKind::Torn, base, seq, other, step);
+                    if let Some((other, _)) = hit {
+                        self.rep
+                            .report(&self.invs, HazardKind::Torn, base, seq, other, step);
+                    }
                 }
             }
         }
-        if write && !self.open_records.is_empty() {
-            let open = std::mem::take(&mut self.open_records);
-            for &other in &open {
+        if write {
+            for &other in &self.open_records {
                 if other == seq {
                     continue;
                 }
-                if let Some(s) = self.inv_mut(other) {
-                    if let Some((base, len, hit @ None)) = &mut s.record {
-                        if base.buffer() == addr.buffer()
-                            && addr.index() >= base.index()
-                            && addr.index() < base.index().saturating_add(*len)
-                        {
-                            *hit = Some((seq, step));
-                        }
+                let Some(l) = self.invs.lane(other) else {
+                    continue;
+                };
+                if let Some((base, len, hit @ None)) = &mut self.lanes[l as usize].record {
+                    if base.buffer() == addr.buffer()
+                        && addr.index() >= base.index()
+                        && addr.index() < base.index().saturating_add(*len)
+                    {
+                        *hit = Some((seq, step));
                     }
                 }
             }
-            self.open_records = open;
         }
-        // Peak concurrency: touchers still in flight.
-        let mut live = std::mem::take(&mut self.slab[slot].touchers);
-        live.retain(|&t| self.live(t));
-        let st = &mut self.slab[slot];
-        st.peak = st.peak.max(live.len() as u32);
-        st.touchers = live;
     }
 
     pub fn counts(&self) -> HazardCounts {
-        self.counts
+        self.rep.counts
+    }
+
+    /// Hazards per pixel (row-major), taken out (the detector then has none until reset).
+    pub fn take_heat(&mut self) -> Vec<u32> {
+        std::mem::take(&mut self.rep.heat)
     }
 
     /// The hazards kept in detail, with buffer names from `name`.
     pub fn hazards(&self, name: impl Fn(u32) -> String) -> Vec<Hazard> {
-        self.hazards
+        self.rep
+            .hazards
             .iter()
             .map(|h| Hazard {
                 kind: h.kind,

@@ -110,6 +110,15 @@ pub enum FaultKind {
     /// The invocation waited on interlock (or for its ordered turn) for too long, or every
     /// invocation in flight was blocked.
     Deadlock { waits: u64 },
+    /// Lockstep forward-progress mode (`ExecConfig::simt`): lanes of one warp share a
+    /// program counter, the `spinning` ones kept looping, and the `held` ones (past the
+    /// loop, possibly holding what the spinners wait for) could not run until they leave
+    /// it. Invocations by `seq`; the warp is its number in admission order.
+    SimtDeadlock {
+        warp: u64,
+        spinning: Vec<u64>,
+        held: Vec<u64>,
+    },
     /// The kernel panicked.
     Panic { message: String },
     /// Misuse of the kernel API (e.g. interlock without declaring it, nested interlock).
@@ -135,6 +144,18 @@ impl std::fmt::Display for FaultKind {
                 write!(
                     f,
                     "deadlock: the invocation waited {waits} times without getting in"
+                )
+            }
+            FaultKind::SimtDeadlock {
+                warp,
+                spinning,
+                held,
+            } => {
+                write!(
+                    f,
+                    "SIMT deadlock in warp {warp}: invocations {spinning:?} spin in a loop while \
+                     {held:?} of the same warp, past the loop, cannot run until they leave it \
+                     (the lanes of a warp share one program counter)"
                 )
             }
             FaultKind::Panic { message } => write!(f, "kernel panicked: {message}"),
@@ -342,7 +363,8 @@ impl Future for Step<'_> {
                     inv.steps.set(inv.steps.get() + 1);
                     Poll::Ready(())
                 } else {
-                    inv.pending.set(Some(self.kind));
+                    // `pending` was set when the step was made (`Frag::step`).
+                    debug_assert_eq!(inv.pending.get(), Some(self.kind));
                     Poll::Pending
                 }
             }
@@ -437,7 +459,10 @@ impl<T: Word> Future for Access<'_, T> {
         } else {
             crate::sync::Ordering::AcqRel
         };
-        let bits = if let Some(table) = env.contention {
+        let bits = if env.mode == Mode::Scheduled {
+            // One thread runs every invocation: no locked instruction needed.
+            env.memory.apply_exclusive::<T>(addr, this.op)
+        } else if let Some(table) = env.contention {
             let guard = table.enter(addr);
             let bits = env.memory.apply::<T>(addr, this.op, ordering);
             drop(guard);
@@ -600,6 +625,11 @@ impl<'a> Frag<'a> {
     }
 
     fn step(&self, kind: StepKind) -> Step<'a> {
+        if self.env.mode == Mode::Scheduled {
+            // Announced here, from registers: copying it out of the future's state in
+            // `Step::poll` stalled on store forwarding (a fifth of a step's time).
+            self.inv.pending.set(Some(kind));
+        }
         Step {
             frag: *self,
             kind,

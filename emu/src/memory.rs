@@ -430,6 +430,40 @@ impl Memory {
         }
     }
 
+    /// The raw bits of the word at a checked address (for the executor: did a step change
+    /// memory?).
+    pub(crate) fn bits(&self, addr: Addr) -> u64 {
+        match self.word(addr.buffer(), addr.index()) {
+            WordRef::W32(a) => a.load(Ordering::Relaxed) as u64,
+            WordRef::W64(a) => a.load(Ordering::Relaxed),
+        }
+    }
+
+    /// [`Memory::apply`] for a caller that is the only thread touching this memory (the
+    /// scheduled executor): the same result, computed with a plain load and store of the
+    /// word instead of a locked read-modify-write.
+    #[inline]
+    pub(crate) fn apply_exclusive<T: Word>(&self, addr: Addr, op: MemOp) -> u64 {
+        match self.word(addr.buffer(), addr.index()) {
+            WordRef::W32(a) => {
+                let old = a.load(Ordering::Relaxed);
+                let (ret, new) = op32::<T>(old, op);
+                if let Some(n) = new {
+                    a.store(n, Ordering::Relaxed);
+                }
+                ret as u64
+            }
+            WordRef::W64(a) => {
+                let old = a.load(Ordering::Relaxed);
+                let (ret, new) = op64(old, op);
+                if let Some(n) = new {
+                    a.store(n, Ordering::Relaxed);
+                }
+                ret
+            }
+        }
+    }
+
     /// Performs one kernel operation on a checked address; returns the previous value (or
     /// the loaded one) as raw bits. `ordering` is the memory order of the real atomic.
     #[inline(always)]
@@ -581,6 +615,62 @@ fn apply32<T: Word>(a: &AtomicU32, op: MemOp, ord: Ordering) -> u32 {
     }
 }
 
+/// One operation on a 32-bit word holding `old`, as a pure function: (the value returned to
+/// the kernel, the new value if the word is written). The semantics of [`apply32`].
+#[inline]
+fn op32<T: Word>(old: u32, op: MemOp) -> (u32, Option<u32>) {
+    let f = f32::from_bits;
+    let new = match op {
+        MemOp::Load | MemOp::AtomicLoad => return (old, None),
+        MemOp::Store(v) | MemOp::AtomicStore(v) => return (0, Some(v as u32)),
+        MemOp::Add(v) => match T::KIND {
+            WordKind::F32 => (f(old) + f(v as u32)).to_bits(),
+            _ => old.wrapping_add(v as u32),
+        },
+        MemOp::Sub(v) => match T::KIND {
+            WordKind::F32 => (f(old) - f(v as u32)).to_bits(),
+            _ => old.wrapping_sub(v as u32),
+        },
+        MemOp::Min(v) => match T::KIND {
+            WordKind::U32 => old.min(v as u32),
+            _ if less::<T>(v, old as u64) => v as u32,
+            _ => old,
+        },
+        MemOp::Max(v) => match T::KIND {
+            WordKind::U32 => old.max(v as u32),
+            _ if less::<T>(old as u64, v) => v as u32,
+            _ => old,
+        },
+        MemOp::And(v) => old & v as u32,
+        MemOp::Or(v) => old | v as u32,
+        MemOp::Xor(v) => old ^ v as u32,
+        MemOp::Exchange(v) => v as u32,
+        MemOp::CompareExchange(e, n) if old == e as u32 => n as u32,
+        MemOp::CompareExchange(..) => return (old, None),
+    };
+    (old, Some(new))
+}
+
+/// [`op32`] for 64-bit words (unsigned): the semantics of [`apply64`].
+#[inline]
+fn op64(old: u64, op: MemOp) -> (u64, Option<u64>) {
+    let new = match op {
+        MemOp::Load | MemOp::AtomicLoad => return (old, None),
+        MemOp::Store(v) | MemOp::AtomicStore(v) => return (0, Some(v)),
+        MemOp::Add(v) => old.wrapping_add(v),
+        MemOp::Sub(v) => old.wrapping_sub(v),
+        MemOp::Min(v) => old.min(v),
+        MemOp::Max(v) => old.max(v),
+        MemOp::And(v) => old & v,
+        MemOp::Or(v) => old | v,
+        MemOp::Xor(v) => old ^ v,
+        MemOp::Exchange(v) => v,
+        MemOp::CompareExchange(e, n) if old == e => n,
+        MemOp::CompareExchange(..) => return (old, None),
+    };
+    (old, Some(new))
+}
+
 /// A read-modify-write through a compare-exchange loop (one atomic step for the kernel).
 #[inline]
 fn rmw32(a: &AtomicU32, ord: Ordering, f: impl Fn(u32) -> u32) -> u32 {
@@ -617,5 +707,57 @@ fn apply64(a: &AtomicU64, op: MemOp, ord: Ordering) -> u64 {
         MemOp::CompareExchange(e, n) => match a.compare_exchange(e, n, ord, load_order(ord)) {
             Ok(v) | Err(v) => v,
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every operation on every word type returns the same value and leaves the same word
+    /// through the locked path and the exclusive (scheduled executor) path.
+    fn same<T: Word>(values: &[T]) {
+        let ops = |v: u64, w: u64| {
+            [
+                MemOp::Load,
+                MemOp::Store(v),
+                MemOp::AtomicLoad,
+                MemOp::AtomicStore(v),
+                MemOp::Add(v),
+                MemOp::Sub(v),
+                MemOp::Min(v),
+                MemOp::Max(v),
+                MemOp::And(v),
+                MemOp::Or(v),
+                MemOp::Xor(v),
+                MemOp::Exchange(v),
+                MemOp::CompareExchange(v, w),
+                MemOp::CompareExchange(w, v),
+            ]
+        };
+        for &a in values {
+            for &b in values {
+                for op in ops(b.to_bits(), a.to_bits()) {
+                    let mut m = Memory::new();
+                    let x = m.create::<T>("x", 1).unwrap();
+                    let y = m.create::<T>("y", 1).unwrap();
+                    m.write(x, 0, &[a]).unwrap();
+                    m.write(y, 0, &[a]).unwrap();
+                    let r1 = m.apply::<T>(Addr::new(x.id, 0), op, Ordering::AcqRel);
+                    let r2 = m.apply_exclusive::<T>(Addr::new(y.id, 0), op);
+                    assert_eq!(r1, r2, "{a:?} {op:?}: returned");
+                    let (w1, w2) = (m.get(x, 0).unwrap(), m.get(y, 0).unwrap());
+                    assert_eq!(w1.to_bits(), w2.to_bits(), "{a:?} {op:?}: stored");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_exclusive_path_computes_what_the_atomics_do() {
+        same::<u32>(&[0, 1, 7, 0x8000_0000, u32::MAX]);
+        same::<i32>(&[0, 1, -1, -7, i32::MIN, i32::MAX]);
+        same::<f32>(&[0.0, -0.0, 1.5, -2.25, f32::INFINITY, f32::MIN, f32::NAN]);
+        same::<u64>(&[0, 1, 1 << 40, u64::MAX]);
     }
 }

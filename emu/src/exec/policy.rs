@@ -115,14 +115,17 @@ impl Policy {
 pub(crate) struct Candidate {
     pub seq: u64,
     pub depth: f32,
+    /// The executor's slot of the invocation (unique among those in flight): per-invocation
+    /// policy state is indexed by it, not hashed by `seq`.
+    pub slot: u32,
 }
 
 /// The running state of a policy during one scheduled pass.
 pub(crate) struct Chooser {
     policy: Policy,
     rng: SmallRng,
-    /// PCT: priority per invocation seq (higher runs first), change points.
-    priorities: std::collections::HashMap<u64, u64>,
+    /// PCT: priority per in-flight slot (higher runs first), change points.
+    priorities: Vec<u64>,
     change_points: Vec<u64>,
     next_low: u64,
     /// Warp: last chosen seq.
@@ -147,7 +150,7 @@ impl Chooser {
         Chooser {
             policy: policy.clone(),
             rng,
-            priorities: Default::default(),
+            priorities: Vec::new(),
             change_points,
             next_low: 0,
             cursor: None,
@@ -170,7 +173,7 @@ impl Chooser {
             }
             self.change_points.sort_unstable();
         }
-        self.priorities.clear();
+        // (Priorities are written at admission: no need to clear them.)
         self.next_low = 0;
         self.cursor = None;
         self.round_cursor = None;
@@ -206,23 +209,34 @@ impl Chooser {
         self.pos
     }
 
-    /// A new invocation entered the window.
-    pub fn admit(&mut self, seq: u64) {
+    /// A new invocation entered the window in slot `slot`.
+    pub fn admit(&mut self, slot: u32) {
         if let Policy::Pct { depth } = self.policy {
             // Initial priorities sit above the `depth` low values used at change points.
             let p = depth as u64 + 1 + self.rng.gen_range(0..1u64 << 40);
-            self.priorities.insert(seq, p);
+            let slot = slot as usize;
+            if self.priorities.len() <= slot {
+                self.priorities.resize(slot + 1, 0);
+            }
+            self.priorities[slot] = p;
         }
-    }
-
-    pub fn retire(&mut self, seq: u64) {
-        self.priorities.remove(&seq);
     }
 
     /// Picks one of `cands` (sorted by seq, non-empty) at global step `step`; returns its
     /// position in `cands`.
+    #[inline]
     pub fn choose(&mut self, cands: &[Candidate], step: u64) -> usize {
         debug_assert!(!cands.is_empty());
+        // The cheapest and commonest policy inline, the others out of line: a call to the
+        // whole match cost a few dozen instructions per step in saved registers alone.
+        match &self.policy {
+            Policy::Random => self.rng.gen_range(0..cands.len()),
+            _ => self.choose_other(cands, step),
+        }
+    }
+
+    #[inline(never)]
+    fn choose_other(&mut self, cands: &[Candidate], step: u64) -> usize {
         match &self.policy {
             Policy::Random => self.rng.gen_range(0..cands.len()),
             // The ordering policies take turns like a GPU's resident warps do: every
@@ -232,11 +246,14 @@ impl Chooser {
             Policy::Reverse => self.round(cands, |c| (0.0, -(c.seq as i128))),
             Policy::FarFirst => self.round(cands, |c| (-c.depth, c.seq as i128)),
             Policy::Pct { .. } => {
-                let pick = |prio: &std::collections::HashMap<u64, u64>| {
+                // The first of the highest priority (every candidate was admitted).
+                let pick = |prio: &[u64]| {
                     let mut best = 0;
-                    for (i, c) in cands.iter().enumerate() {
-                        if prio.get(&c.seq) > prio.get(&cands[best].seq) {
-                            best = i;
+                    let mut top = prio[cands[0].slot as usize];
+                    for (i, c) in cands.iter().enumerate().skip(1) {
+                        let p = prio[c.slot as usize];
+                        if p > top {
+                            (best, top) = (i, p);
                         }
                     }
                     best
@@ -247,7 +264,7 @@ impl Chooser {
                     // The running invocation drops below everyone admitted so far.
                     self.next_low += 1;
                     let low = (self.change_points.len() as u64 + 1).saturating_sub(self.next_low);
-                    self.priorities.insert(cands[best].seq, low);
+                    self.priorities[cands[best].slot as usize] = low;
                     best = pick(&self.priorities);
                 }
                 best

@@ -6,6 +6,7 @@ use std::pin::Pin;
 use std::task::{Context, Poll, Waker};
 
 use super::policy::{Candidate, Chooser};
+use super::simt::Simt;
 use super::{ExecConfig, ExecMode, ScheduleConfig};
 use crate::hazard::{Detector, Hazard, HazardCounts, InvocationId};
 use crate::kernel::{FaultKind, Frag, FragInput, FragmentKernel, Invocation, PassEnv, StepKind};
@@ -263,6 +264,7 @@ pub(crate) fn shade<K: FragmentKernel>(
             targets,
             &mut outcome,
             cfg.reduce,
+            cfg.simt,
         ),
     }
     outcome
@@ -450,14 +452,17 @@ pub(crate) struct SchedScratch {
     chooser: Option<Chooser>,
     which: Vec<usize>,
     free: Vec<usize>,
+    /// Slots in flight, in admission order.
     inflight: Vec<usize>,
+    /// The runnable ones, in the same order (see `schedule_once`).
     cands: Vec<Candidate>,
-    cand_slots: Vec<usize>,
     pub record: Vec<u8>,
     conflicting: Vec<usize>,
     sub_cands: Vec<Candidate>,
     /// Interleave only conflicting invocations (ExecConfig::reduce).
     pub reduce: bool,
+    /// Lockstep forward progress (ExecConfig::simt).
+    pub simt: Option<Simt>,
 }
 
 impl SchedScratch {
@@ -469,12 +474,21 @@ impl SchedScratch {
             free: Vec::new(),
             inflight: Vec::new(),
             cands: Vec::new(),
-            cand_slots: Vec::new(),
             record: Vec::new(),
             conflicting: Vec::new(),
             sub_cands: Vec::new(),
             reduce: false,
+            simt: None,
         }
+    }
+}
+
+fn candidate(inv: &Invocation, slot: usize) -> Candidate {
+    let i = inv.input.get();
+    Candidate {
+        seq: i.seq,
+        depth: i.depth,
+        slot: slot as u32,
     }
 }
 
@@ -490,6 +504,7 @@ fn run_scheduled<K: FragmentKernel>(
     targets: usize,
     outcome: &mut ShadeOutcome,
     reduce: bool,
+    simt: u32,
 ) {
     let width = sc.window.max(1);
     let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
@@ -497,6 +512,7 @@ fn run_scheduled<K: FragmentKernel>(
     futs.resize_with(width, || None);
     let mut scratch = SchedScratch::new(env.width, env.height);
     scratch.reduce = reduce;
+    scratch.simt = (simt > 0).then(|| Simt::new(simt));
     let mut acc = Acc::default();
     schedule_once(
         &slots,
@@ -519,7 +535,7 @@ fn run_scheduled<K: FragmentKernel>(
         .detector
         .hazards(|b| memory.buffer_name(b).to_string());
     outcome.scheduled_hotspots = scratch.detector.hotspots(crate::stats::HOTSPOTS);
-    outcome.heat = std::mem::take(&mut scratch.detector.heat);
+    outcome.heat = scratch.detector.take_heat();
     outcome.schedule = sc.record.then(|| std::mem::take(&mut scratch.record));
     outcome.bytes_used = scratch.chooser.as_ref().map_or(0, |c| c.bytes_used());
 }
@@ -543,6 +559,10 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
 ) -> u64 {
     let width = slots.len();
     let reduce = scratch.reduce;
+    // Without interlock every in-flight invocation with a pending step is runnable, and
+    // stays so until its own next poll: the candidates are kept up to date as invocations
+    // are admitted, stepped and retired instead of being rebuilt before every step.
+    let simple = env.interlock.is_none() && scratch.simt.is_none();
     let SchedScratch {
         detector,
         chooser,
@@ -550,12 +570,15 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         free,
         inflight,
         cands,
-        cand_slots,
         record,
         conflicting,
         sub_cands,
+        simt,
         ..
     } = scratch;
+    if let Some(m) = simt.as_mut() {
+        m.reset(width);
+    }
     detector.reset(env.width, env.height);
     if let Some(base) = inputs.iter().map(|f| f.seq).min() {
         detector.set_base(base);
@@ -571,6 +594,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     free.clear();
     free.extend((0..width).rev());
     inflight.clear();
+    cands.clear();
     for f in futs.iter_mut() {
         *f = None;
     }
@@ -592,9 +616,16 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 &mut colors[i * targets..(i + 1) * targets],
             );
             detector.finish(seq, step);
-            chooser.retire(seq);
             if let Some(p) = inflight.iter().position(|&x| x == s) {
                 inflight.remove(p);
+            }
+            if simple {
+                if let Some(p) = cands.iter().position(|c| c.slot as usize == s) {
+                    cands.remove(p);
+                }
+            }
+            if let Some(m) = simt.as_mut() {
+                m.retired();
             }
             free.push(s);
         }};
@@ -607,40 +638,53 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             slots[s].reset(inputs[next]);
             which[s] = next;
             futs[s] = Some(make(&slots[s]));
-            detector.start(id_of(&inputs[next]), step);
-            chooser.admit(inputs[next].seq);
+            detector.start(id_of(&inputs[next]), step, s);
+            chooser.admit(s as u32);
+            if let Some(m) = simt.as_mut() {
+                m.admit(s);
+            }
             inflight.push(s);
             next += 1;
             // Run up to the first step.
             if let Polled::Done = poll_slot(&mut futs[s], &slots[s], &mut cx) {
                 retire!(s);
+            } else if simple && slots[s].pending.get().is_some() {
+                cands.push(candidate(&slots[s], s));
             }
         }
-        pass_deferred(&mut deferred, env);
+        if !deferred.is_empty() {
+            pass_deferred(&mut deferred, env);
+        }
         if inflight.is_empty() {
             break;
         }
-        cands.clear();
-        cand_slots.clear();
-        for &s in inflight.iter() {
-            let inv = &slots[s];
-            let runnable = match inv.pending.get() {
-                Some(StepKind::InterlockBegin) => Frag { inv, env }
-                    .claim()
-                    .is_none_or(|(l, m, c)| l.can_enter_claim(m, &c)),
-                Some(StepKind::PassTurn) => Frag { inv, env }
-                    .claim()
-                    .is_none_or(|(l, _, c)| l.is_turn_claim(&c)),
-                Some(_) => true,
-                None => false,
-            };
-            if runnable {
-                let i = inv.input.get();
-                cands.push(Candidate {
-                    seq: i.seq,
-                    depth: i.depth,
-                });
-                cand_slots.push(s);
+        if !simple {
+            cands.clear();
+            for &s in inflight.iter() {
+                let inv = &slots[s];
+                let runnable = match inv.pending.get() {
+                    Some(StepKind::InterlockBegin) => Frag { inv, env }
+                        .claim()
+                        .is_none_or(|(l, m, c)| l.can_enter_claim(m, &c)),
+                    Some(StepKind::PassTurn) => Frag { inv, env }
+                        .claim()
+                        .is_none_or(|(l, _, c)| l.is_turn_claim(&c)),
+                    Some(_) => true,
+                    None => false,
+                };
+                if runnable {
+                    cands.push(candidate(inv, s));
+                }
+            }
+            if let Some(m) = simt.as_mut() {
+                m.filter(cands, slots, which);
+                if m.deadlocked(cands) {
+                    for (s, fault) in m.deadlock_faults(cands, slots, which) {
+                        *slots[s].fault.borrow_mut() = Some(fault);
+                        retire!(s);
+                    }
+                    continue;
+                }
             }
         }
         if cands.is_empty() {
@@ -664,7 +708,8 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 (i.x, i.y)
             };
             conflicting.clear();
-            for (ci, &s) in cand_slots.iter().enumerate() {
+            for (ci, c) in cands.iter().enumerate() {
+                let s = c.slot as usize;
                 let hot = inflight.iter().any(|&o| {
                     o != s && ((key(s).is_some() && key(o) == key(s)) || pixel(o) == pixel(s))
                 });
@@ -685,20 +730,21 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         if sc.record {
             record.push(k as u8);
         }
-        let s = cand_slots[k];
+        let s = cands[k].slot as usize;
         let inv = &slots[s];
-        let input = inv.input.get();
         if let Some(StepKind::Mem {
             addr,
             op,
             record: rec,
         }) = inv.pending.get()
         {
+            let input = inv.input.get();
             let lock = match env.interlock {
                 Some(l) if inv.in_interlock.get() => Some(l.key(input.x, input.y)),
                 _ => None,
             };
             detector.access(
+                s,
                 input.seq,
                 addr,
                 op,
@@ -707,9 +753,16 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 rec.map(|r| (r.base, r.len, r.word)),
             );
         }
+        let taken = inv.pending.get();
+        if let Some(m) = simt.as_mut() {
+            m.before_step(k, s, inv, env.memory);
+        }
         inv.granted.set(true);
         step += 1;
         let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
+        if let Some(m) = simt.as_mut() {
+            m.after_step(taken, env.memory);
+        }
         if !done && inv.steps.get() > max_steps {
             *inv.fault.borrow_mut() = Some(FaultKind::Watchdog {
                 steps: inv.steps.get(),
@@ -717,6 +770,9 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             retire!(s);
         } else if done {
             retire!(s);
+        } else if simple && inv.pending.get().is_none() {
+            // Suspended on something other than a step: it will never be granted one.
+            cands.remove(k);
         }
     }
     step

@@ -543,7 +543,8 @@ pub(super) mod testing {
 
     /// Ordered, parallel(2), parallel(4) with small batches (fragments of one pixel on
     /// different threads), parallel(3) with lanes run to completion instead of in lockstep,
-    /// and scheduled under every policy with `seeds` seeds each, plus a wide window.
+    /// and scheduled under every policy with `seeds` seeds each, plus lockstep forward
+    /// progress (`simt`) and a wide window.
     pub fn executors(seeds: u64) -> Vec<(String, ExecConfig)> {
         let mut v = vec![
             ("ordered".to_string(), ExecConfig::ordered()),
@@ -571,6 +572,14 @@ pub(super) mod testing {
                 ));
             }
         }
+        // Lockstep forward progress: spinning lanes hold their warp-mates back.
+        v.push((
+            "scheduled random simt 32".to_string(),
+            ExecConfig {
+                simt: 32,
+                ..scheduled(Policy::Random, 0)
+            },
+        ));
         // A wide window: more fragments of one pixel in flight at once.
         v.push((
             "scheduled random window 256".to_string(),
