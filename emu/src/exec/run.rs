@@ -753,7 +753,6 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 rec.map(|r| (r.base, r.len, r.word)),
             );
         }
-        let taken = inv.pending.get();
         if let Some(m) = simt.as_mut() {
             m.before_step(k, s, inv, env.memory);
         }
@@ -761,7 +760,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         step += 1;
         let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
         if let Some(m) = simt.as_mut() {
-            m.after_step(taken, env.memory);
+            m.after_step(env.memory);
         }
         if !done && inv.steps.get() > max_steps {
             *inv.fault.borrow_mut() = Some(FaultKind::Watchdog {

@@ -44,8 +44,17 @@ pub(crate) struct Simt {
     spinning: Vec<bool>,
     /// Slots held by the rule at the last [`Simt::filter`].
     held: Vec<usize>,
-    /// The step being taken: whether it spins, and the word it touches with its old bits.
-    taking: Option<(usize, bool, Option<(Addr, u64)>)>,
+    /// The step being taken.
+    taking: Option<Taking>,
+}
+
+/// A step between [`Simt::before_step`] and [`Simt::after_step`].
+struct Taking {
+    slot: usize,
+    kind: Option<StepKind>,
+    spinning: bool,
+    /// The word it touches, with its bits before.
+    word: Option<(Addr, u64)>,
 }
 
 impl Simt {
@@ -194,16 +203,28 @@ impl Simt {
 
     /// Before candidate `k` (in `slot`) takes its step.
     pub fn before_step(&mut self, k: usize, slot: usize, inv: &Invocation, memory: &Memory) {
-        let word = match inv.pending.get() {
+        let kind = inv.pending.get();
+        let word = match kind {
             Some(StepKind::Mem { addr, .. }) => Some((addr, memory.bits(addr))),
             _ => None,
         };
-        self.taking = Some((slot, self.spinning[k], word));
+        self.taking = Some(Taking {
+            slot,
+            kind,
+            spinning: self.spinning[k],
+            word,
+        });
     }
 
-    /// After the step announced by [`Simt::before_step`] (`kind` is what it was).
-    pub fn after_step(&mut self, kind: Option<StepKind>, memory: &Memory) {
-        let Some((slot, spinning, word)) = self.taking.take() else {
+    /// After the step announced by [`Simt::before_step`].
+    pub fn after_step(&mut self, memory: &Memory) {
+        let Some(Taking {
+            slot,
+            kind,
+            spinning,
+            word,
+        }) = self.taking.take()
+        else {
             return;
         };
         let changed = match (kind, word) {

@@ -26,6 +26,11 @@
 //! so a holder in the spinner's own warp always progresses, and a holder in another warp
 //! runs on another thread, which the OS may deschedule: even the default cap runs out there
 //! (seen with 4 threads on 2 cores).
+//!
+//! On GPUs without independent thread scheduling (the scheduled executor's `simt` mode) it is
+//! the other way round: a holder cannot run its release while warp-mates spin on its lock,
+//! so with the cap every such warp-mate gives up, and without one (`spin_cap` u32::MAX) the
+//! warp deadlocks (a reported `SimtDeadlock` fault; `kernels/tests/simt.rs`).
 
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
