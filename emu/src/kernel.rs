@@ -113,7 +113,8 @@ pub enum FaultKind {
     /// Lockstep forward-progress mode (`ExecConfig::simt`): lanes of one warp share a
     /// program counter, the `spinning` ones kept looping, and the `held` ones (past the
     /// loop, possibly holding what the spinners wait for) could not run until they leave
-    /// it. Invocations by `seq`; the warp is its number in admission order.
+    /// it. Invocations by `seq`; the warp by its number in admission order (within the
+    /// wave of tiles being shaded).
     SimtDeadlock {
         warp: u64,
         spinning: Vec<u64>,
@@ -627,7 +628,8 @@ impl<'a> Frag<'a> {
     fn step(&self, kind: StepKind) -> Step<'a> {
         if self.env.mode == Mode::Scheduled {
             // Announced here, from registers: copying it out of the future's state in
-            // `Step::poll` stalled on store forwarding (a fifth of a step's time).
+            // `Step::poll` stalled on store forwarding (the hottest instruction of the
+            // access path in profiles of the scheduled executor).
             self.inv.pending.set(Some(kind));
         }
         Step {

@@ -13,8 +13,9 @@
 //!   that some lanes leave and others do not: the looping lanes run until all of them exit,
 //!   the others wait at the loop's exit. A lock holder held that way never releases.
 //! - **deadlock**: when lanes are held, every lane allowed to run is spinning, and each has
-//!   taken [`SPIN_LIMIT`] spinning steps in a row while no step anywhere changed memory, the
-//!   warps with held lanes are deadlocked: their spinning lanes end with
+//!   taken [`SPIN_LIMIT`] spinning steps in a row while no step anywhere changed memory or
+//!   interlock and no invocation was admitted or retired, the warps with held lanes are
+//!   deadlocked: their spinning lanes end with
 //!   [`FaultKind::SimtDeadlock`], which lets the held lanes run (the run goes on and reports,
 //!   where the hardware would hang).
 //!
