@@ -220,30 +220,13 @@ impl Device {
         let info = kernel.info();
         let interlock = info.interlock.map(|_| Interlock::new(width, height));
         let env = PassEnv {
-            memory: &self.memory,
-            tris: &[],
-            width,
-            height,
-            samples: 1,
-            interlock: interlock.as_ref(),
-            interlock_mode: info.interlock,
-            sample_tickets: &[],
-            mode: match exec.mode {
-                ExecMode::Scheduled(_) => Mode::Scheduled,
-                ExecMode::Parallel if exec.lockstep => Mode::Direct { yield_every: 1 },
-                _ => Mode::Direct { yield_every: 0 },
-            },
+            mode: mode_of(exec),
             max_steps: exec.max_steps,
             max_waits: exec.max_waits,
             spurious_cas: exec.spurious_cas_per_mille,
-            contention: None,
+            ..self.explicit_env(width, height, interlock.as_ref(), info.interlock)
         };
-        let mut inputs = inputs.to_vec();
-        for (i, f) in inputs.iter_mut().enumerate() {
-            f.seq = i as u64;
-            f.x = f.x.min(width.saturating_sub(1));
-            f.y = f.y.min(height.saturating_sub(1));
-        }
+        let inputs = explicit_inputs(inputs, width, height);
         let mut outs = vec![FragOut::default(); inputs.len()];
         let mut colors = vec![[0u32; 4]; inputs.len() * 8];
         let outcome = shade(kernel, &env, exec, &inputs, &mut outs, &mut colors, 8);
@@ -275,27 +258,38 @@ impl Device {
         let info = kernel.info();
         let interlock = info.interlock.map(|_| Interlock::new(width, height));
         let env = PassEnv {
+            mode: Mode::Scheduled,
+            max_steps,
+            max_waits: max_steps,
+            ..self.explicit_env(width, height, interlock.as_ref(), info.interlock)
+        };
+        let inputs = explicit_inputs(inputs, width, height);
+        crate::exec::explore(kernel, &env, schedule, max_steps, &inputs, seeds, each)
+    }
+
+    /// The environment of explicit invocations (no rasterizer, one sample), direct mode.
+    fn explicit_env<'a>(
+        &'a self,
+        width: u32,
+        height: u32,
+        interlock: Option<&'a Interlock>,
+        interlock_mode: Option<crate::interlock::InterlockMode>,
+    ) -> PassEnv<'a> {
+        PassEnv {
             memory: &self.memory,
             tris: &[],
             width,
             height,
             samples: 1,
-            interlock: interlock.as_ref(),
-            interlock_mode: info.interlock,
+            interlock,
+            interlock_mode,
             sample_tickets: &[],
-            mode: Mode::Scheduled,
-            max_steps,
-            max_waits: max_steps,
+            mode: Mode::Direct { yield_every: 0 },
+            max_steps: u64::MAX,
+            max_waits: u64::MAX,
             spurious_cas: 0,
             contention: None,
-        };
-        let mut inputs = inputs.to_vec();
-        for (i, f) in inputs.iter_mut().enumerate() {
-            f.seq = i as u64;
-            f.x = f.x.min(width.saturating_sub(1));
-            f.y = f.y.min(height.saturating_sub(1));
         }
-        crate::exec::explore(kernel, &env, schedule, max_steps, &inputs, seeds, each)
     }
 
     /// Runs a full-screen pass: one invocation per pixel (all samples covered, depth 0.5,
@@ -373,11 +367,7 @@ impl Device {
                 .collect();
             ContentionTable::new(&words)
         });
-        let mode = match exec.mode {
-            ExecMode::Scheduled(_) => Mode::Scheduled,
-            ExecMode::Parallel if exec.lockstep => Mode::Direct { yield_every: 1 },
-            _ => Mode::Direct { yield_every: 0 },
-        };
+        let mode = mode_of(exec);
         let tris: &[crate::raster::SetupTriangle] = match geo {
             Geometry::Binned { binned, .. } => &binned.tris,
             Geometry::FullScreen => &[],
@@ -661,6 +651,26 @@ impl Device {
             report.stats.merge(&s);
         }
     }
+}
+
+/// How an executor's invocations suspend.
+fn mode_of(exec: &ExecConfig) -> Mode {
+    match exec.mode {
+        ExecMode::Scheduled(_) => Mode::Scheduled,
+        ExecMode::Parallel if exec.lockstep => Mode::Direct { yield_every: 1 },
+        _ => Mode::Direct { yield_every: 0 },
+    }
+}
+
+/// Explicit fragments numbered in slice order and clamped to the render area.
+fn explicit_inputs(inputs: &[FragInput], width: u32, height: u32) -> Vec<FragInput> {
+    let mut inputs = inputs.to_vec();
+    for (i, f) in inputs.iter_mut().enumerate() {
+        f.seq = i as u64;
+        f.x = f.x.min(width.saturating_sub(1));
+        f.y = f.y.min(height.saturating_sub(1));
+    }
+    inputs
 }
 
 /// Folds one wave's shading outcome into the pass report.
