@@ -240,7 +240,10 @@ pub(crate) struct Invocation {
     pub steps: Cell<u64>,
     pub waits: Cell<u64>,
     pub since_yield: Cell<u32>,
-    pub fault: RefCell<Option<FaultKind>>,
+    /// Why the invocation ended early; `None` while it runs. Read through [`Self::faulted`]
+    /// (a flag, so the hot path never touches the `RefCell`).
+    fault: RefCell<Option<FaultKind>>,
+    has_fault: Cell<bool>,
     pub in_interlock: Cell<bool>,
     pub entered_interlock: Cell<bool>,
     pub ops: [Cell<u32>; 13],
@@ -260,6 +263,7 @@ impl Invocation {
             waits: Cell::new(0),
             since_yield: Cell::new(0),
             fault: RefCell::new(None),
+            has_fault: Cell::new(false),
             in_interlock: Cell::new(false),
             entered_interlock: Cell::new(false),
             ops: Default::default(),
@@ -293,21 +297,66 @@ impl Invocation {
         self.steps.set(0);
         self.waits.set(0);
         self.since_yield.set(0);
-        *self.fault.borrow_mut() = None;
+        if self.has_fault.get() {
+            self.take_fault();
+        }
         self.in_interlock.set(false);
         self.entered_interlock.set(false);
     }
 
+    /// [`Self::reset_keep_ops`] for the fused path of the direct executors, which uses no
+    /// interlock and no scheduler: the state only those touch (`granted`, `waits`, the
+    /// interlock flags) is never set there, so it is left alone; `pending` only marks a
+    /// suspended lockstep lane and is rewritten before it is read.
     #[inline]
-    pub fn faulted(&self) -> bool {
-        self.fault.borrow().is_some()
+    pub fn reset_direct(&self, input: FragInput) {
+        debug_assert!(!self.granted.get() && self.waits.get() == 0);
+        debug_assert!(!self.in_interlock.get() && !self.entered_interlock.get());
+        self.input.set(input);
+        let mut written = self.outputs_written.replace(0);
+        while written != 0 {
+            let i = written.trailing_zeros() as usize;
+            self.outputs[i].set([0; 4]);
+            written &= written - 1;
+        }
+        self.discarded.set(false);
+        self.depth_out.set(None);
+        self.steps.set(0);
+        self.since_yield.set(0);
+        if self.has_fault.get() {
+            self.take_fault();
+        }
     }
 
-    fn set_fault(&self, f: FaultKind) {
+    #[inline]
+    pub fn faulted(&self) -> bool {
+        self.has_fault.get()
+    }
+
+    /// Records why the invocation ends; the first fault wins.
+    #[cold]
+    pub fn set_fault(&self, f: FaultKind) {
         let mut slot = self.fault.borrow_mut();
         if slot.is_none() {
             *slot = Some(f);
+            self.has_fault.set(true);
         }
+    }
+
+    /// Records a fault that replaces any earlier one (the executor's verdict).
+    #[cold]
+    pub fn replace_fault(&self, f: FaultKind) {
+        *self.fault.borrow_mut() = Some(f);
+        self.has_fault.set(true);
+    }
+
+    /// Takes the fault out (the slot can then be reused).
+    #[inline]
+    pub fn take_fault(&self) -> Option<FaultKind> {
+        if !self.has_fault.replace(false) {
+            return None;
+        }
+        self.fault.borrow_mut().take()
     }
 }
 
@@ -343,15 +392,20 @@ impl Future for Step<'_> {
                     inv.set_fault(FaultKind::Watchdog { steps: steps - 1 });
                     return Poll::Pending;
                 }
-                if yield_every > 0 && !self.yielded {
-                    let n = inv.since_yield.get() + 1;
-                    if n >= yield_every {
-                        inv.since_yield.set(0);
-                        self.yielded = true;
-                        inv.pending.set(Some(self.kind));
-                        return Poll::Pending;
+                // Lockstep: `yield_every` steps per turn, as in `Access::poll`.
+                if yield_every > 0 {
+                    if self.yielded {
+                        inv.since_yield.set(1);
+                    } else {
+                        let n = inv.since_yield.get();
+                        if n >= yield_every {
+                            inv.since_yield.set(0);
+                            self.yielded = true;
+                            inv.pending.set(Some(self.kind));
+                            return Poll::Pending;
+                        }
+                        inv.since_yield.set(n + 1);
                     }
-                    inv.since_yield.set(n);
                 }
                 inv.pending.set(None);
                 inv.steps.set(steps);
@@ -414,63 +468,84 @@ pub struct Access<'a, T: Word> {
     index: u32,
     op: MemOp,
     record: Option<RecordSpan>,
-    /// The scheduling point, once the access has had to suspend.
-    step: Option<Step<'a>>,
+    /// Scheduled executor: the access has announced its step (at its first poll).
+    stepped: bool,
+    /// Direct lockstep mode: the access has suspended once and runs when polled again.
+    resumed: bool,
+    /// Direct modes: the outcome, once performed (`Pending`: the invocation faulted).
+    done: Option<Poll<T>>,
 }
 
 impl<T: Word> Future for Access<'_, T> {
     type Output = T;
-    #[inline]
+    #[inline(always)]
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<T> {
         // `Access` is `Unpin` (references and plain data only).
         let this = self.get_mut();
-        let frag = this.frag;
+        if let Some(done) = this.done {
+            // Performed when it was made (see `Frag::access`), or faulted.
+            return done;
+        }
+        let Mode::Direct { yield_every } = this.frag.env.mode else {
+            return this.poll_scheduled(cx);
+        };
+        // Lockstep warps: an invocation makes `yield_every` accesses per turn. An access
+        // made after those is run lazily: it suspends at its first poll (in one turn every
+        // lane makes its next access, in lane order) and runs at the next.
+        let inv = this.frag.inv;
+        if yield_every > 0 && !this.resumed {
+            inv.since_yield.set(0);
+            this.resumed = true;
+            inv.pending.set(Some(StepKind::Mem {
+                addr: Addr::new(this.buf.id, this.index),
+                op: this.op.kind(),
+                record: this.record,
+            }));
+            return Poll::Pending;
+        }
+        inv.since_yield.set(1);
+        inv.pending.set(None);
+        let done = this.frag.perform::<T>(this.buf, this.index, this.op);
+        this.done = Some(done);
+        done
+    }
+}
+
+impl<T: Word> Access<'_, T> {
+    /// The scheduled executor's path: suspend at a step until the scheduler grants it.
+    #[inline(never)]
+    fn poll_scheduled(&mut self, cx: &mut Context<'_>) -> Poll<T> {
+        let frag = self.frag;
         let (inv, env) = (frag.inv, frag.env);
-        let Some(addr) = frag.addr(this.buf, this.index) else {
-            // Faulted: never completes; the executor drops the invocation.
+        let Some(addr) = frag.addr(self.buf, self.index) else {
             return Poll::Pending;
         };
-        let kind = this.op.kind();
-        if this.step.is_none() && env.mode == (Mode::Direct { yield_every: 0 }) {
-            // Nothing ever suspends here: count the step for the watchdog without a step
-            // future (the hot path of the ordered and parallel executors).
-            let steps = inv.steps.get() + 1;
-            if steps > env.max_steps || inv.faulted() {
-                inv.set_fault(FaultKind::Watchdog { steps: steps - 1 });
-                return Poll::Pending;
+        let kind = self.op.kind();
+        let record = self.record;
+        let step_kind = StepKind::Mem {
+            addr,
+            op: kind,
+            record,
+        };
+        let mut step = if self.stepped {
+            // The step was announced at the first poll; its future holds no other state
+            // in scheduled mode, so it is rebuilt rather than kept in the access.
+            Step {
+                frag,
+                kind: step_kind,
+                yielded: false,
             }
-            inv.steps.set(steps);
         } else {
-            let record = this.record;
-            let step = this.step.get_or_insert_with(|| {
-                frag.step(StepKind::Mem {
-                    addr,
-                    op: kind,
-                    record,
-                })
-            });
-            if Pin::new(step).poll(cx).is_pending() {
-                return Poll::Pending;
-            }
+            self.stepped = true;
+            frag.step(step_kind)
+        };
+        if Pin::new(&mut step).poll(cx).is_pending() {
+            return Poll::Pending;
         }
         let k = kind as usize;
         inv.ops[k].set(inv.ops[k].get() + 1);
-        let ordering = if kind.is_plain() {
-            crate::sync::Ordering::Relaxed
-        } else {
-            crate::sync::Ordering::AcqRel
-        };
-        let bits = if env.mode == Mode::Scheduled {
-            // One thread runs every invocation: no locked instruction needed.
-            env.memory.apply_exclusive::<T>(addr, this.op)
-        } else if let Some(table) = env.contention {
-            let guard = table.enter(addr);
-            let bits = env.memory.apply::<T>(addr, this.op, ordering);
-            drop(guard);
-            bits
-        } else {
-            env.memory.apply::<T>(addr, this.op, ordering)
-        };
+        // One thread runs every invocation: no locked instruction needed.
+        let bits = env.memory.apply_exclusive::<T>(addr, self.op);
         Poll::Ready(T::from_bits(bits))
     }
 }
@@ -644,18 +719,30 @@ impl<'a> Frag<'a> {
         if index < buf.len {
             Some(Addr::new(buf.id, index))
         } else {
-            self.inv.set_fault(FaultKind::OutOfBounds {
-                buffer: self.env.memory.buffer_name(buf.id).to_string(),
-                index: index as u64,
-                len: buf.len,
-            });
+            self.out_of_bounds(buf, index);
             None
         }
     }
 
+    #[cold]
+    #[inline(never)]
+    fn out_of_bounds<T: Word>(&self, buf: Buf<T>, index: u32) {
+        self.inv.set_fault(FaultKind::OutOfBounds {
+            buffer: self.env.memory.buffer_name(buf.id).to_string(),
+            index: index as u64,
+            len: buf.len,
+        });
+    }
+
     /// The future of one access: bounds are checked when it is first polled (an
     /// out-of-range access faults and ends the invocation).
-    #[inline]
+    ///
+    /// Under the direct executors (`ordered`, `parallel`) the access is performed here, when
+    /// it is made, unless a lockstep lane has used its turn: here the operation is a
+    /// constant of the kernel's code (inside the future's `poll` it would be read back from
+    /// the kernel's state machine and dispatched at run time). Awaited at once, as the
+    /// kernel API asks, this is the same as performing it at its first poll.
+    #[inline(always)]
     fn access<T: Word>(
         &self,
         buf: Buf<T>,
@@ -663,79 +750,130 @@ impl<'a> Frag<'a> {
         op: MemOp,
         record: Option<RecordSpan>,
     ) -> Access<'a, T> {
+        let done = match self.env.mode {
+            Mode::Direct { yield_every } => {
+                let n = self.inv.since_yield.get();
+                if yield_every == 0 || n < yield_every {
+                    self.inv.since_yield.set(n + 1);
+                    Some(self.perform::<T>(buf, index, op))
+                } else {
+                    None
+                }
+            }
+            Mode::Scheduled => None,
+        };
         Access {
             frag: *self,
             buf,
             index,
             op,
             record,
-            step: None,
+            stepped: false,
+            resumed: false,
+            done,
         }
     }
 
+    /// Performs one access under a direct executor: a bounds check, a step count for the
+    /// watchdog, the operation counter and the operation itself. `Pending` when the
+    /// invocation faults (the executor then drops it).
+    #[inline(always)]
+    fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
+        let (inv, env) = (self.inv, self.env);
+        if index >= buf.len {
+            self.out_of_bounds(buf, index);
+            return Poll::Pending;
+        }
+        let steps = inv.steps.get() + 1;
+        if steps > env.max_steps || inv.faulted() {
+            inv.set_fault(FaultKind::Watchdog { steps: steps - 1 });
+            return Poll::Pending;
+        }
+        inv.steps.set(steps);
+        let kind = op.kind();
+        let k = kind as usize;
+        inv.ops[k].set(inv.ops[k].get() + 1);
+        let addr = Addr::new(buf.id, index);
+        let ordering = if kind.is_plain() {
+            crate::sync::Ordering::Relaxed
+        } else {
+            crate::sync::Ordering::AcqRel
+        };
+        let bits = match env.contention {
+            None => env.memory.apply::<T>(addr, op, ordering),
+            Some(table) => {
+                let guard = table.enter(addr);
+                let bits = env.memory.apply::<T>(addr, op, ordering);
+                drop(guard);
+                bits
+            }
+        };
+        Poll::Ready(T::from_bits(bits))
+    }
+
     /// Plain load (no atomicity, no ordering: as a GLSL load from a buffer).
-    #[inline]
+    #[inline(always)]
     pub fn load<T: Word>(&self, buf: Buf<T>, index: u32) -> Access<'a, T> {
         self.access(buf, index, MemOp::Load, None)
     }
     /// Plain store.
-    #[inline]
+    #[inline(always)]
     pub fn store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Store<'a, T> {
         Store(self.access(buf, index, MemOp::Store(value.to_bits()), None))
     }
     /// Atomic load (acquire).
-    #[inline]
+    #[inline(always)]
     pub fn atomic_load<T: Word>(&self, buf: Buf<T>, index: u32) -> Access<'a, T> {
         self.access(buf, index, MemOp::AtomicLoad, None)
     }
     /// Atomic store (release).
-    #[inline]
+    #[inline(always)]
     pub fn atomic_store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Store<'a, T> {
         Store(self.access(buf, index, MemOp::AtomicStore(value.to_bits()), None))
     }
     /// Atomic add; returns the previous value (wrapping for integers).
-    #[inline]
+    #[inline(always)]
     pub fn atomic_add<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Add(value.to_bits()), None)
     }
     /// Atomic subtract; returns the previous value.
-    #[inline]
+    #[inline(always)]
     pub fn atomic_sub<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Sub(value.to_bits()), None)
     }
     /// Atomic minimum (as `T`: signed for i32, float order for f32); returns the previous value.
-    #[inline]
+    #[inline(always)]
     pub fn atomic_min<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Min(value.to_bits()), None)
     }
     /// Atomic maximum; returns the previous value.
-    #[inline]
+    #[inline(always)]
     pub fn atomic_max<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Max(value.to_bits()), None)
     }
     /// Atomic bitwise and; returns the previous value.
-    #[inline]
+    #[inline(always)]
     pub fn atomic_and<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::And(value.to_bits()), None)
     }
     /// Atomic bitwise or; returns the previous value.
-    #[inline]
+    #[inline(always)]
     pub fn atomic_or<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Or(value.to_bits()), None)
     }
     /// Atomic bitwise xor; returns the previous value.
-    #[inline]
+    #[inline(always)]
     pub fn atomic_xor<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Xor(value.to_bits()), None)
     }
     /// Atomic exchange; returns the previous value.
-    #[inline]
+    #[inline(always)]
     pub fn atomic_exchange<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
         self.access(buf, index, MemOp::Exchange(value.to_bits()), None)
     }
     /// Atomic compare-exchange: `Ok(previous)` if the word held `expected` and now holds
     /// `new`, `Err(current)` otherwise (bitwise comparison, as GLSL's `atomicCompSwap`).
-    #[inline]
+    #[inline(always)]
     pub fn atomic_compare_exchange<T: Word>(
         &self,
         buf: Buf<T>,

@@ -17,7 +17,9 @@ pub const MAX_BUFFER_WORDS: u64 = 1 << 31;
 pub const MAX_TOTAL_BYTES: u64 = 16 << 30;
 
 /// A word type a buffer can hold.
-pub trait Word: Copy + PartialEq + fmt::Debug + Send + Sync + 'static + sealed::Sealed {
+pub trait Word:
+    Copy + Unpin + PartialEq + fmt::Debug + Send + Sync + 'static + sealed::Sealed
+{
     /// True for 64-bit words.
     const WIDE: bool;
     const NAME: &'static str;
@@ -468,9 +470,22 @@ impl Memory {
     /// the loaded one) as raw bits. `ordering` is the memory order of the real atomic.
     #[inline(always)]
     pub(crate) fn apply<T: Word>(&self, addr: Addr, op: MemOp, ordering: Ordering) -> u64 {
-        self.word(addr.buffer(), addr.index())
-            .apply::<T>(op, ordering)
+        // A `Buf<T>` names a buffer of `T`-sized words, so only one arm is reachable for a
+        // given `T`: dispatching on `T::WIDE` keeps the other out of every kernel's code.
+        let (b, i) = (addr.buffer() as usize, addr.index() as usize);
+        match (&self.buffers[b].words, T::WIDE) {
+            (Words::W32(w), false) => apply32::<T>(&w[i], op, ordering) as u64,
+            (Words::W64(w), true) => apply64(&w[i], op, ordering),
+            _ => foreign_handle(),
+        }
     }
+}
+
+/// A `Buf<T>` whose word size is not its buffer's: a handle made by another device's memory.
+#[cold]
+#[inline(never)]
+fn foreign_handle() -> ! {
+    panic!("a buffer handle used with a memory that did not create it")
 }
 
 /// One operation with its operands (raw bits).
@@ -529,14 +544,6 @@ impl WordRef<'_> {
         match self {
             WordRef::W32(a) => a.store(v as u32, Ordering::Relaxed),
             WordRef::W64(a) => a.store(v, Ordering::Relaxed),
-        }
-    }
-
-    #[inline(always)]
-    fn apply<T: Word>(&self, op: MemOp, ord: Ordering) -> u64 {
-        match self {
-            WordRef::W32(a) => apply32::<T>(a, op, ord) as u64,
-            WordRef::W64(a) => apply64(a, op, ord),
         }
     }
 }

@@ -108,10 +108,7 @@ pub(crate) fn record_panic(inv: &Invocation, payload: &(dyn std::any::Any + Send
         .map(|s| s.to_string())
         .or_else(|| payload.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "panic with a non-string payload".into());
-    let mut f = inv.fault.borrow_mut();
-    if f.is_none() {
-        *f = Some(FaultKind::Panic { message });
-    }
+    inv.set_fault(FaultKind::Panic { message });
 }
 
 /// A faulted invocation is dropped mid-kernel: release what it held of the interlock, and
@@ -183,8 +180,7 @@ impl Acc {
     /// Counts a finished invocation (steps, waits, discard, fault) and takes its
     /// fault; returns whether it faulted. Its outputs stay in the slot.
     pub(crate) fn count(&mut self, inv: &Invocation) -> bool {
-        let input = inv.input.get();
-        let fault = inv.fault.borrow_mut().take();
+        let fault = inv.take_fault();
         let faulted = fault.is_some();
         let s = &mut self.stats;
         s.shaded += 1;
@@ -199,12 +195,45 @@ impl Acc {
             s.faulted += 1;
             if self.faults.len() < KEEP_FAULTS {
                 self.faults.push(Fault {
-                    invocation: id_of(&input),
+                    invocation: id_of(&inv.input.get()),
                     kind,
                 });
             }
         }
         faulted
+    }
+
+    /// Counts a warp of finished invocations that nothing follows but counting (fused passes
+    /// with no late tests and no targets): [`Self::count`] for each, in one loop. Returns
+    /// the samples that passed (covered samples of the invocations that neither discarded
+    /// nor faulted).
+    pub(crate) fn count_passing(&mut self, slots: &[Invocation]) -> u64 {
+        let mut passed = 0u64;
+        let (mut shaded, mut discarded, mut steps, mut waits) = (0u64, 0u64, 0u64, 0u64);
+        let mut max_steps = self.stats.max_steps_per_invocation;
+        for inv in slots {
+            if inv.faulted() {
+                self.count(inv);
+                continue;
+            }
+            let d = inv.discarded.get();
+            let s = inv.steps.get();
+            shaded += 1;
+            discarded += u64::from(d);
+            steps += s;
+            waits += inv.waits.get();
+            max_steps = max_steps.max(s);
+            if !d {
+                passed += u64::from(inv.input.get().coverage.count_ones());
+            }
+        }
+        let st = &mut self.stats;
+        st.shaded += shaded;
+        st.discarded += discarded;
+        st.steps += steps;
+        st.interlock_waits += waits;
+        st.max_steps_per_invocation = st.max_steps_per_invocation.max(max_steps);
+        passed
     }
 
     /// Adds operation counters kept across invocations (see [`Invocation::reset_keep_ops`]).
@@ -680,7 +709,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 m.filter(cands, slots, which);
                 if m.deadlocked(cands) {
                     for (s, fault) in m.deadlock_faults(cands, slots, which) {
-                        *slots[s].fault.borrow_mut() = Some(fault);
+                        slots[s].replace_fault(fault);
                         retire!(s);
                     }
                     continue;
@@ -692,7 +721,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             while let Some(&s) = inflight.first() {
                 let inv = &slots[s];
                 let w = inv.waits.get() + 1;
-                *inv.fault.borrow_mut() = Some(FaultKind::Deadlock { waits: w });
+                inv.replace_fault(FaultKind::Deadlock { waits: w });
                 retire!(s);
             }
             continue;
@@ -763,7 +792,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             m.after_step(env.memory);
         }
         if !done && inv.steps.get() > max_steps {
-            *inv.fault.borrow_mut() = Some(FaultKind::Watchdog {
+            inv.replace_fault(FaultKind::Watchdog {
                 steps: inv.steps.get(),
             });
             retire!(s);

@@ -83,7 +83,7 @@ pub fn run_on_threads<K: FragmentKernel + Send + 'static>(
                         thread::yield_now();
                     }
                 }
-                let fault = inv.fault.borrow_mut().take();
+                let fault = inv.take_fault();
                 ThreadOutcome {
                     input,
                     outputs: std::array::from_fn(|i| inv.outputs[i].get()),

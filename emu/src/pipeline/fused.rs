@@ -110,6 +110,8 @@ impl TileAccess<'_> {
 }
 
 /// Runs a fused pass over `tiles` (all of the framebuffer's tiles, in tile order).
+// Never inlined: one call per pass, and profiles can then tell the pass apart.
+#[inline(never)]
 pub(crate) fn run_fused<K: FragmentKernel>(
     kernel: &K,
     env: &PassEnv<'_>,
@@ -198,8 +200,8 @@ struct Worker<'a, K> {
     env: &'a PassEnv<'a>,
     pass: &'a FusedPass<'a>,
     slots: Vec<Invocation>,
-    /// Fragments gathered for the next warp (API order).
-    warp: Vec<FragInput>,
+    /// Slots `..filled` hold the fragments gathered for the next warp (API order).
+    filled: usize,
     acc: Acc,
     counts: FusedCounts,
     /// Sample positions (pixel-relative) for per-sample depths.
@@ -217,7 +219,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             env,
             pass,
             slots: (0..lanes).map(|_| Invocation::new()).collect(),
-            warp: Vec::with_capacity(lanes),
+            filled: 0,
             acc: Acc::default(),
             counts: FusedCounts::default(),
             positions: SampleCount::from_count(samples)
@@ -249,9 +251,6 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let per_sample_depth = self.env.samples > 1 && !pass.single;
         let (x0, y0) = (tile.tile().x0, tile.tile().y0);
         let lanes = self.slots.len();
-        // Without lockstep, lanes run one after the other: shade each fragment as it is
-        // rasterized (no warp to gather).
-        let inline = lanes == 1 || !pass.lockstep;
         binned.raster_segment(seg, |f| {
             let cov = if pass.single && f.coverage & 1 != 0 {
                 self.all_samples
@@ -297,89 +296,40 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 depth,
                 ticket: 0,
             };
-            if inline {
-                let slot = &self.slots[0];
-                slot.reset_keep_ops(input);
-                run_to_end(self.kernel, slot, self.env);
-                late(
-                    pass,
-                    self.env,
-                    self.positions,
-                    &mut self.acc,
-                    &mut self.counts,
-                    slot,
-                    &mut tile,
-                );
-            } else {
-                self.warp.push(input);
-                if self.warp.len() == lanes {
-                    self.flush(&mut tile);
-                }
+            self.slots[self.filled].reset_direct(input);
+            self.filled += 1;
+            if self.filled == lanes {
+                self.flush(&mut tile);
             }
         });
         self.flush(&mut tile);
         tile
     }
 
-    /// Shades the gathered warp with its lanes in lockstep (every lane takes one step per
-    /// turn), then runs the late stage in API order.
+    /// Shades the gathered warp, then runs the late stage in API order.
     fn flush(&mut self, tile: &mut TileAccess<'_>) {
-        let n = self.warp.len();
+        let n = self.filled;
         if n == 0 {
             return;
         }
-        let env = self.env;
-        let mut cx = Context::from_waker(Waker::noop());
-        for (slot, input) in self.slots.iter().zip(&self.warp) {
-            slot.reset_keep_ops(*input);
-        }
-        // Interlock is not used on this path, so the kernel is the whole invocation.
-        let mut futs: Vec<Option<_>> = self.slots[..n]
-            .iter()
-            .map(|slot| Some(self.kernel.shade(Frag { inv: slot, env })))
-            .collect();
+        self.filled = 0;
         let slots = &self.slots[..n];
-        let mut left = n;
-        // Next lane to poll in the current round. One `catch_unwind` covers many polls; a
-        // panic ends the lane being polled (`lane - 1`) and the rounds go on after it.
-        let mut lane = 0;
-        while left > 0 {
-            let rounds = catch_unwind(AssertUnwindSafe(|| loop {
-                while lane < n {
-                    let i = lane;
-                    lane += 1;
-                    let Some(fut) = futs[i].as_mut() else {
-                        continue;
-                    };
-                    // SAFETY: the futures live in `futs`, which is not resized or moved
-                    // until every one of them is dropped in place (`= None`), so a future
-                    // is never moved after this pin.
-                    let pinned = unsafe { Pin::new_unchecked(fut) };
-                    let done = match pinned.poll(&mut cx) {
-                        Poll::Ready(()) => true,
-                        Poll::Pending => slots[i].faulted(),
-                    };
-                    if done {
-                        futs[i] = None;
-                        left -= 1;
-                    }
-                }
-                if left == 0 {
-                    break;
-                }
-                lane = 0;
-            }));
-            if let Err(payload) = rounds {
-                let i = lane - 1;
-                record_panic(&slots[i], payload.as_ref());
-                futs[i] = None;
-                left -= 1;
-            }
+        if self.pass.lockstep && n > 1 {
+            shade_lockstep(self.kernel, slots, self.env);
+        } else {
+            shade_in_turn(self.kernel, slots, self.env);
         }
-        for slot in &self.slots[..n] {
+        let state = self.pass.state;
+        let late_tests = !self.pass.early && (state.depth.test || state.stencil.enabled);
+        if !late_tests && self.pass.targets == 0 {
+            // Nothing to test or write (capture and counting passes): count them.
+            self.counts.samples_passed += self.acc.count_passing(slots);
+            return;
+        }
+        for slot in slots {
             late(
                 self.pass,
-                env,
+                self.env,
                 self.positions,
                 &mut self.acc,
                 &mut self.counts,
@@ -387,23 +337,77 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 tile,
             );
         }
-        self.warp.clear();
     }
 }
 
-/// Runs one invocation to its end on this thread (direct mode: an access completes at
-/// once; a spin loop runs until it gets in or the watchdog ends it). A panic becomes the
-/// invocation's fault.
-#[inline]
-fn run_to_end<K: FragmentKernel>(kernel: &K, inv: &Invocation, env: &PassEnv<'_>) {
-    // Interlock is not used on this path, so the kernel is the whole invocation.
-    let mut fut = std::pin::pin!(kernel.shade(Frag { inv, env }));
+/// Shades `slots` with their lanes in lockstep: every lane takes one step per turn (see
+/// `Access::poll`). A panic ends the lane that raised it and the turns go on.
+fn shade_lockstep<K: FragmentKernel>(kernel: &K, slots: &[Invocation], env: &PassEnv<'_>) {
+    let n = slots.len();
     let mut cx = Context::from_waker(Waker::noop());
-    let r = catch_unwind(AssertUnwindSafe(|| {
-        while fut.as_mut().poll(&mut cx).is_pending() && !inv.faulted() {}
-    }));
-    if let Err(payload) = r {
-        record_panic(inv, payload.as_ref());
+    // Interlock is not used on this path, so the kernel is the whole invocation.
+    let mut futs: Vec<Option<_>> = slots
+        .iter()
+        .map(|slot| Some(kernel.shade(Frag { inv: slot, env })))
+        .collect();
+    let mut left = n;
+    // Next lane to poll in the current round. One `catch_unwind` covers many polls; a
+    // panic ends the lane being polled (`lane - 1`) and the rounds go on after it.
+    let mut lane = 0;
+    while left > 0 {
+        let rounds = catch_unwind(AssertUnwindSafe(|| loop {
+            while lane < n {
+                let i = lane;
+                lane += 1;
+                let Some(fut) = futs[i].as_mut() else {
+                    continue;
+                };
+                // SAFETY: the futures live in `futs`, which is not resized or moved until
+                // every one of them is dropped in place (`= None`), so a future is never
+                // moved after this pin.
+                let pinned = unsafe { Pin::new_unchecked(fut) };
+                let done = match pinned.poll(&mut cx) {
+                    Poll::Ready(()) => true,
+                    Poll::Pending => slots[i].faulted(),
+                };
+                if done {
+                    futs[i] = None;
+                    left -= 1;
+                }
+            }
+            if left == 0 {
+                break;
+            }
+            lane = 0;
+        }));
+        if let Err(payload) = rounds {
+            let i = lane - 1;
+            record_panic(&slots[i], payload.as_ref());
+            futs[i] = None;
+            left -= 1;
+        }
+    }
+}
+
+/// Shades `slots` one after the other, each to its end (direct mode: an access completes
+/// at once; a spin loop runs until it gets in or the watchdog ends it). One `catch_unwind`
+/// covers the whole warp; a panic ends the invocation that raised it.
+fn shade_in_turn<K: FragmentKernel>(kernel: &K, slots: &[Invocation], env: &PassEnv<'_>) {
+    let mut cx = Context::from_waker(Waker::noop());
+    let mut next = 0;
+    while next < slots.len() {
+        let r = catch_unwind(AssertUnwindSafe(|| {
+            while next < slots.len() {
+                let inv = &slots[next];
+                next += 1;
+                // Interlock is not used on this path, so the kernel is the whole invocation.
+                let mut fut = std::pin::pin!(kernel.shade(Frag { inv, env }));
+                while fut.as_mut().poll(&mut cx).is_pending() && !inv.faulted() {}
+            }
+        }));
+        if let Err(payload) = r {
+            record_panic(&slots[next - 1], payload.as_ref());
+        }
     }
 }
 
