@@ -169,6 +169,8 @@ pub enum MemoryError {
     },
     #[error("buffer #{0} does not exist on this device")]
     NoSuchBuffer(u32),
+    #[error("buffer `{0}` was moved out (Memory::take)")]
+    Taken(String),
     #[error("write of {len} words at {offset} into buffer `{name}` of {words} words")]
     OutOfRange {
         name: String,
@@ -302,9 +304,9 @@ impl Memory {
             });
         }
         let words = if T::WIDE {
-            Words::W64((0..len).map(|_| AtomicU64::new(0)).collect())
+            Words::W64(zeroed_words(len as usize))
         } else {
-            Words::W32((0..len).map(|_| AtomicU32::new(0)).collect())
+            Words::W32(zeroed_words(len as usize))
         };
         self.bytes += bytes;
         let id = self.buffers.len() as u32;
@@ -367,6 +369,13 @@ impl Memory {
                 expected: T::NAME,
             });
         }
+        let words = match &b.words {
+            Words::W32(w) => w.len(),
+            Words::W64(w) => w.len(),
+        };
+        if words < buf.len as usize {
+            return Err(MemoryError::Taken(b.name.clone()));
+        }
         Ok(b)
     }
 
@@ -383,6 +392,38 @@ impl Memory {
                 .map(|a| T::from_bits(a.load(Ordering::Relaxed)))
                 .collect(),
         })
+    }
+
+    /// Moves a buffer's contents out (host side, after the passes that use it): the same
+    /// values as [`Memory::read`] without a copy. The buffer is left empty, so a later
+    /// access to it is out of range; the storage it held still counts in [`Memory::bytes`].
+    pub fn take<T: Word>(&mut self, buf: Buf<T>) -> Result<Vec<T>, MemoryError> {
+        self.check(buf)?;
+        #[cfg(loom)]
+        let values = {
+            let v = self.read(buf)?;
+            self.buffers[buf.id as usize].words = Words::W32(Box::new([]));
+            v
+        };
+        #[cfg(not(loom))]
+        let values = match std::mem::replace(
+            &mut self.buffers[buf.id as usize].words,
+            Words::W32(Box::new([])),
+        ) {
+            // Both collects reuse the allocation (same size and alignment) and compile to
+            // plain loads: no atomics, no second buffer.
+            Words::W32(w) => w
+                .into_vec()
+                .into_iter()
+                .map(|a| T::from_bits(a.into_inner() as u64))
+                .collect(),
+            Words::W64(w) => w
+                .into_vec()
+                .into_iter()
+                .map(|a| T::from_bits(a.into_inner()))
+                .collect(),
+        };
+        Ok(values)
     }
 
     /// One word (host side, no allocation); `None` out of range or on a type mismatch.
@@ -478,6 +519,38 @@ impl Memory {
             (Words::W64(w), true) => apply64(&w[i], op, ordering),
             _ => foreign_handle(),
         }
+    }
+}
+
+/// `len` zero words. Zero-filled allocation: large buffers come as fresh zero pages from the
+/// OS (paid for at first touch, and only for the pages touched) instead of being written.
+#[cfg(not(loom))]
+fn zeroed_words<A: ZeroIsValid>(len: usize) -> Box<[A]> {
+    // SAFETY: `A` is an atomic integer (`ZeroIsValid` is implemented for `AtomicU32` and
+    // `AtomicU64` only), for which all-zero bytes are a valid value (zero).
+    unsafe { Box::<[A]>::new_zeroed_slice(len).assume_init() }
+}
+
+#[cfg(loom)]
+fn zeroed_words<A: ZeroIsValid>(len: usize) -> Box<[A]> {
+    (0..len).map(|_| A::zero()).collect()
+}
+
+/// Atomic words whose all-zero bit pattern is the value zero.
+trait ZeroIsValid: Sized {
+    #[cfg(loom)]
+    fn zero() -> Self;
+}
+impl ZeroIsValid for AtomicU32 {
+    #[cfg(loom)]
+    fn zero() -> Self {
+        AtomicU32::new(0)
+    }
+}
+impl ZeroIsValid for AtomicU64 {
+    #[cfg(loom)]
+    fn zero() -> Self {
+        AtomicU64::new(0)
     }
 }
 
@@ -720,6 +793,27 @@ fn apply64(a: &AtomicU64, op: MemOp, ord: Ordering) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `take` moves out what `read` copies, for both word widths, and leaves the buffer
+    /// empty; new buffers start at zero.
+    #[test]
+    fn take_moves_out_what_read_copies() {
+        let mut m = Memory::default();
+        let a = m.create::<f32>("a", 1000).unwrap();
+        let b = m.create::<u64>("b", 3).unwrap();
+        assert!(m.read(a).unwrap().iter().all(|&v| v == 0.0));
+        for i in 0..1000 {
+            m.set(a, i, i as f32 * 0.5 - 7.0).unwrap();
+        }
+        m.set(b, 2, u64::MAX - 1).unwrap();
+        let (ra, rb) = (m.read(a).unwrap(), m.read(b).unwrap());
+        assert_eq!(m.take(a).unwrap(), ra);
+        assert_eq!(m.take(b).unwrap(), rb);
+        assert_eq!(rb, vec![0, 0, u64::MAX - 1]);
+        assert_eq!(m.read(a), Err(MemoryError::Taken("a".into())));
+        assert_eq!(m.get(a, 0), None);
+        assert!(m.take(a).is_err());
+    }
 
     /// Every operation on every word type returns the same value and leaves the same word
     /// through the locked path and the exclusive (scheduled executor) path.

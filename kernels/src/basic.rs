@@ -75,7 +75,7 @@ fn run_count(frame: &Frame<'_>, exec: &ExecConfig, plain: bool) -> Result<AlgoRe
             exec,
         )?
     };
-    let values = device.memory.read(counts)?;
+    let values = device.memory.take(counts)?;
     let total: u64 = values.iter().map(|&c| c as u64).sum();
     let generated = report.stats.fragments_generated;
     let checks = vec![Check::new(

@@ -251,55 +251,62 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let per_sample_depth = self.env.samples > 1 && !pass.single;
         let (x0, y0) = (tile.tile().x0, tile.tile().y0);
         let lanes = self.slots.len();
-        binned.raster_segment(seg, |f| {
-            let cov = if pass.single && f.coverage & 1 != 0 {
+        binned.raster_segment_spans(seg, |span| {
+            let cov = if pass.single && span.coverage & 1 != 0 {
                 self.all_samples
             } else {
-                f.coverage
+                span.coverage
             };
-            let mut cov = cov & sample_mask;
+            let cov = cov & sample_mask;
             if cov == 0 {
                 return;
             }
-            self.counts.generated += 1;
-            let t = &binned.tris[f.tri as usize];
-            let (fx, fy) = (f.x as f32, f.y as f32);
-            // Interpolated here only for the tests (`Frag::depth` does it on demand).
-            let mut depth = f32::NAN;
-            if tests {
-                depth = t.depth_at(fx + 0.5, fy + 0.5);
-                let mut depths = [depth; 8];
-                if per_sample_depth {
-                    for (s, p) in self.positions.iter().enumerate() {
-                        depths[s] = t.depth_at(fx + p.0, fy + p.1);
+            // What the pixels of a run share.
+            let tri = span.tri;
+            let t = &binned.tris[tri as usize];
+            let fy = span.y as f32;
+            // Unique and increasing in API order (triangle, then pixel).
+            let row_seq = pass
+                .seq_base
+                .wrapping_add(tri as u64 * self.pixels)
+                .wrapping_add(span.y as u64 * self.env.width as u64);
+            self.counts.generated += u64::from(span.x1 - span.x0);
+            for x in span.x0..span.x1 {
+                let mut cov = cov;
+                // Interpolated here only for the tests (`Frag::depth` does it on demand).
+                let mut depth = f32::NAN;
+                if tests {
+                    let fx = x as f32;
+                    depth = t.depth_at(fx + 0.5, fy + 0.5);
+                    let mut depths = [depth; 8];
+                    if per_sample_depth {
+                        for (s, p) in self.positions.iter().enumerate() {
+                            depths[s] = t.depth_at(fx + p.0, fy + p.1);
+                        }
+                    }
+                    cov = tile.test(state, (x - x0, span.y - y0), cov, &depths, t.front_facing);
+                    if cov == 0 {
+                        self.counts.early_culled += 1;
+                        continue;
                     }
                 }
-                cov = tile.test(state, (f.x - x0, f.y - y0), cov, &depths, t.front_facing);
-                if cov == 0 {
-                    self.counts.early_culled += 1;
-                    return;
+                let input = FragInput {
+                    seq: row_seq.wrapping_add(x as u64),
+                    x,
+                    y: span.y,
+                    tri,
+                    primitive_id: t.source,
+                    instance_id: pass.instance,
+                    coverage: cov,
+                    front_facing: t.front_facing,
+                    depth,
+                    ticket: 0,
+                };
+                self.slots[self.filled].reset_direct(input);
+                self.filled += 1;
+                if self.filled == lanes {
+                    self.flush(&mut tile);
                 }
-            }
-            let input = FragInput {
-                // Unique and increasing in API order (triangle, then pixel).
-                seq: pass
-                    .seq_base
-                    .wrapping_add(f.tri as u64 * self.pixels)
-                    .wrapping_add(f.y as u64 * self.env.width as u64 + f.x as u64),
-                x: f.x,
-                y: f.y,
-                tri: f.tri,
-                primitive_id: t.source,
-                instance_id: pass.instance,
-                coverage: cov,
-                front_facing: t.front_facing,
-                depth,
-                ticket: 0,
-            };
-            self.slots[self.filled].reset_direct(input);
-            self.filled += 1;
-            if self.filled == lanes {
-                self.flush(&mut tile);
             }
         });
         self.flush(&mut tile);

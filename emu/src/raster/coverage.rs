@@ -260,11 +260,21 @@ pub(crate) fn pixel_mask(v: &[[i32; 2]; 3], si: &SampleInfo, px: i32, py: i32) -
     m
 }
 
-/// Calls `f(x, y, mask)` for every pixel of the inclusive pixel rectangle `r` with at least
-/// one covered sample, in row-major order. Edge functions are stepped incrementally (exact
-/// integer additions, so stepping gives the same values as direct evaluation).
+/// Calls `f(y, x0, x1, mask)` for every run `x0..x1` of row `y` of the inclusive pixel
+/// rectangle `r` whose pixels have the same nonzero coverage `mask`, in row-major order.
+/// Edge functions are stepped incrementally (exact integer additions, so stepping gives the
+/// same values as direct evaluation).
+///
+/// With one sample a triangle covers one run per row (it is convex): the scan of a row
+/// stops at the end of the run, and the consumer gets the run whole rather than a call per
+/// pixel.
 #[inline]
-pub(crate) fn raster(e: &Edges, si: &SampleInfo, r: [i32; 4], mut f: impl FnMut(u32, u32, u8)) {
+pub(crate) fn raster(
+    e: &Edges,
+    si: &SampleInfo,
+    r: [i32; 4],
+    mut f: impl FnMut(u32, u32, u32, u8),
+) {
     let [x0, y0, x1, y1] = r;
     let step_x = [
         e.a[0] << SUBPIXEL_BITS,
@@ -283,13 +293,23 @@ pub(crate) fn raster(e: &Edges, si: &SampleInfo, r: [i32; 4], mut f: impl FnMut(
         let mut row = e.at(bx + ox as i64, by + oy as i64);
         for y in y0..=y1 {
             let mut v = row;
-            for x in x0..=x1 {
-                if (v[0] | v[1] | v[2]) >= 0 {
-                    f(x as u32, y as u32, 1);
-                }
+            let mut x = x0;
+            // Skip to the run, then find its end: the pixels between are all covered.
+            while x <= x1 && (v[0] | v[1] | v[2]) < 0 {
                 v[0] += step_x[0];
                 v[1] += step_x[1];
                 v[2] += step_x[2];
+                x += 1;
+            }
+            let start = x;
+            while x <= x1 && (v[0] | v[1] | v[2]) >= 0 {
+                v[0] += step_x[0];
+                v[1] += step_x[1];
+                v[2] += step_x[2];
+                x += 1;
+            }
+            if x > start {
+                f(y as u32, start as u32, x as u32, 1);
             }
             row[0] += step_y[0];
             row[1] += step_y[1];
@@ -312,7 +332,7 @@ pub(crate) fn raster(e: &Edges, si: &SampleInfo, r: [i32; 4], mut f: impl FnMut(
                     m |= u8::from(inside) << s;
                 }
                 if m != 0 {
-                    f(x as u32, y as u32, m);
+                    f(y as u32, x as u32, x as u32 + 1, m);
                 }
                 v[0] += step_x[0];
                 v[1] += step_x[1];

@@ -132,6 +132,21 @@ pub struct Viewport {
     pub height: u32,
 }
 
+/// A run of pixels `x0..x1` of row `y` covered by one triangle with the same samples: the
+/// unit the rasterizer hands out (one per row of a triangle with one sample; single pixels
+/// with several).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Span {
+    pub y: u32,
+    pub x0: u32,
+    /// Exclusive.
+    pub x1: u32,
+    /// Index into [`Binned::tris`].
+    pub tri: u32,
+    /// Coverage of every pixel of the run (see [`Fragment::coverage`]).
+    pub coverage: u8,
+}
+
 /// One covered pixel of one triangle (a fragment before shading).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Fragment {

@@ -14,7 +14,9 @@
 use super::clip::{self, ClipVert, Planes, MAX_POLY, NON_FINITE};
 use super::coverage::{self, area2, bbox, Edges, SampleInfo, ONE};
 use super::pool::Pool;
-use super::{CullMode, Fragment, FrontFace, RasterState, SampleCount, Viewport, SUBPIXEL_BITS};
+use super::{
+    CullMode, Fragment, FrontFace, RasterState, SampleCount, Span, Viewport, SUBPIXEL_BITS,
+};
 use glam::Vec4;
 
 /// Largest magnitude of a snapped coordinate (sub-pixel units). The guard band keeps real
@@ -220,6 +222,20 @@ impl Binned {
     /// Emits the fragments of one segment of a tile in API order (by `tri`); within one
     /// triangle in row-major order.
     pub fn raster_segment(&self, seg: &Segment, mut emit: impl FnMut(Fragment)) {
+        self.raster_segment_spans(seg, |s| {
+            for x in s.x0..s.x1 {
+                emit(Fragment {
+                    x,
+                    y: s.y,
+                    tri: s.tri,
+                    coverage: s.coverage,
+                })
+            }
+        })
+    }
+
+    /// [`Binned::raster_segment`] as runs of pixels: the same fragments in the same order.
+    pub fn raster_segment_spans(&self, seg: &Segment, mut emit: impl FnMut(Span)) {
         let tile = seg.tile as usize;
         let Some(c) = self.chunks.get(seg.chunk as usize) else {
             return;
@@ -255,10 +271,11 @@ impl Binned {
                 }
             }
             if j == i + 1 {
-                entry_coverage(c, &e, rect, &si, |x, y, coverage| {
-                    emit(Fragment {
-                        x,
+                entry_coverage(c, &e, rect, &si, |y, x0, x1, coverage| {
+                    emit(Span {
                         y,
+                        x0,
+                        x1,
                         tri,
                         coverage,
                     })
@@ -266,7 +283,9 @@ impl Binned {
             } else {
                 merge.clear();
                 for e in &list[i..j] {
-                    entry_coverage(c, e, rect, &si, |x, y, m| merge.push((y, x, m)));
+                    entry_coverage(c, e, rect, &si, |y, x0, x1, m| {
+                        merge.extend((x0..x1).map(|x| (y, x, m)))
+                    });
                 }
                 merge.sort_unstable_by_key(|&(y, x, _)| (y, x));
                 let mut k = 0;
@@ -277,9 +296,10 @@ impl Binned {
                         coverage |= merge[k].2;
                         k += 1;
                     }
-                    emit(Fragment {
-                        x,
+                    emit(Span {
                         y,
+                        x0: x,
+                        x1: x + 1,
                         tri,
                         coverage,
                     });
@@ -301,22 +321,22 @@ pub struct Segment {
     pub end: u32,
 }
 
-/// Calls `f(x, y, mask)` for the pixels of tile rectangle `rect` (`[x0, y0, x1, y1)`) covered
-/// by one bin entry, in row-major order.
+/// Calls `f(y, x0, x1, mask)` for the runs of pixels of tile rectangle `rect`
+/// (`[x0, y0, x1, y1)`) covered by one bin entry, in row-major order.
 #[inline]
 fn entry_coverage(
     c: &ChunkBins,
     e: &BinEntry,
     rect: [i32; 4],
     si: &SampleInfo,
-    mut f: impl FnMut(u32, u32, u8),
+    mut f: impl FnMut(u32, u32, u32, u8),
 ) {
     if e.info & SINGLE != 0 {
         let (x, y) = (
             rect[0] as u32 + (e.info & 0xff),
             rect[1] as u32 + ((e.info >> 8) & 0xff),
         );
-        f(x, y, (e.info >> 16) as u8);
+        f(y, x, x + 1, (e.info >> 16) as u8);
         return;
     }
     let v = &c.verts[(e.info & !PIECE) as usize];
