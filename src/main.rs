@@ -586,7 +586,6 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
             stats.fragments_generated as f64 / (ms / 1e3) / 1e6, tris / (ms / 1e3) / 1e6, stats.steps as f64 / (ms / 1e3) / 1e6
         );
     }
-    let _ = Path::new("");
     Ok(())
 }
 
