@@ -138,3 +138,32 @@ fn the_bunny_matches_the_llvmpipe_peers_figures() {
     assert_eq!(c.iter().filter(|&&v| v > 0).count(), 55_090);
     assert_eq!(c.iter().copied().max(), Some(6));
 }
+
+/// Lockstep warps interleave their lanes at every access even on one thread: in one turn
+/// every lane loads, in the next every lane stores, so lanes of one warp on one pixel lose
+/// each other's plain increments, the same on every run. Independent lanes on one thread run
+/// each invocation to its end and lose nothing.
+#[test]
+fn lockstep_lanes_race_on_one_thread_and_independent_lanes_do_not() {
+    let mut exact_spec = spec("hairball", "count", 64, ExecConfig::ordered());
+    exact_spec.exec.threads = 1;
+    let (exact, _) = counts(&exact_spec);
+    let total: u64 = exact.iter().map(|&v| v as u64).sum();
+    let run = |lockstep: bool| {
+        let mut e = ExecConfig::parallel(1);
+        e.lockstep = lockstep;
+        counts(&spec("hairball", "count-plain", 64, e)).0
+    };
+    let (a, b) = (run(true), run(true));
+    let got: u64 = a.iter().map(|&v| v as u64).sum();
+    assert!(got < total, "lockstep lost nothing ({got} of {total})");
+    assert_eq!(
+        a, b,
+        "one thread: the lockstep interleaving is deterministic"
+    );
+    assert_eq!(
+        run(false),
+        exact,
+        "independent lanes on one thread lost an update"
+    );
+}
