@@ -69,6 +69,22 @@ impl TileMemory {
         samples: u32,
         targets: usize,
     ) -> TileMemory {
+        let mut t = TileMemory::lazy(x0, y0, w, h, tile_size, samples, targets);
+        t.materialize();
+        t
+    }
+
+    /// [`TileMemory::new`] with depth and stencil left lazy (allocated on first use): what a
+    /// framebuffer starts with, so that passes that never test never pay for them.
+    fn lazy(
+        x0: u32,
+        y0: u32,
+        w: u32,
+        h: u32,
+        tile_size: u32,
+        samples: u32,
+        targets: usize,
+    ) -> TileMemory {
         let n = (tile_size * tile_size * samples) as usize;
         TileMemory {
             x0,
@@ -78,8 +94,8 @@ impl TileMemory {
             tile_size,
             samples,
             color: (0..targets).map(|_| vec![[0u32; 4]; n]).collect(),
-            depth: vec![1.0; n],
-            stencil: vec![0; n],
+            depth: Vec::new(),
+            stencil: Vec::new(),
             depth_clear: 1.0,
             stencil_clear: 0,
         }
@@ -336,7 +352,7 @@ impl Framebuffer {
             for tx in 0..tiles_x {
                 let x0 = tx * tile_size;
                 let y0 = ty * tile_size;
-                tiles.push(TileMemory::new(
+                tiles.push(TileMemory::lazy(
                     x0,
                     y0,
                     tile_size.min(width - x0),
@@ -346,11 +362,6 @@ impl Framebuffer {
                     formats.len(),
                 ));
             }
-        }
-        // Depth and stencil are allocated on first use (see TileMemory::depth).
-        for t in &mut tiles {
-            t.depth = Vec::new();
-            t.stencil = Vec::new();
         }
         Ok(Framebuffer {
             width,
