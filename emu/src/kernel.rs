@@ -270,18 +270,34 @@ impl Invocation {
         }
     }
 
-    /// Resets the slot for a new fragment.
+    /// Resets the slot for a new fragment (every executor but the fused path).
     pub fn reset(&self, input: FragInput) {
-        self.reset_keep_ops(input);
+        self.reset_fragment(input);
+        self.pending.set(None);
+        self.granted.set(false);
+        self.waits.set(0);
+        self.in_interlock.set(false);
+        self.entered_interlock.set(false);
         for o in &self.ops {
             o.set(0);
         }
     }
 
-    /// Resets the slot for a new fragment but lets the operation counters run on (the
-    /// fused path sums them once per worker instead of once per invocation).
+    /// [`Self::reset`] for the fused path of the direct executors, which uses no interlock
+    /// and no scheduler: the state only those touch (`granted`, `waits`, the interlock flags)
+    /// is never set there, so it is left alone; `pending` only marks a suspended lockstep
+    /// lane and is rewritten before it is read. The operation counters run on (the fused
+    /// path sums them once per worker).
     #[inline]
-    pub fn reset_keep_ops(&self, input: FragInput) {
+    pub fn reset_direct(&self, input: FragInput) {
+        debug_assert!(!self.granted.get() && self.waits.get() == 0);
+        debug_assert!(!self.in_interlock.get() && !self.entered_interlock.get());
+        self.reset_fragment(input);
+    }
+
+    /// What every reset does: the new input, and the previous fragment's results cleared.
+    #[inline]
+    fn reset_fragment(&self, input: FragInput) {
         self.input.set(input);
         // Only outputs the previous invocation wrote need clearing (most write none).
         let mut written = self.outputs_written.replace(0);
@@ -292,40 +308,33 @@ impl Invocation {
         }
         self.discarded.set(false);
         self.depth_out.set(None);
-        self.pending.set(None);
-        self.granted.set(false);
         self.steps.set(0);
-        self.waits.set(0);
         self.since_yield.set(0);
         if self.has_fault.get() {
             self.take_fault();
         }
-        self.in_interlock.set(false);
-        self.entered_interlock.set(false);
     }
 
-    /// [`Self::reset_keep_ops`] for the fused path of the direct executors, which uses no
-    /// interlock and no scheduler: the state only those touch (`granted`, `waits`, the
-    /// interlock flags) is never set there, so it is left alone; `pending` only marks a
-    /// suspended lockstep lane and is rewritten before it is read.
+    /// Lockstep warps (`Mode::Direct { yield_every }`, `yield_every > 0`): an invocation
+    /// makes `yield_every` steps per turn. True, and the step counted, if one more fits in
+    /// this turn; false if the invocation must suspend first (it then calls
+    /// [`Self::resume_turn`] when polled again). Always true without lockstep.
     #[inline]
-    pub fn reset_direct(&self, input: FragInput) {
-        debug_assert!(!self.granted.get() && self.waits.get() == 0);
-        debug_assert!(!self.in_interlock.get() && !self.entered_interlock.get());
-        self.input.set(input);
-        let mut written = self.outputs_written.replace(0);
-        while written != 0 {
-            let i = written.trailing_zeros() as usize;
-            self.outputs[i].set([0; 4]);
-            written &= written - 1;
+    fn take_turn(&self, yield_every: u32) -> bool {
+        let n = self.since_yield.get();
+        if yield_every == 0 || n < yield_every {
+            self.since_yield.set(n + 1);
+            true
+        } else {
+            false
         }
-        self.discarded.set(false);
-        self.depth_out.set(None);
-        self.steps.set(0);
-        self.since_yield.set(0);
-        if self.has_fault.get() {
-            self.take_fault();
-        }
+    }
+
+    /// A suspended lockstep step runs: it is the first step of the invocation's new turn.
+    #[inline]
+    fn resume_turn(&self) {
+        self.since_yield.set(1);
+        self.pending.set(None);
     }
 
     #[inline]
@@ -392,20 +401,12 @@ impl Future for Step<'_> {
                     inv.set_fault(FaultKind::Watchdog { steps: steps - 1 });
                     return Poll::Pending;
                 }
-                // Lockstep: `yield_every` steps per turn, as in `Access::poll`.
-                if yield_every > 0 {
-                    if self.yielded {
-                        inv.since_yield.set(1);
-                    } else {
-                        let n = inv.since_yield.get();
-                        if n >= yield_every {
-                            inv.since_yield.set(0);
-                            self.yielded = true;
-                            inv.pending.set(Some(self.kind));
-                            return Poll::Pending;
-                        }
-                        inv.since_yield.set(n + 1);
-                    }
+                if self.yielded {
+                    inv.resume_turn();
+                } else if !inv.take_turn(yield_every) {
+                    self.yielded = true;
+                    inv.pending.set(Some(self.kind));
+                    return Poll::Pending;
                 }
                 inv.pending.set(None);
                 inv.steps.set(steps);
@@ -494,7 +495,6 @@ impl<T: Word> Future for Access<'_, T> {
         // lane makes its next access, in lane order) and runs at the next.
         let inv = this.frag.inv;
         if yield_every > 0 && !this.resumed {
-            inv.since_yield.set(0);
             this.resumed = true;
             inv.pending.set(Some(StepKind::Mem {
                 addr: Addr::new(this.buf.id, this.index),
@@ -503,8 +503,7 @@ impl<T: Word> Future for Access<'_, T> {
             }));
             return Poll::Pending;
         }
-        inv.since_yield.set(1);
-        inv.pending.set(None);
+        inv.resume_turn();
         let done = this.frag.perform::<T>(this.buf, this.index, this.op);
         this.done = Some(done);
         done
@@ -751,15 +750,10 @@ impl<'a> Frag<'a> {
         record: Option<RecordSpan>,
     ) -> Access<'a, T> {
         let done = match self.env.mode {
-            Mode::Direct { yield_every } => {
-                let n = self.inv.since_yield.get();
-                if yield_every == 0 || n < yield_every {
-                    self.inv.since_yield.set(n + 1);
-                    Some(self.perform::<T>(buf, index, op))
-                } else {
-                    None
-                }
-            }
+            Mode::Direct { yield_every } => self
+                .inv
+                .take_turn(yield_every)
+                .then(|| self.perform::<T>(buf, index, op)),
             Mode::Scheduled => None,
         };
         Access {
