@@ -287,6 +287,9 @@ impl Invocation {
 
     /// Resets the slot for a new fragment (every executor but the fused path).
     pub fn reset(&self, input: FragInput) {
+        if self.has_fault.get() {
+            self.take_fault();
+        }
         self.reset_fragment(input);
         self.pending.set(None);
         self.granted.set(false);
@@ -310,10 +313,14 @@ impl Invocation {
     pub fn reset_direct(&self, input: FragInput) {
         debug_assert!(!self.granted.get() && self.waits.get() == 0);
         debug_assert!(!self.in_interlock.get() && !self.entered_interlock.get());
+        // The fused path counts every invocation (`Acc::count`, which takes the fault)
+        // before its slot is reused.
+        debug_assert!(!self.has_fault.get());
         self.reset_fragment(input);
     }
 
-    /// What every reset does: the new input, and the previous fragment's results cleared.
+    /// What every reset does: the new input, and the previous fragment's results cleared
+    /// (its fault has been taken already).
     #[inline(always)]
     fn reset_fragment(&self, input: FragInput) {
         self.input.set(input);
@@ -328,9 +335,6 @@ impl Invocation {
         self.depth_out.set(None);
         self.steps.set(0);
         self.since_yield.set(0);
-        if self.has_fault.get() {
-            self.take_fault();
-        }
     }
 
     /// Lockstep warps (`Mode::Direct { yield_every }`, `yield_every > 0`): an invocation
@@ -480,8 +484,22 @@ impl<F: Fn() -> bool> Future for WaitUntil<'_, F> {
 /// executors an access completes at its first poll, and this keeps that path to a bounds
 /// check, a step count and the atomic (an `async fn` would copy its arguments into its
 /// state first). Await it at once: an access that is never polled never happens.
+///
+/// An enum so that an access performed when it was made (the common case) writes two
+/// words into the kernel's state machine rather than the whole request (the state is
+/// written for every access the kernel awaits).
 #[must_use = "a memory access does nothing unless awaited"]
-pub struct Access<'a, T: Word> {
+pub struct Access<'a, T: Word>(AccessState<'a, T>);
+
+enum AccessState<'a, T: Word> {
+    /// Direct modes: performed when made; the outcome (`Pending`: the invocation faulted).
+    Done(Poll<T>),
+    /// Not performed yet (scheduled mode, or a lockstep lane that has used its turn).
+    Waiting(Request<'a, T>),
+}
+
+/// An access that has not been performed yet.
+struct Request<'a, T: Word> {
     frag: Frag<'a>,
     buf: Buf<T>,
     index: u32,
@@ -491,8 +509,6 @@ pub struct Access<'a, T: Word> {
     stepped: bool,
     /// Direct lockstep mode: the access has suspended once and runs when polled again.
     resumed: bool,
-    /// Direct modes: the outcome, once performed (`Pending`: the invocation faulted).
-    done: Option<Poll<T>>,
 }
 
 impl<T: Word> Future for Access<'_, T> {
@@ -501,34 +517,35 @@ impl<T: Word> Future for Access<'_, T> {
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<T> {
         // `Access` is `Unpin` (references and plain data only).
         let this = self.get_mut();
-        if let Some(done) = this.done {
+        let req = match &mut this.0 {
             // Performed when it was made (see `Frag::access`), or faulted.
-            return done;
-        }
-        let Mode::Direct { yield_every } = this.frag.env.mode else {
-            return this.poll_scheduled(cx);
+            AccessState::Done(done) => return *done,
+            AccessState::Waiting(req) => req,
+        };
+        let Mode::Direct { yield_every } = req.frag.env.mode else {
+            return req.poll_scheduled(cx);
         };
         // Lockstep warps: an invocation makes `yield_every` accesses per turn. An access
         // made after those is run lazily: it suspends at its first poll (in one turn every
         // lane makes its next access, in lane order) and runs at the next.
-        let inv = this.frag.inv;
-        if yield_every > 0 && !this.resumed {
-            this.resumed = true;
+        let inv = req.frag.inv;
+        if yield_every > 0 && !req.resumed {
+            req.resumed = true;
             inv.pending.set(Some(StepKind::Mem {
-                addr: Addr::new(this.buf.id, this.index),
-                op: this.op.kind(),
-                record: this.record,
+                addr: Addr::new(req.buf.id, req.index),
+                op: req.op.kind(),
+                record: req.record,
             }));
             return Poll::Pending;
         }
         inv.resume_turn();
-        let done = this.frag.perform::<T>(this.buf, this.index, this.op);
-        this.done = Some(done);
+        let done = req.frag.perform::<T>(req.buf, req.index, req.op);
+        this.0 = AccessState::Done(done);
         done
     }
 }
 
-impl<T: Word> Access<'_, T> {
+impl<T: Word> Request<'_, T> {
     /// The scheduled executor's path: suspend at a step until the scheduler grants it.
     #[inline(never)]
     fn poll_scheduled(&mut self, cx: &mut Context<'_>) -> Poll<T> {
@@ -581,17 +598,18 @@ impl<T: Word> Future for Store<'_, T> {
 
 /// The future of [`Frag::atomic_compare_exchange`].
 #[must_use = "a memory access does nothing unless awaited"]
-pub struct CompareExchange<'a, T: Word>(Access<'a, T>);
+pub struct CompareExchange<'a, T: Word> {
+    access: Access<'a, T>,
+    expected: u64,
+}
 
 impl<T: Word> Future for CompareExchange<'_, T> {
     type Output = Result<T, T>;
     #[inline]
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Result<T, T>> {
-        let access = &mut self.get_mut().0;
-        let MemOp::CompareExchange(expected, _) = access.op else {
-            unreachable!("built by Frag::atomic_compare_exchange")
-        };
-        Pin::new(access).poll(cx).map(|prev| {
+        let this = self.get_mut();
+        let expected = this.expected;
+        Pin::new(&mut this.access).poll(cx).map(|prev| {
             if prev.to_bits() == expected {
                 Ok(prev)
             } else {
@@ -767,14 +785,24 @@ impl<'a> Frag<'a> {
         op: MemOp,
         record: Option<RecordSpan>,
     ) -> Access<'a, T> {
-        let done = match self.env.mode {
-            Mode::Direct { yield_every } => self
-                .inv
-                .take_turn(yield_every)
-                .then(|| self.perform::<T>(buf, index, op)),
-            Mode::Scheduled => None,
-        };
-        Access {
+        if let Mode::Direct { yield_every } = self.env.mode {
+            if self.inv.take_turn(yield_every) {
+                return Access(AccessState::Done(self.perform::<T>(buf, index, op)));
+            }
+        }
+        self.request(buf, index, op, record)
+    }
+
+    /// An access left for later (scheduled mode, or a lockstep lane past its turn).
+    #[inline(always)]
+    fn request<T: Word>(
+        &self,
+        buf: Buf<T>,
+        index: u32,
+        op: MemOp,
+        record: Option<RecordSpan>,
+    ) -> Access<'a, T> {
+        Access(AccessState::Waiting(Request {
             frag: *self,
             buf,
             index,
@@ -782,8 +810,7 @@ impl<'a> Frag<'a> {
             record,
             stepped: false,
             resumed: false,
-            done,
-        }
+        }))
     }
 
     /// Performs one access under a direct executor: a bounds check, a step count for the
@@ -893,12 +920,15 @@ impl<'a> Frag<'a> {
         expected: T,
         new: T,
     ) -> CompareExchange<'a, T> {
-        CompareExchange(self.access(
-            buf,
-            index,
-            MemOp::CompareExchange(expected.to_bits(), new.to_bits()),
-            None,
-        ))
+        CompareExchange {
+            access: self.access(
+                buf,
+                index,
+                MemOp::CompareExchange(expected.to_bits(), new.to_bits()),
+                None,
+            ),
+            expected: expected.to_bits(),
+        }
     }
 
     /// Weak compare-exchange: as [`Frag::atomic_compare_exchange`], but may fail

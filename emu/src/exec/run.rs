@@ -209,7 +209,8 @@ impl Acc {
     /// nor faulted).
     pub(crate) fn count_passing(&mut self, slots: &[Invocation]) -> u64 {
         let mut passed = 0u64;
-        let (mut shaded, mut discarded, mut steps, mut waits) = (0u64, 0u64, 0u64, 0u64);
+        // No interlock on the fused path, so no invocation waits (`reset_direct` checks).
+        let (mut shaded, mut discarded, mut steps) = (0u64, 0u64, 0u64);
         let mut max_steps = self.stats.max_steps_per_invocation;
         for inv in slots {
             if inv.faulted() {
@@ -221,7 +222,6 @@ impl Acc {
             shaded += 1;
             discarded += u64::from(d);
             steps += s;
-            waits += inv.waits.get();
             max_steps = max_steps.max(s);
             if !d {
                 passed += u64::from(inv.input.get().coverage.count_ones());
@@ -231,7 +231,6 @@ impl Acc {
         st.shaded += shaded;
         st.discarded += discarded;
         st.steps += steps;
-        st.interlock_waits += waits;
         st.max_steps_per_invocation = st.max_steps_per_invocation.max(max_steps);
         passed
     }
