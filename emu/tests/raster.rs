@@ -353,14 +353,36 @@ fn fans_tile_the_same_polygon() {
 /// Random triangles (no clipping needed) against an independent brute-force rasterizer.
 #[test]
 fn matches_brute_force_reference() {
-    let v = vp(40, 30);
-    let mut rng = SmallRng::seed_from_u64(2);
-    for samples in [SampleCount::X1, SampleCount::X4, SampleCount::X8] {
+    let samples = [SampleCount::X1, SampleCount::X4, SampleCount::X8];
+    check_against_reference(2, vp(40, 30), &[0.3, 2.0, 15.0, 60.0], &samples, 400);
+}
+
+/// Small one-sample triangles (boxes up to 4x4 pixels) have their coverage computed at
+/// setup and are rasterized from it, in every tile they straddle (8-pixel tiles here).
+#[test]
+fn small_triangles_match_brute_force_reference() {
+    check_against_reference(5, vp(48, 40), &[0.4, 0.9, 1.5, 2.2], &[X1], 1500);
+}
+
+/// Random triangles of the given sizes (half-extents in pixels, in turn) against
+/// [`reference_mask`] on every pixel, for each sample count.
+fn check_against_reference(
+    seed: u64,
+    v: Viewport,
+    scales: &[f64],
+    sample_counts: &[SampleCount],
+    count: u32,
+) {
+    let mut rng = SmallRng::seed_from_u64(seed);
+    for &samples in sample_counts {
         let mut pos = Vec::new();
         let mut idx = Vec::new();
-        for t in 0..400u32 {
-            let scale = [0.3, 2.0, 15.0, 60.0][(t % 4) as usize];
-            let (cx, cy) = (rng.gen_range(-5.0..45.0), rng.gen_range(-5.0..35.0));
+        for t in 0..count {
+            let scale = scales[t as usize % scales.len()];
+            let (cx, cy) = (
+                rng.gen_range(-5.0..v.width as f64 + 5.0),
+                rng.gen_range(-5.0..v.height as f64 + 5.0),
+            );
             for _ in 0..3 {
                 let (mut x, mut y): (f64, f64) = (
                     cx + rng.gen_range(-1.0..1.0) * scale,

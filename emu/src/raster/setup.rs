@@ -115,12 +115,52 @@ struct ChunkBins {
     /// Snapped vertices (sub-pixel units, y down, positively oriented: see
     /// [`coverage::area2`]) of the chunk's triangles that are rasterized in the tiles.
     verts: Vec<[[i32; 2]; 3]>,
+    /// Coverage of the chunk's small triangles, computed at setup (see [`SmallCoverage`]).
+    smalls: Vec<SmallCoverage>,
+}
+
+/// The coverage of a small one-sample triangle (pixel rectangle of at most 4x4, most
+/// triangles of a dense mesh at high resolution), computed once at setup: bit `4 j + i` is
+/// pixel `(x + i, y + j)`. Rasterizing it is then a walk over bits, with no edge set-up
+/// and no per-pixel edge stepping, in every tile it is binned to.
+#[derive(Clone, Copy, Debug, Default)]
+struct SmallCoverage {
+    x: i32,
+    y: i32,
+    bits: u16,
+}
+
+impl SmallCoverage {
+    /// Calls `f(y, x0, x1)` for the covered runs inside the pixel rectangle `rect`
+    /// (`[x0, y0, x1, y1)`), in row-major order.
+    #[inline]
+    fn runs(&self, rect: [i32; 4], mut f: impl FnMut(u32, u32, u32)) {
+        // Columns of the 4-wide block inside the rectangle.
+        let lo = (rect[0] - self.x).clamp(0, 4);
+        let hi = (rect[2] - self.x).clamp(0, 4);
+        let cols = ((1u32 << hi) - 1) & !((1u32 << lo) - 1);
+        for j in 0..4 {
+            let y = self.y + j;
+            let mut row = (self.bits as u32 >> (4 * j)) & cols;
+            if row == 0 || y < rect[1] || y >= rect[3] {
+                continue;
+            }
+            while row != 0 {
+                let start = row.trailing_zeros();
+                let len = (!(row >> start)).trailing_zeros();
+                let x0 = (self.x + start as i32) as u32;
+                f(y as u32, x0, x0 + len);
+                row &= !(((1u32 << len) - 1) << start);
+            }
+        }
+    }
 }
 
 /// One triangle in one tile: its setup index relative to the chunk, and `info`: for a
 /// triangle whose coverage is a single pixel (most triangles of a dense mesh) that pixel and
 /// mask, computed at setup, as `SINGLE | mask << 16 | dy << 8 | dx` relative to the tile
-/// origin; otherwise the index of its vertices in [`ChunkBins::verts`].
+/// origin; for a small one-sample triangle `SMALL | i`, its coverage being
+/// [`ChunkBins::smalls`]`[i]`; otherwise the index of its vertices in [`ChunkBins::verts`].
 #[derive(Clone, Copy, Debug, Default)]
 struct BinEntry {
     tri: u32,
@@ -131,6 +171,11 @@ struct BinEntry {
 const SINGLE: u32 = 1 << 31;
 /// Flag of a [`BinEntry`] of one of several fan pieces of a clipped triangle.
 const PIECE: u32 = 1 << 30;
+/// Flag of a [`BinEntry`] whose coverage was computed at setup: `info` (without the flags)
+/// indexes [`ChunkBins::smalls`].
+const SMALL: u32 = 1 << 29;
+/// The flags of a [`BinEntry`]'s `info`.
+const FLAGS: u32 = SINGLE | PIECE | SMALL;
 
 impl Binned {
     pub fn tile_count(&self) -> usize {
@@ -339,7 +384,11 @@ fn entry_coverage(
         f(y, x, x + 1, (e.info >> 16) as u8);
         return;
     }
-    let v = &c.verts[(e.info & !PIECE) as usize];
+    if e.info & SMALL != 0 {
+        c.smalls[(e.info & !FLAGS) as usize].runs(rect, |y, x0, x1| f(y, x0, x1, 1));
+        return;
+    }
+    let v = &c.verts[(e.info & !FLAGS) as usize];
     let Some(r) = si.pixel_rect(bbox(v), rect[2], rect[3]) else {
         return;
     };
@@ -357,6 +406,7 @@ static PAIRS: Pool<(u32, BinEntry)> = Pool::new();
 static ENTRIES: Pool<BinEntry> = Pool::new();
 static STARTS: Pool<u32> = Pool::new();
 static VERTS: Pool<[[i32; 2]; 3]> = Pool::new();
+static SMALLS: Pool<SmallCoverage> = Pool::new();
 
 impl Drop for Binned {
     /// Hands the big buffers back to the pool for the next frame.
@@ -366,6 +416,7 @@ impl Drop for Binned {
             ENTRIES.give_dirty(c.entries); // fully overwritten by the next scatter
             STARTS.give(c.tile_start);
             VERTS.give(c.verts);
+            SMALLS.give(c.smalls);
         }
     }
 }
@@ -505,9 +556,20 @@ const BATCH: usize = 256;
 struct ChunkOut {
     tris: Vec<SetupTriangle>,
     verts: Vec<[[i32; 2]; 3]>,
+    smalls: Vec<SmallCoverage>,
     /// `(tile, entry)` in triangle order.
     bins: Vec<(u32, BinEntry)>,
     rejected: u64,
+}
+
+/// What setup found of a triangle's coverage.
+enum SetupCoverage {
+    /// One covered pixel: its [`BinEntry`] info and the tile it is in.
+    Single { info: u32, tile: u32 },
+    /// A small one-sample triangle's covered pixels.
+    Small(SmallCoverage),
+    /// Rasterized in the tiles from its vertices.
+    Vertices,
 }
 
 /// Coverage of a tiny triangle (pixel rectangle of at most 2x2).
@@ -639,7 +701,7 @@ impl Ctx<'_> {
         let idx = if a2 > 0 { [ia, ib, ic] } else { [ia, ic, ib] };
         let perm = if a2 > 0 { [0, 1, 2] } else { [0, 2, 1] };
         let v = if a2 > 0 { v } else { [v[0], v[2], v[1]] };
-        let Some(single) = self.coverage(&v, r) else {
+        let Some(cov) = self.coverage(&v, r) else {
             return;
         };
         let zw = idx.map(|i| self.zw[i as usize]);
@@ -647,17 +709,7 @@ impl Ctx<'_> {
         for i in 0..3 {
             q[i][perm[i]] = zw[i][1];
         }
-        self.finish(
-            out,
-            t as u32,
-            front,
-            false,
-            single,
-            v,
-            r,
-            zw.map(|z| z[0]),
-            q,
-        );
+        self.finish(out, t as u32, front, false, cov, v, r, zw.map(|z| z[0]), q);
     }
 
     /// Slow path: a vertex is outside a clip plane (or not finite).
@@ -713,7 +765,7 @@ impl Ctx<'_> {
             if area2(&v) <= 0 {
                 continue;
             }
-            let Some(single) = self.coverage(&v, r) else {
+            let Some(cov) = self.coverage(&v, r) else {
                 continue;
             };
             let zw = h.map(|j| proj[j].z);
@@ -722,33 +774,49 @@ impl Ctx<'_> {
                 let iw = proj[j].iw as f64;
                 [(b[0] * iw) as f32, (b[1] * iw) as f32, (b[2] * iw) as f32]
             });
-            self.finish(out, source, front, m > 3, single, v, r, zw, q);
+            self.finish(out, source, front, m > 3, cov, v, r, zw, q);
         }
     }
 
-    /// Exact coverage of tiny triangles (pixel rectangle `r` of at most 2x2): `None` when no
-    /// sample is covered, `Some(Some((info, tile)))` for a single covered pixel (the
-    /// [`BinEntry`] info and the one tile to bin it to), `Some(None)` otherwise.
+    /// Exact coverage of small triangles (pixel rectangle `r` of at most 4x4 with one
+    /// sample, 2x2 with several): `None` when no sample is covered.
     #[inline]
-    fn coverage(&self, v: &[[i32; 2]; 3], r: [i32; 4]) -> Option<Option<(u32, u32)>> {
+    fn coverage(&self, v: &[[i32; 2]; 3], r: [i32; 4]) -> Option<SetupCoverage> {
         let sh = self.tile_shift;
         let tmask = (1 << sh) - 1;
-        let pack = |x: i32, y: i32, m: u8| {
+        let single = |x: i32, y: i32, m: u8| {
             let info = SINGLE | (m as u32) << 16 | ((y & tmask) as u32) << 8 | (x & tmask) as u32;
-            (info, (y >> sh) as u32 * self.tiles_x + (x >> sh) as u32)
+            let tile = (y >> sh) as u32 * self.tiles_x + (x >> sh) as u32;
+            SetupCoverage::Single { info, tile }
         };
         if r[0] == r[2] && r[1] == r[3] {
             let m = coverage::pixel_mask(v, &self.si, r[0], r[1]);
-            return (m != 0).then(|| Some(pack(r[0], r[1], m)));
+            return (m != 0).then(|| single(r[0], r[1], m));
         }
-        if r[2] - r[0] <= 1 && r[3] - r[1] <= 1 {
-            return match self.tiny(&Edges::new(v), r) {
-                Tiny::Empty => None,
-                Tiny::Single(x, y, m) => Some(Some(pack(x, y, m))),
-                Tiny::Several => Some(None),
+        let (w, h) = (r[2] - r[0], r[3] - r[1]);
+        if self.si.offs.len() == 1 && w < 4 && h < 4 {
+            let bits = coverage::block_mask(&Edges::new(v), &self.si, r);
+            return match bits.count_ones() {
+                0 => None,
+                1 => {
+                    let k = bits.trailing_zeros() as i32;
+                    Some(single(r[0] + k % 4, r[1] + k / 4, 1))
+                }
+                _ => Some(SetupCoverage::Small(SmallCoverage {
+                    x: r[0],
+                    y: r[1],
+                    bits,
+                })),
             };
         }
-        Some(None)
+        if w <= 1 && h <= 1 {
+            return match self.tiny(&Edges::new(v), r) {
+                Tiny::Empty => None,
+                Tiny::Single(x, y, m) => Some(single(x, y, m)),
+                Tiny::Several => Some(SetupCoverage::Vertices),
+            };
+        }
+        Some(SetupCoverage::Vertices)
     }
 
     /// Stores the setup triangle and bins it into the tiles its
@@ -762,7 +830,7 @@ impl Ctx<'_> {
         source: u32,
         front_facing: bool,
         piece: bool,
-        single: Option<(u32, u32)>,
+        cov: SetupCoverage,
         v: [[i32; 2]; 3],
         r: [i32; 4],
         zw: [f32; 3],
@@ -780,20 +848,42 @@ impl Ctx<'_> {
             bary,
         });
         let piece = if piece { PIECE } else { 0 };
-        if let Some((info, tile)) = single {
-            // Only the tile of the covered pixel (the box may straddle tiles).
-            out.bins.push((
-                tile,
-                BinEntry {
-                    tri,
-                    info: info | piece,
-                },
-            ));
-            return;
+        let (tx0, ty0, tx1, ty1) = (r[0] >> sh, r[1] >> sh, r[2] >> sh, r[3] >> sh);
+        match cov {
+            SetupCoverage::Single { info, tile } => {
+                // Only the tile of the covered pixel (the box may straddle tiles).
+                out.bins.push((
+                    tile,
+                    BinEntry {
+                        tri,
+                        info: info | piece,
+                    },
+                ));
+                return;
+            }
+            SetupCoverage::Small(small) => {
+                out.smalls.push(small);
+                let info = (out.smalls.len() as u32 - 1) | SMALL | piece;
+                // Only the tiles holding a covered pixel.
+                for ty in ty0..=ty1 {
+                    for tx in tx0..=tx1 {
+                        let rect = [tx << sh, ty << sh, (tx + 1) << sh, (ty + 1) << sh];
+                        let mut any = false;
+                        small.runs(rect, |_, _, _| any = true);
+                        if any {
+                            out.bins.push((
+                                ty as u32 * self.tiles_x + tx as u32,
+                                BinEntry { tri, info },
+                            ));
+                        }
+                    }
+                }
+                return;
+            }
+            SetupCoverage::Vertices => {}
         }
         out.verts.push(v);
         let info = (out.verts.len() as u32 - 1) | piece;
-        let (tx0, ty0, tx1, ty1) = (r[0] >> sh, r[1] >> sh, r[2] >> sh, r[3] >> sh);
         if tx0 == tx1 && ty0 == ty1 {
             out.bins.push((
                 ty0 as u32 * self.tiles_x + tx0 as u32,
@@ -823,6 +913,7 @@ impl Ctx<'_> {
         let mut out = ChunkOut {
             tris: TRIS.take(),
             verts: VERTS.take(),
+            smalls: SMALLS.take(),
             bins: PAIRS.take(),
             rejected: 0,
         };
@@ -851,6 +942,7 @@ impl Ctx<'_> {
                 tile_start,
                 entries,
                 verts: out.verts,
+                smalls: out.smalls,
             },
             out.rejected,
         )
@@ -1006,6 +1098,7 @@ pub fn bin_triangles(
             tile_start: vec![0; ntiles + 1],
             entries: Vec::new(),
             verts: Vec::new(),
+            smalls: Vec::new(),
         };
         (Vec::new(), bins, rejected)
     };
