@@ -31,8 +31,16 @@ impl Mesh {
     pub fn validate(&self) -> Result<(), MeshError> {
         // Fast paths first (this runs on every draw of an 871K-triangle mesh); the slow
         // loops below only run to name the culprit.
-        let finite = self.positions.iter().fold(true, |ok, p| ok & p.is_finite());
-        let max_index = self.indices.iter().flatten().fold(0u32, |m, &i| m.max(i));
+        // Branch-free folds (the compiler vectorizes them): a float is not finite iff its
+        // exponent bits are all ones, and then adding one to the exponent carries into bit 31.
+        let not_finite = |v: f32| ((v.to_bits() & 0x7f80_0000) + 0x0080_0000) >> 31;
+        let finite = self.positions.iter().fold(0u32, |bad, p| {
+            bad | not_finite(p.x) | not_finite(p.y) | not_finite(p.z)
+        }) == 0;
+        let max_index = self
+            .indices
+            .iter()
+            .fold(0u32, |m, t| m.max(t[0]).max(t[1]).max(t[2]));
         let in_range = self.indices.is_empty() || (max_index as usize) < self.positions.len();
         let normals_ok = self
             .normals

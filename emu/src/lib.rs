@@ -32,7 +32,7 @@ pub mod sync;
 
 pub use exec::{ExecConfig, ExecMode, Policy, ScheduleConfig};
 pub use framebuffer::{Framebuffer, Image};
-pub use geometry::{Draw, Mesh};
+pub use geometry::{Draw, Mesh, MeshError};
 pub use hazard::{Hazard, HazardCounts, HazardKind};
 pub use interlock::InterlockMode;
 pub use kernel::FragInput;

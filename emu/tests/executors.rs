@@ -655,3 +655,58 @@ fn faults_in_draws_are_reported_under_the_direct_executors() {
             .all(|f| matches!(f.kind, FaultKind::Watchdog { .. })));
     }
 }
+
+/// A draw whose triangles use a non-finite position or an index out of range fails with a
+/// mesh error naming the culprit, before anything is shaded (the full check runs only when
+/// binning rejected triangles); an unused non-finite vertex is not an error.
+#[test]
+fn bad_meshes_fail_the_draw_before_shading() {
+    use fragrace_emu::{Draw, MeshError, PassError, PassState};
+    let run = |mesh: &fragrace_emu::Mesh, e: &ExecConfig| {
+        let mut dev = Device::new();
+        let counter = dev.buffer::<u32>("counter", 1).unwrap();
+        let mut fb = fb(16, 8);
+        let draw = Draw::new(mesh, glam::Mat4::IDENTITY);
+        let kernel = GlobalCounter {
+            counter,
+            atomic: true,
+        };
+        let r = dev.draw(&mut fb, &draw, &PassState::default(), &kernel, e);
+        (r, dev.memory.read(counter).unwrap()[0])
+    };
+    for e in direct_execs().iter().chain(&all_execs()) {
+        let mut nan = two_layers();
+        nan.positions[5].y = f32::NAN;
+        let (r, shaded) = run(&nan, e);
+        assert!(
+            matches!(
+                r,
+                Err(PassError::Mesh(MeshError::NonFinite { index: 5, .. }))
+            ),
+            "{r:?}"
+        );
+        assert_eq!(shaded, 0, "{e:?}");
+
+        let mut bad_index = two_layers();
+        bad_index.indices[3][1] = 99;
+        let (r, shaded) = run(&bad_index, e);
+        assert!(
+            matches!(
+                r,
+                Err(PassError::Mesh(MeshError::IndexOutOfRange {
+                    tri: 3,
+                    index: 99,
+                    ..
+                }))
+            ),
+            "{r:?}"
+        );
+        assert_eq!(shaded, 0, "{e:?}");
+
+        let mut unused = two_layers();
+        unused.positions.push(glam::Vec3::splat(f32::INFINITY));
+        let (r, shaded) = run(&unused, e);
+        assert!(r.is_ok(), "{r:?}");
+        assert_eq!(shaded, 2 * 16 * 8, "{e:?}");
+    }
+}

@@ -124,6 +124,13 @@ impl Device {
     }
 
     /// Runs a geometry pass: `draw` through `state` into `fb`, shading with `kernel`.
+    ///
+    /// A mesh whose triangles use a non-finite position or an index out of range is an
+    /// error ([`PassError::Mesh`], naming the first culprit), returned before anything is
+    /// shaded. Binning finds such triangles anyway (it rejects them), so the mesh is only
+    /// checked in full when binning rejected some: a large mesh drawn every frame does not
+    /// pay for a second pass over it (on the 871K-triangle dragon at 512x512 that pass was
+    /// a tenth of the frame, on one thread). Vertices no triangle uses are not checked.
     pub fn draw<K: FragmentKernel>(
         &self,
         fb: &mut Framebuffer,
@@ -133,7 +140,14 @@ impl Device {
         exec: &ExecConfig,
     ) -> Result<PassReport, PassError> {
         let start = Instant::now();
-        draw.mesh.validate()?;
+        if draw
+            .mesh
+            .normals
+            .as_ref()
+            .is_some_and(|n| n.len() != draw.mesh.positions.len())
+        {
+            draw.mesh.validate()?;
+        }
         if fb.samples != state.raster.samples {
             return Err(PassError::SampleMismatch {
                 fb: fb.samples.count(),
@@ -183,6 +197,11 @@ impl Device {
                 raster
             };
             let binned = bin_triangles(&clip, &draw.mesh.indices, &bin_state, viewport, threads);
+            if binned.rejected > 0 {
+                // Bad input, or positions that the model matrix took out of range (those
+                // are only counted).
+                draw.mesh.validate()?;
+            }
             report.stats.rejected_triangles += binned.rejected;
             let geo = Geometry::Binned {
                 binned: &binned,
