@@ -3,8 +3,9 @@
 //! - **lost updates**: A plain-loads X, another invocation B writes X, then A plain-stores
 //!   X (B's write is overwritten by a value computed from a stale read);
 //! - **data races**: conflicting accesses to X (at least one a write, at least one plain)
-//!   by two invocations whose lifetimes overlap, not both inside the interlock critical
-//!   section of the same pixel (interlock orders them);
+//!   by two invocations whose lifetimes overlap, not both inside critical sections that
+//!   exclude each other (interlock of the same pixel; per-sample interlock only when the
+//!   two share a covered sample: see [`LockKey`]);
 //! - **torn records**: another invocation writes a word of a multi-word record while A is
 //!   part-way through loading it ([`crate::Frag::load_record`]).
 //!
@@ -114,13 +115,32 @@ pub(crate) type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<AddrHasher>>;
 struct Access {
     seq: u64,
     step: u64,
-    /// The interlock key held at the time, [`NO_LOCK`] if none (not an `Option`: this
-    /// keeps an access at 24 bytes, and `Option<Access>` too).
+    /// The interlock section held at the time (a [`LockKey`]), [`NO_LOCK`] if none (not an
+    /// `Option`: this keeps an access at 24 bytes, and `Option<Access>` too).
     lock: u64,
     plain: bool,
 }
 
 const NO_LOCK: u64 = u64::MAX;
+
+/// The interlock critical section an access was made in: its pixel and the samples it
+/// holds (all eight for per-pixel interlock). Two accesses are ordered by interlock iff
+/// both were made inside sections of the same pixel that share a sample: per-sample
+/// sections of fragments with disjoint coverage run at the same time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LockKey(u64);
+
+impl LockKey {
+    pub fn new(pixel: usize, samples: u8) -> LockKey {
+        LockKey((pixel as u64) << 8 | samples as u64)
+    }
+}
+
+/// Whether two accesses' sections (raw [`LockKey`]s or [`NO_LOCK`]) order them.
+#[inline]
+fn same_section(a: u64, b: u64) -> bool {
+    (a >> 8 == b >> 8) & (a & b & 0xff != 0) & (a != NO_LOCK) & (b != NO_LOCK)
+}
 
 #[derive(Default)]
 struct AddrState {
@@ -538,7 +558,7 @@ impl Detector {
     }
 
     /// A memory access at `step` by `seq`, started in `lane` (see [`Detector::start`]);
-    /// `lock` is the interlock key it holds, if any; `record` is `(base, len, word)` for
+    /// `lock` is the interlock section it holds, if any; `record` is `(base, len, word)` for
     /// record accesses.
     #[allow(clippy::too_many_arguments)] // one call site, in the executor's hot loop
     #[inline]
@@ -549,12 +569,12 @@ impl Detector {
         addr: Addr,
         op: OpKind,
         step: u64,
-        lock: Option<usize>,
+        lock: Option<LockKey>,
         record: Option<(Addr, u32, u32)>,
     ) {
         let plain = op.is_plain();
         let write = op.is_write();
-        let lock = lock.map_or(NO_LOCK, |l| l as u64);
+        let lock = lock.map_or(NO_LOCK, |l| l.0);
         let me = Access {
             seq,
             step,
@@ -583,7 +603,7 @@ impl Detector {
         // Races: conflicts with the last write and, for a write, with the reads since it,
         // in that order (the order hazards are reported in).
         let race = |rep: &mut Reports, c: &Access| {
-            let ordered = (c.lock == lock) & (lock != NO_LOCK);
+            let ordered = same_section(c.lock, lock);
             if !ordered && invs.overlapped(c.seq, seq) {
                 rep.report(invs, HazardKind::Race, addr, seq, c.seq, step);
             }

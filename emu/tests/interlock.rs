@@ -4,7 +4,7 @@
 
 use fragrace_emu::{
     Buf, Device, Draw, ExecConfig, ExecMode, Frag, FragmentKernel, Framebuffer, InterlockMode,
-    KernelInfo, Mesh, PassState, Policy, RasterState, SampleCount, ScheduleConfig,
+    KernelInfo, Mesh, PassReport, PassState, Policy, RasterState, SampleCount, ScheduleConfig,
 };
 use glam::{Mat4, Vec3};
 
@@ -194,10 +194,18 @@ impl FragmentKernel for Inside {
 }
 
 fn peak(mode: InterlockMode, seed: u64) -> u32 {
-    let mesh = scene(4);
     let mut dev = Device::new();
     let inside = dev.buffer::<u32>("inside", 30).unwrap();
     let peak = dev.buffer::<u32>("peak", 30).unwrap();
+    let r = split_pixels(&dev, &Inside { inside, peak, mode }, seed);
+    assert_eq!(r.stats.faulted, 0);
+    dev.memory.read(peak).unwrap().into_iter().max().unwrap()
+}
+
+/// Draws `scene(4)` into 6x5 pixels of 8 samples (triangles that split pixels, so
+/// fragments of one pixel cover disjoint samples) under a random schedule.
+fn split_pixels<K: FragmentKernel>(dev: &Device, kernel: &K, seed: u64) -> PassReport {
+    let mesh = scene(4);
     let mut fb = Framebuffer::new(6, 5, SampleCount::X8, 8, &[]).unwrap();
     let state = PassState {
         raster: RasterState {
@@ -215,17 +223,61 @@ fn peak(mode: InterlockMode, seed: u64) -> u32 {
         }),
         ..ExecConfig::default()
     };
-    let r = dev
-        .draw(
-            &mut fb,
-            &Draw::new(&mesh, Mat4::IDENTITY),
-            &state,
-            &Inside { inside, peak, mode },
-            &e,
-        )
-        .unwrap();
-    assert_eq!(r.stats.faulted, 0);
-    dev.memory.read(peak).unwrap().into_iter().max().unwrap()
+    dev.draw(
+        &mut fb,
+        &Draw::new(&mesh, Mat4::IDENTITY),
+        &state,
+        kernel,
+        &e,
+    )
+    .unwrap()
+}
+
+/// Inside the section, a plain read-modify-write of one word per pixel.
+struct PixelRmw {
+    count: Buf<u32>,
+    mode: InterlockMode,
+}
+
+impl FragmentKernel for PixelRmw {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("pixel-rmw").with_interlock(self.mode)
+    }
+    async fn shade(&self, f: Frag<'_>) {
+        let p = f.pixel_index();
+        f.interlock_begin().await;
+        let c = f.load(self.count, p).await;
+        f.store(self.count, p, c + 1).await;
+        f.interlock_end().await;
+    }
+}
+
+#[test]
+fn the_detector_knows_sample_sections_of_disjoint_coverage_run_together() {
+    let races = |mode: InterlockMode, seed: u64| {
+        let mut dev = Device::new();
+        let count = dev.buffer::<u32>("count", 30).unwrap();
+        let r = split_pixels(&dev, &PixelRmw { count, mode }, seed);
+        assert_eq!(r.stats.faulted, 0);
+        r.hazards.races
+    };
+    // Per-pixel sections order every access to the pixel's word.
+    for mode in [InterlockMode::ORDERED, InterlockMode::UNORDERED] {
+        for seed in 0..8 {
+            assert_eq!(races(mode, seed), 0, "{mode:?} seed {seed}");
+        }
+    }
+    // Per-sample sections of fragments covering disjoint samples do not: the per-pixel
+    // word is raced on (a kernel bug the detector must show).
+    for mode in [
+        InterlockMode::SAMPLE_ORDERED,
+        InterlockMode::SAMPLE_UNORDERED,
+    ] {
+        assert!(
+            (0..8).any(|seed| races(mode, seed) > 0),
+            "{mode:?}: no race reported"
+        );
+    }
 }
 
 #[test]

@@ -767,8 +767,19 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         }) = inv.pending.get()
         {
             let input = inv.input.get();
-            let lock = match env.interlock {
-                Some(l) if inv.in_interlock.get() => Some(l.key(input.x, input.y)),
+            let lock = match (env.interlock, env.interlock_mode) {
+                (Some(l), Some(mode)) if inv.in_interlock.get() => {
+                    // Per-sample sections exclude only fragments sharing a covered sample.
+                    let samples = if mode.per_sample {
+                        input.coverage
+                    } else {
+                        0xff
+                    };
+                    Some(crate::hazard::LockKey::new(
+                        l.key(input.x, input.y),
+                        samples,
+                    ))
+                }
                 _ => None,
             };
             detector.access(
