@@ -790,18 +790,7 @@ impl<'a> Frag<'a> {
                 return Access(AccessState::Done(self.perform::<T>(buf, index, op)));
             }
         }
-        self.request(buf, index, op, record)
-    }
-
-    /// An access left for later (scheduled mode, or a lockstep lane past its turn).
-    #[inline(always)]
-    fn request<T: Word>(
-        &self,
-        buf: Buf<T>,
-        index: u32,
-        op: MemOp,
-        record: Option<RecordSpan>,
-    ) -> Access<'a, T> {
+        // Left for later: scheduled mode, or a lockstep lane past its turn.
         Access(AccessState::Waiting(Request {
             frag: *self,
             buf,
