@@ -263,7 +263,9 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             }
             // What the pixels of a run share.
             let tri = span.tri;
-            let t = &binned.tris[tri as usize];
+            // The setup record (planes) only for the tests: loading it per run cost a cache
+            // miss per triangle on large meshes.
+            let planes = tests.then(|| &binned.tris[tri as usize]);
             let fy = span.y as f32;
             // Unique and increasing in API order (triangle, then pixel).
             let row_seq = pass
@@ -275,7 +277,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 let mut cov = cov;
                 // Interpolated here only for the tests (`Frag::depth` does it on demand).
                 let mut depth = f32::NAN;
-                if tests {
+                if let Some(t) = planes {
                     let fx = x as f32;
                     depth = t.depth_at(fx + 0.5, fy + 0.5);
                     let mut depths = [depth; 8];
@@ -284,7 +286,13 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                             depths[s] = t.depth_at(fx + p.0, fy + p.1);
                         }
                     }
-                    cov = tile.test(state, (x - x0, span.y - y0), cov, &depths, t.front_facing);
+                    cov = tile.test(
+                        state,
+                        (x - x0, span.y - y0),
+                        cov,
+                        &depths,
+                        span.front_facing,
+                    );
                     if cov == 0 {
                         self.counts.early_culled += 1;
                         continue;
@@ -295,10 +303,10 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                     x,
                     y: span.y,
                     tri,
-                    primitive_id: t.source,
+                    primitive_id: span.source,
                     instance_id: pass.instance,
                     coverage: cov,
-                    front_facing: t.front_facing,
+                    front_facing: span.front_facing,
                     depth,
                     ticket: 0,
                 };

@@ -145,6 +145,11 @@ pub struct Span {
     pub tri: u32,
     /// Coverage of every pixel of the run (see [`Fragment::coverage`]).
     pub coverage: u8,
+    /// The triangle's [`SetupTriangle::source`] and [`SetupTriangle::front_facing`],
+    /// carried along so that shading need not load the setup record (64 bytes, a cache
+    /// miss per triangle on a large mesh) unless it reads depth or barycentrics.
+    pub source: u32,
+    pub front_facing: bool,
 }
 
 /// One covered pixel of one triangle (a fragment before shading).

@@ -117,6 +117,16 @@ struct ChunkBins {
     verts: Vec<[[i32; 2]; 3]>,
     /// Coverage of the chunk's small triangles, computed at setup (see [`SmallCoverage`]).
     smalls: Vec<SmallCoverage>,
+    /// Per setup triangle of the chunk (by `BinEntry::tri`): what shading needs of it
+    /// besides coverage, kept apart from the 64-byte setup records.
+    meta: Vec<TriMeta>,
+}
+
+/// A setup triangle's source index and facing (see [`SetupTriangle`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct TriMeta {
+    source: u32,
+    front_facing: bool,
 }
 
 /// The coverage of a small one-sample triangle (pixel rectangle of at most 4x4, most
@@ -248,8 +258,8 @@ impl Binned {
                 while end < n && list[end as usize].info & PIECE != 0 && {
                     let prev = &list[end as usize - 1];
                     prev.info & PIECE != 0
-                        && self.tris[(chunk.base + prev.tri) as usize].source
-                            == self.tris[(chunk.base + list[end as usize].tri) as usize].source
+                        && chunk.meta[prev.tri as usize].source
+                            == chunk.meta[list[end as usize].tri as usize].source
                 } {
                     end += 1;
                 }
@@ -307,14 +317,18 @@ impl Binned {
             // fragment (the pieces are consecutive, and share the source's planes).
             let mut j = i + 1;
             if e.info & PIECE != 0 && si.offs.len() > 1 {
-                let source = self.tris[tri as usize].source;
+                let source = c.meta[e.tri as usize].source;
                 while j < list.len()
                     && list[j].info & PIECE != 0
-                    && self.tris[(c.base + list[j].tri) as usize].source == source
+                    && c.meta[list[j].tri as usize].source == source
                 {
                     j += 1;
                 }
             }
+            let TriMeta {
+                source,
+                front_facing,
+            } = c.meta[e.tri as usize];
             if j == i + 1 {
                 entry_coverage(c, &e, rect, &si, |y, x0, x1, coverage| {
                     emit(Span {
@@ -323,6 +337,8 @@ impl Binned {
                         x1,
                         tri,
                         coverage,
+                        source,
+                        front_facing,
                     })
                 });
             } else {
@@ -347,6 +363,8 @@ impl Binned {
                         x1: x + 1,
                         tri,
                         coverage,
+                        source,
+                        front_facing,
                     });
                 }
             }
@@ -407,6 +425,7 @@ static ENTRIES: Pool<BinEntry> = Pool::new();
 static STARTS: Pool<u32> = Pool::new();
 static VERTS: Pool<[[i32; 2]; 3]> = Pool::new();
 static SMALLS: Pool<SmallCoverage> = Pool::new();
+static META: Pool<TriMeta> = Pool::new();
 
 impl Drop for Binned {
     /// Hands the big buffers back to the pool for the next frame.
@@ -417,6 +436,7 @@ impl Drop for Binned {
             STARTS.give(c.tile_start);
             VERTS.give(c.verts);
             SMALLS.give(c.smalls);
+            META.give(c.meta);
         }
     }
 }
@@ -557,6 +577,7 @@ struct ChunkOut {
     tris: Vec<SetupTriangle>,
     verts: Vec<[[i32; 2]; 3]>,
     smalls: Vec<SmallCoverage>,
+    meta: Vec<TriMeta>,
     /// `(tile, entry)` in triangle order.
     bins: Vec<(u32, BinEntry)>,
     rejected: u64,
@@ -839,6 +860,10 @@ impl Ctx<'_> {
         let sh = self.tile_shift;
         let (depth, bary) = planes(&v, &zw, &q, r[0], r[1]);
         let tri = out.tris.len() as u32;
+        out.meta.push(TriMeta {
+            source,
+            front_facing,
+        });
         out.tris.push(SetupTriangle {
             source,
             front_facing,
@@ -914,6 +939,7 @@ impl Ctx<'_> {
             tris: TRIS.take(),
             verts: VERTS.take(),
             smalls: SMALLS.take(),
+            meta: META.take(),
             bins: PAIRS.take(),
             rejected: 0,
         };
@@ -943,6 +969,7 @@ impl Ctx<'_> {
                 entries,
                 verts: out.verts,
                 smalls: out.smalls,
+                meta: out.meta,
             },
             out.rejected,
         )
@@ -1099,6 +1126,7 @@ pub fn bin_triangles(
             entries: Vec::new(),
             verts: Vec::new(),
             smalls: Vec::new(),
+            meta: Vec::new(),
         };
         (Vec::new(), bins, rejected)
     };
