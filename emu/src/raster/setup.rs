@@ -888,7 +888,9 @@ impl Ctx<'_> {
             }
             SetupCoverage::Small(small) => {
                 out.smalls.push(small);
-                let info = (out.smalls.len() as u32 - 1) | SMALL | piece;
+                let index = out.smalls.len() as u32 - 1;
+                debug_assert!(index & FLAGS == 0, "a chunk of over 2^29 triangles");
+                let info = index | SMALL | piece;
                 // Only the tiles holding a covered pixel.
                 for ty in ty0..=ty1 {
                     for tx in tx0..=tx1 {
@@ -908,7 +910,9 @@ impl Ctx<'_> {
             SetupCoverage::Vertices => {}
         }
         out.verts.push(v);
-        let info = (out.verts.len() as u32 - 1) | piece;
+        let index = out.verts.len() as u32 - 1;
+        debug_assert!(index & FLAGS == 0, "a chunk of over 2^29 triangles");
+        let info = index | piece;
         if tx0 == tx1 && ty0 == ty1 {
             out.bins.push((
                 ty0 as u32 * self.tiles_x + tx0 as u32,
