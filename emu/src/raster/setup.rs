@@ -181,6 +181,10 @@ struct BinEntry {
 const SINGLE: u32 = 1 << 31;
 /// Flag of a [`BinEntry`] of one of several fan pieces of a clipped triangle.
 const PIECE: u32 = 1 << 30;
+/// Most input triangles per setup chunk (see [`bin_triangles`]).
+const MAX_CHUNK: usize = 1 << 25;
+const _: () = assert!(MAX_CHUNK * MAX_POLY < SMALL as usize);
+
 /// Flag of a [`BinEntry`] whose coverage was computed at setup: `info` (without the flags)
 /// indexes [`ChunkBins::smalls`].
 const SMALL: u32 = 1 << 29;
@@ -1121,7 +1125,9 @@ pub fn bin_triangles(
     // One contiguous chunk per thread: the first chunk's buffer becomes `tris` and only the
     // others are appended (copying setup records is a large part of the memory traffic).
     // Rejecting off-screen or sub-pixel triangles is cheap, so equal ranges balance well.
-    let chunk = n.div_ceil(threads).max(4096);
+    // At most 2^25 input triangles a chunk: with clipping's fan pieces (at most
+    // `MAX_POLY - 2` each) a chunk's setup indices stay below the bin entry's flag bits.
+    let chunk = n.div_ceil(threads).clamp(4096, MAX_CHUNK);
     let nchunks = n.div_ceil(chunk);
     let empty = |rejected: u64| {
         let bins = ChunkBins {
