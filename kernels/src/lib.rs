@@ -15,6 +15,7 @@ pub mod basic;
 pub mod common;
 pub mod kbuffer;
 pub mod oracle;
+pub mod peeling;
 pub mod protocols;
 pub mod registry;
 pub(crate) mod resolve;

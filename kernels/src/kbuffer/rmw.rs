@@ -487,7 +487,7 @@ impl Algorithm for KbRmw {
 
 /// Scenes, executors and the oracle comparison shared by the k-buffer tests of this folder.
 #[cfg(test)]
-pub(super) mod testing {
+pub(crate) mod testing {
     use fragrace_emu::{ExecConfig, ExecMode, Mesh, Policy, ScheduleConfig};
     use glam::Vec3;
 

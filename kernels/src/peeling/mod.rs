@@ -1,0 +1,155 @@
+//! Depth peeling: multi-pass algorithms that extract the fragments of every pixel layer by
+//! layer, front to back, each geometry pass peeling the next layer behind the one before.
+//!
+//! The classic front-to-back peeling (F2B, Everitt 2001, \[12\] of the depth-fighting paper)
+//! and the depth-fighting paper's coplanarity-aware variants of it (section 3.1: F2B-2P,
+//! Algorithm 1; F2B-LL, Algorithm 2). They share the peel loop's shape, which lives here:
+//!
+//! - every iteration is one or two geometry passes; the host loop ends when an occlusion
+//!   query says the last pass passed no sample (the paper halts the loop with conditional
+//!   rendering, section 3.3: the next pass is issued with the query as its condition, so it
+//!   is skipped once nothing is left), or after `k` iterations;
+//! - the fragments each iteration extracts are appended to per-pixel lists on the host,
+//!   in extraction order (front to back);
+//! - the image is the front-to-back composite of the extracted layers (what the paper's
+//!   blend-under accumulation of each peeled layer computes), by primitive colour at the
+//!   constant opacity `params.alpha`, as every other algorithm's resolve.
+//!
+//! **How many layers.** As the k-buffers keep the `k` nearest fragments, the peelers peel
+//! at most `k` iterations (the paper's "maximum number of iterations set by the user") and
+//! keep the first `k` fragments they extracted, which the oracle compares with the true `k`
+//! nearest (`Capacity::KNearest`). `--k` large enough peels every layer (`check` then
+//! compares with the `k` nearest of a scene whose pixels hold fewer than `k` fragments,
+//! which is all of them).
+//!
+//! **Hazards.** Classic peeling has no shared memory at all: the depth test, blending and the
+//! images read back from earlier passes are fixed-function and API ordered, so every
+//! executor gives the same result. What it loses is by design: F2B discards every fragment
+//! at the depth of the layer it peeled last, so coplanar fragments collapse into one
+//! (robustness ratio below 1 where the scene has coplanar fragments: the depth-fighting
+//! paper's motivation, section 1). F2B-LL adds a per-pixel linked list with atomics.
+
+mod f2b;
+mod f2b2p;
+mod f2bll;
+
+use fragrace_emu::{Format, Framebuffer, Image, SampleCount};
+
+use crate::algo::{AlgoError, AlgoResult, Capture, CapturedFrag, Check, Frame, Params};
+use crate::common::{self, composite_frags, pixels};
+
+use crate::algo::Algorithm;
+
+/// The algorithms of this family.
+pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
+    vec![
+        Box::new(f2b::F2b),
+        Box::new(f2b2p::F2b2p),
+        Box::new(f2bll::F2bLl),
+    ]
+}
+
+/// Most layers a peeler may be asked for (k), so that a typo cannot ask for billions of
+/// geometry passes.
+pub const MAX_LAYERS: u32 = 1 << 16;
+
+/// The layers of a peel run: what each pixel's iterations extracted, in order.
+pub(super) struct Peeled<'a> {
+    pub frame: Frame<'a>,
+    pub params: &'a Params,
+    /// Iterations allowed (`params.k`).
+    pub k: u32,
+    pub lists: Vec<Vec<CapturedFrag>>,
+    /// Iterations run.
+    pub iterations: u32,
+}
+
+impl<'a> Peeled<'a> {
+    pub fn new(frame: &Frame<'a>, params: &'a Params) -> Result<Peeled<'a>, AlgoError> {
+        if params.k == 0 || params.k > MAX_LAYERS {
+            return Err(AlgoError::Invalid(format!(
+                "k = {} layers is outside 1..={MAX_LAYERS}",
+                params.k
+            )));
+        }
+        Ok(Peeled {
+            frame: *frame,
+            params,
+            k: params.k,
+            lists: vec![Vec::new(); pixels(frame)],
+            iterations: 0,
+        })
+    }
+
+    /// A single-sample framebuffer of the frame with `formats` as its targets.
+    pub fn framebuffer(&self, formats: &[Format]) -> Result<Framebuffer, AlgoError> {
+        common::framebuffer(&self.frame, SampleCount::X1, formats)
+    }
+
+    /// The per-pixel lists truncated to the first `k` extracted, the composite image, and
+    /// the result. `bytes_per_pixel`: the targets and images the passes used (the device's
+    /// buffers are added).
+    pub fn finish(
+        self,
+        report: fragrace_emu::PassReport,
+        mut checks: Vec<Check>,
+        device_bytes: u64,
+        bytes_per_pixel: u64,
+    ) -> AlgoResult {
+        let k = self.k as usize;
+        let mut beyond = 0u64;
+        let lists: Vec<Vec<CapturedFrag>> = self
+            .lists
+            .into_iter()
+            .map(|mut l| {
+                beyond += l.len().saturating_sub(k) as u64;
+                l.truncate(k);
+                l
+            })
+            .collect();
+        let alpha = self.params.alpha;
+        let background = self.params.background;
+        let image = lists
+            .iter()
+            .map(|l| composite_frags(l, alpha, background))
+            .collect();
+        checks.push(Check::new(
+            "iterations (informational)",
+            true,
+            format!(
+                "{} iterations of at most k = {}; {beyond} fragments extracted beyond the k-th of their pixel",
+                self.iterations, self.k
+            ),
+        ));
+        let n = lists.len() as u64;
+        AlgoResult {
+            capture: Some(Capture::from_lists(
+                self.frame.width,
+                self.frame.height,
+                lists,
+            )),
+            image: Some(image),
+            report,
+            checks,
+            storage_bytes: device_bytes + n * bytes_per_pixel,
+            ..Default::default()
+        }
+    }
+}
+
+/// Texel `p` (row-major pixel index) of a single-sample image as floats.
+pub(super) fn texel_f32(image: &Image, p: usize) -> [f32; 4] {
+    image.texels[p].map(f32::from_bits)
+}
+
+/// Primitive ids travel through float targets (blending works on floats, as on the GPU the
+/// paper targets): exact below 2^24.
+pub(super) fn check_ids_fit_floats(frame: &Frame<'_>) -> Result<(), AlgoError> {
+    let prims = frame.mesh.indices.len() as u64;
+    if prims > 1 << 24 {
+        return Err(AlgoError::Invalid(format!(
+            "{prims} primitives: the ids do not fit the 24-bit mantissa of the float targets"
+        )));
+    }
+    Ok(())
+}
