@@ -25,8 +25,8 @@
 //! that many.
 
 use fragrace_emu::{
-    CompareFunc, DepthState, Draw, Format, Frag, FragmentKernel, Image, KernelInfo, PassReport,
-    PassState, TargetState,
+    Buf, CompareFunc, DepthState, Draw, Format, Frag, FragmentKernel, Image, KernelInfo,
+    PassReport, PassState, TargetState,
 };
 
 use super::{texel_f32, Peeled};
@@ -40,6 +40,9 @@ use crate::common::{capture_state, EMPTY};
 struct Peel<'i> {
     /// The previous layer (RG32F: depth, primitive bits); `None` in the first pass.
     prev: Option<&'i Image>,
+    /// One word: fragments at exactly the previous layer's depth (the peeled one and its
+    /// coplanar companions, which are lost), counted for the `dropped` figure.
+    coplanar: Buf<u32>,
 }
 
 impl FragmentKernel for Peel<'_> {
@@ -50,8 +53,12 @@ impl FragmentKernel for Peel<'_> {
         let z = f.depth();
         if let Some(prev) = self.prev {
             // At or in front of the last peeled layer: peeled already, or coplanar with it
-            // (the classic algorithm's loss).
-            if z <= f32::from_bits(f.texel(prev, f.x(), f.y(), 0)[0]) {
+            // (the classic algorithm's loss, counted).
+            let d = f32::from_bits(f.texel(prev, f.x(), f.y(), 0)[0]);
+            if z <= d {
+                if z == d {
+                    f.atomic_add(self.coplanar, 0, 1).await;
+                }
                 f.discard();
                 return;
             }
@@ -99,14 +106,18 @@ impl Algorithm for F2b {
         exec: &fragrace_emu::ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
         let mut peeled = Peeled::new(frame, params)?;
-        let device = crate::common::fresh();
+        let mut device = crate::common::fresh();
+        let coplanar = device.buffer::<u32>("f2b-coplanar", 1)?;
         let draw = Draw::new(frame.mesh, frame.view_proj);
         let mut fb = peeled.framebuffer(&[Format::RG32F])?;
-        let mut state = peel_state();
+        let state = peel_state();
         let mut report = PassReport::default();
         let mut prev: Option<Image> = None;
         let mut not_increasing = 0u64;
         let mut query_mismatch = 0u32;
+        // Pixels peeled by a pass that another pass followed (which met the peeled fragment
+        // again at its layer's depth), and by the last pass.
+        let (mut revisited, mut last_gained) = (0u64, 0u64);
         while peeled.iterations < peeled.k {
             fb.clear_depth(f32::INFINITY);
             fb.clear_color(0, [f32::INFINITY.to_bits(), EMPTY, 0, 0]);
@@ -116,11 +127,13 @@ impl Algorithm for F2b {
                 &state,
                 &Peel {
                     prev: prev.as_ref(),
+                    coplanar,
                 },
                 exec,
             )?;
             report.merge(&pass);
-            if pass.skipped || pass.stats.samples_passed == 0 {
+            revisited += last_gained;
+            if pass.stats.samples_passed == 0 {
                 break;
             }
             peeled.iterations += 1;
@@ -145,11 +158,20 @@ impl Algorithm for F2b {
             if gained == 0 || gained > pass.stats.samples_passed {
                 query_mismatch += 1;
             }
-            // Conditional rendering: the next peel runs only if this one peeled anything.
-            state.condition = Some(pass.query());
+            last_gained = gained;
             prev = Some(layer);
         }
+        let at_layers = u64::from(device.memory.read(coplanar)?[0]);
+        let lost = at_layers.saturating_sub(revisited);
         let checks = vec![
+            Check::new(
+                "every peeled fragment is met again, at its layer's depth, by the next pass",
+                at_layers >= revisited,
+                format!(
+                    "{at_layers} fragments at a peeled layer's depth for {revisited} peeled; {lost} coplanar \
+                     fragments lost"
+                ),
+            ),
             Check::new(
                 "each pixel's layers strictly increase in depth",
                 not_increasing == 0,
@@ -161,7 +183,10 @@ impl Algorithm for F2b {
                 format!("{query_mismatch} passes disagree"),
             ),
         ];
-        Ok(peeled.finish(report, checks, device.memory.bytes(), 20))
+        let mut result = peeled.finish(report, checks, device.memory.bytes(), 20);
+        // Coplanar companions of a peeled fragment: generated, never kept.
+        result.dropped = lost;
+        Ok(result)
     }
 }
 
@@ -183,6 +208,10 @@ mod tests {
             }
             // The scene has coplanar quads: classic peeling loses fragments there.
             assert!(m.error_pixels > 0 && m.robustness < 1.0, "{what}: {m:?}");
+            assert!(
+                r.dropped > 0,
+                "{what}: the coplanar fragments lost are counted"
+            );
             let mask = m.error_mask.clone();
             let b = baseline.get_or_insert(mask.clone());
             assert_eq!(
@@ -212,6 +241,7 @@ mod tests {
             };
             let (r, m) = run(&F2b, &f, &params, &fragrace_emu::ExecConfig::parallel(2));
             assert_eq!(m.error_pixels, 0, "k = {k}: {:?}", m.first_error);
+            assert_eq!(r.dropped, 0, "k = {k}: nothing coplanar, nothing lost");
             assert!(r.report.stats.geometry_passes <= k + 1);
         }
     }

@@ -173,16 +173,17 @@ impl Algorithm for F2b2p {
         }];
         let mut report = PassReport::default();
         let mut peel = |current: Option<(&Image, &Image)>,
-                        report: &mut PassReport,
-                        condition|
+                        report: &mut PassReport|
          -> Result<(Image, Image), AlgoError> {
             peel_fb.clear_color(0, [NONE.to_bits(), NONE.to_bits(), 0, 0]);
             peel_fb.clear_color(1, [NONE.to_bits(), 0, 0, 0]);
-            let state = PassState {
-                condition,
-                ..peel_state.clone()
-            };
-            report.merge(&device.draw(&mut peel_fb, &draw, &state, &Peel { current }, exec)?);
+            report.merge(&device.draw(
+                &mut peel_fb,
+                &draw,
+                &peel_state,
+                &Peel { current },
+                exec,
+            )?);
             Ok((peel_fb.image(0), peel_fb.image(1)))
         };
         let mut count = |layer: &Image,
@@ -201,11 +202,11 @@ impl Algorithm for F2b2p {
             Ok((count_fb.image(0), pass))
         };
 
-        let (_, mut layer) = peel(None, &mut report, None)?;
+        let (_, mut layer) = peel(None, &mut report)?;
         let (mut ids, mut counted) = count(&layer, None, &mut report)?;
         let (mut not_found, mut backwards, mut stalled) = (0u64, 0u64, 0u64);
         while counted.stats.samples_passed > 0 && peeled.iterations < peeled.k {
-            let (extracted, next) = peel(Some((&layer, &ids)), &mut report, Some(counted.query()))?;
+            let (extracted, next) = peel(Some((&layer, &ids)), &mut report)?;
             peeled.iterations += 1;
             for (p, list) in peeled.lists.iter_mut().enumerate() {
                 let [id_min, id_max, _, n] = texel_f32(&ids, p);

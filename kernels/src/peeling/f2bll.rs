@@ -29,7 +29,7 @@
 
 use fragrace_emu::{
     Buf, CompareFunc, DepthState, Draw, EarlyTests, Format, Frag, FragmentKernel, Image,
-    KernelInfo, PassReport, PassState, TargetState,
+    KernelInfo, PassReport, TargetState,
 };
 
 use super::Peeled;
@@ -145,26 +145,21 @@ impl Algorithm for F2bLl {
         let mut report = PassReport::default();
         let mut prev: Option<Image> = None;
         let mut lists: Option<Lists> = None;
-        let mut condition = None;
         let mut pushed = 0u64;
         while peeled.iterations < peeled.k {
             fb.clear_depth(f32::INFINITY);
             fb.clear_color(0, [f32::INFINITY.to_bits(), 0, 0, 0]);
-            let state = PassState {
-                condition,
-                ..depth_state.clone()
-            };
             let depth_pass = device.draw(
                 &mut fb,
                 &draw,
-                &state,
+                &depth_state,
                 &DepthPass {
                     prev: prev.as_ref(),
                 },
                 exec,
             )?;
             report.merge(&depth_pass);
-            if depth_pass.skipped || depth_pass.stats.samples_passed == 0 {
+            if depth_pass.stats.samples_passed == 0 {
                 break;
             }
             let l = match lists {
@@ -191,15 +186,11 @@ impl Algorithm for F2bLl {
                     })
                 }
             };
-            let state = PassState {
-                condition: Some(depth_pass.query()),
-                ..capture.clone()
-            };
-            let captured = device.draw(&mut fb, &draw, &state, &CapturePass { lists: l }, exec)?;
+            let captured =
+                device.draw(&mut fb, &draw, &capture, &CapturePass { lists: l }, exec)?;
             report.merge(&captured);
             peeled.iterations += 1;
             pushed += captured.stats.samples_passed;
-            condition = Some(captured.query());
             prev = Some(fb.image(0));
         }
 

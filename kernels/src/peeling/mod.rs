@@ -5,10 +5,10 @@
 //! and the depth-fighting paper's coplanarity-aware variants of it (section 3.1: F2B-2P,
 //! Algorithm 1; F2B-LL, Algorithm 2). They share the peel loop's shape, which lives here:
 //!
-//! - every iteration is one or two geometry passes; the host loop ends when an occlusion
-//!   query says the last pass passed no sample (the paper halts the loop with conditional
-//!   rendering, section 3.3: the next pass is issued with the query as its condition, so it
-//!   is skipped once nothing is left), or after `k` iterations;
+//! - every iteration is one or two geometry passes; the host loop ends when the occlusion
+//!   query of the last pass (samples passed) is zero, or after `k` iterations (the paper
+//!   avoids reading the query back with conditional rendering, section 3.3; here the
+//!   read-back costs nothing, so the loop reads it);
 //! - the fragments each iteration extracts are appended to per-pixel lists on the host,
 //!   in extraction order (front to back);
 //! - the image is the front-to-back composite of the extracted layers (what the paper's
