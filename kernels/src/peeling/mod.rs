@@ -1,9 +1,11 @@
 //! Depth peeling: multi-pass algorithms that extract the fragments of every pixel layer by
-//! layer, front to back, each geometry pass peeling the next layer behind the one before.
+//! layer, each geometry pass peeling the next layer behind the one before (DUAL: the next
+//! one at each end of the remaining depth range).
 //!
-//! The classic front-to-back peeling (F2B, Everitt 2001, \[12\] of the depth-fighting paper)
-//! and the depth-fighting paper's coplanarity-aware variants of it (section 3.1: F2B-2P,
-//! Algorithm 1; F2B-LL, Algorithm 2). They share the peel loop's shape, which lives here:
+//! The classic front-to-back peeling (F2B, Everitt 2001, \[12\] of the depth-fighting paper),
+//! the depth-fighting paper's coplanarity-aware variants of it (section 3.1: F2B-2P,
+//! Algorithm 1; F2B-LL, Algorithm 2), and dual depth peeling (DUAL, Bavoil & Myers 2008,
+//! \[13\] there, section 3.1.2). They share the peel loop's shape, which lives here:
 //!
 //! - every iteration is one or two geometry passes; the host loop ends when the occlusion
 //!   query of the last pass (samples passed) is zero, or after `k` iterations (the paper
@@ -15,20 +17,23 @@
 //!   blend-under accumulation of each peeled layer computes), by primitive colour at the
 //!   constant opacity `params.alpha`, as every other algorithm's resolve.
 //!
-//! **How many layers.** As the k-buffers keep the `k` nearest fragments, the peelers peel
-//! at most `k` iterations (the paper's "maximum number of iterations set by the user") and
-//! keep the first `k` fragments they extracted, which the oracle compares with the true `k`
-//! nearest (`Capacity::KNearest`). `--k` large enough peels every layer (`check` then
-//! compares with the `k` nearest of a scene whose pixels hold fewer than `k` fragments,
-//! which is all of them).
+//! **How many layers.** As the k-buffers keep the `k` nearest fragments, the front-to-back
+//! peelers peel at most `k` iterations (the paper's "maximum number of iterations set by
+//! the user") and keep the first `k` fragments they extracted, which the oracle compares
+//! with the true `k` nearest (`Capacity::KNearest`). `--k` large enough peels every layer.
+//! DUAL peels from both ends, so a cap would keep layers that are not the nearest: it peels
+//! every layer (`Capacity::All`).
 //!
-//! **Hazards.** Classic peeling has no shared memory at all: the depth test, blending and the
+//! **Hazards.** Classic peeling needs no shared memory: the depth test, blending and the
 //! images read back from earlier passes are fixed-function and API ordered, so every
 //! executor gives the same result. What it loses is by design: F2B discards every fragment
 //! at the depth of the layer it peeled last, so coplanar fragments collapse into one
 //! (robustness ratio below 1 where the scene has coplanar fragments: the depth-fighting
-//! paper's motivation, section 1). F2B-LL adds a per-pixel linked list with atomics.
+//! paper's motivation, section 1); DUAL loses them at both ends of its range. Both count the
+//! lost fragments with one atomic counter (`AlgoResult::dropped`). F2B-LL adds a per-pixel
+//! linked list with atomics.
 
+mod dual;
 mod f2b;
 mod f2b2p;
 mod f2bll;
@@ -46,6 +51,7 @@ pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
         Box::new(f2b::F2b),
         Box::new(f2b2p::F2b2p),
         Box::new(f2bll::F2bLl),
+        Box::new(dual::Dual),
     ]
 }
 
