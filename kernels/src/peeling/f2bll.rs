@@ -28,8 +28,8 @@
 //! `R_h = 1` under every executor (asserted by the differential harness).
 
 use fragrace_emu::{
-    Buf, CompareFunc, DepthState, Draw, EarlyTests, Format, Frag, FragmentKernel, Image,
-    KernelInfo, PassReport, TargetState,
+    Buf, CompareFunc, DepthState, Device, Draw, EarlyTests, ExecConfig, Format, Frag,
+    FragmentKernel, Framebuffer, Image, KernelInfo, PassReport, PassState, TargetState,
 };
 
 use super::Peeled;
@@ -61,6 +61,83 @@ impl FragmentKernel for DepthPass<'_> {
             }
         }
         f.output(0, [z, 0.0, 0.0, 0.0]);
+    }
+}
+
+/// The two passes of an F2B-LL or F2B-B iteration over one framebuffer: the depth pass
+/// that leaves the next layer in the depth buffer, and the capture pass that runs a kernel on
+/// the fragments at that layer (depth test `EQUAL`, early, no writes).
+pub(super) struct LayerPasses<'m> {
+    draw: Draw<'m>,
+    fb: Framebuffer,
+    depth_state: PassState,
+    capture_state: PassState,
+    /// The last layer (R32F depth), once a depth pass has run.
+    prev: Option<Image>,
+}
+
+impl<'m> LayerPasses<'m> {
+    pub fn new(peeled: &Peeled<'_>, frame: &Frame<'m>) -> Result<LayerPasses<'m>, AlgoError> {
+        let mut depth_state = capture_state();
+        depth_state.fragment.depth = DepthState {
+            test: true,
+            func: CompareFunc::Less,
+            write: true,
+        };
+        depth_state.fragment.targets = vec![TargetState::new(Format::R32F)];
+        let mut capture = capture_state();
+        capture.fragment.depth = DepthState {
+            test: true,
+            func: CompareFunc::Equal,
+            write: false,
+        };
+        capture.fragment.early = EarlyTests::ForceEarly;
+        Ok(LayerPasses {
+            draw: Draw::new(frame.mesh, frame.view_proj),
+            fb: peeled.framebuffer(&[Format::R32F])?,
+            depth_state,
+            capture_state: capture,
+            prev: None,
+        })
+    }
+
+    /// The depth pass of the next layer; `None` when no fragment is left behind the last.
+    pub fn next_layer(
+        &mut self,
+        device: &Device,
+        exec: &ExecConfig,
+        report: &mut PassReport,
+    ) -> Result<Option<PassReport>, AlgoError> {
+        self.fb.clear_depth(f32::INFINITY);
+        self.fb.clear_color(0, [f32::INFINITY.to_bits(), 0, 0, 0]);
+        let kernel = DepthPass {
+            prev: self.prev.as_ref(),
+        };
+        let pass = device.draw(&mut self.fb, &self.draw, &self.depth_state, &kernel, exec)?;
+        report.merge(&pass);
+        if pass.stats.samples_passed == 0 {
+            return Ok(None);
+        }
+        self.prev = Some(self.fb.image(0));
+        Ok(Some(pass))
+    }
+
+    /// The layer the last depth pass found (R32F depth, `+inf` where none), once one ran.
+    pub fn layer(&self) -> Option<&Image> {
+        self.prev.as_ref()
+    }
+
+    /// Runs `kernel` on the fragments at the layer the last depth pass found.
+    pub fn capture<K: FragmentKernel>(
+        &mut self,
+        device: &Device,
+        kernel: &K,
+        exec: &ExecConfig,
+        report: &mut PassReport,
+    ) -> Result<PassReport, AlgoError> {
+        let pass = device.draw(&mut self.fb, &self.draw, &self.capture_state, kernel, exec)?;
+        report.merge(&pass);
+        Ok(pass)
     }
 }
 
@@ -125,43 +202,14 @@ impl Algorithm for F2bLl {
     ) -> Result<AlgoResult, AlgoError> {
         let mut peeled = Peeled::new(frame, params)?;
         let mut device = crate::common::fresh();
-        let draw = Draw::new(frame.mesh, frame.view_proj);
-        let mut fb = peeled.framebuffer(&[Format::R32F])?;
-        let mut depth_state = capture_state();
-        depth_state.fragment.depth = DepthState {
-            test: true,
-            func: CompareFunc::Less,
-            write: true,
-        };
-        depth_state.fragment.targets = vec![TargetState::new(Format::R32F)];
-        let mut capture = capture_state();
-        capture.fragment.depth = DepthState {
-            test: true,
-            func: CompareFunc::Equal,
-            write: false,
-        };
-        capture.fragment.early = EarlyTests::ForceEarly;
-
+        let mut layers = LayerPasses::new(&peeled, frame)?;
         let mut report = PassReport::default();
-        let mut prev: Option<Image> = None;
         let mut lists: Option<Lists> = None;
         let mut pushed = 0u64;
         while peeled.iterations < peeled.k {
-            fb.clear_depth(f32::INFINITY);
-            fb.clear_color(0, [f32::INFINITY.to_bits(), 0, 0, 0]);
-            let depth_pass = device.draw(
-                &mut fb,
-                &draw,
-                &depth_state,
-                &DepthPass {
-                    prev: prev.as_ref(),
-                },
-                exec,
-            )?;
-            report.merge(&depth_pass);
-            if depth_pass.stats.samples_passed == 0 {
+            let Some(depth_pass) = layers.next_layer(&device, exec, &mut report)? else {
                 break;
-            }
+            };
             let l = match lists {
                 Some(l) => l,
                 None => {
@@ -186,12 +234,9 @@ impl Algorithm for F2bLl {
                     })
                 }
             };
-            let captured =
-                device.draw(&mut fb, &draw, &capture, &CapturePass { lists: l }, exec)?;
-            report.merge(&captured);
+            let captured = layers.capture(&device, &CapturePass { lists: l }, exec, &mut report)?;
             peeled.iterations += 1;
             pushed += captured.stats.samples_passed;
-            prev = Some(fb.image(0));
         }
 
         let mut checks = Vec::new();

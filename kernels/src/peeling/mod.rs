@@ -36,6 +36,7 @@
 mod dual;
 mod f2b;
 mod f2b2p;
+mod f2bb;
 mod f2bll;
 
 use fragrace_emu::{Format, Framebuffer, Image, SampleCount};
@@ -51,6 +52,8 @@ pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
         Box::new(f2b::F2b),
         Box::new(f2b2p::F2b2p),
         Box::new(f2bll::F2bLl),
+        Box::new(f2bb::F2bB::fab()),
+        Box::new(f2bb::F2bB::kb()),
         Box::new(dual::Dual),
     ]
 }
