@@ -141,14 +141,104 @@ impl<'m> LayerPasses<'m> {
     }
 }
 
-/// The list buffers.
+/// The list buffers: heads (`EMPTY` = empty list), a pool of nodes of [`NODE_WORDS`] words,
+/// and the allocation counters.
 #[derive(Clone, Copy)]
-struct Lists {
-    heads: Buf<u32>,
-    nodes: Buf<u32>,
-    /// `[allocated, dropped]`.
-    counters: Buf<u32>,
-    capacity: u32,
+pub(super) struct Lists {
+    pub heads: Buf<u32>,
+    pub nodes: Buf<u32>,
+    /// `[allocated, dropped, ...]` (DUAL-LL adds the back lists' allocation).
+    pub counters: Buf<u32>,
+    pub capacity: u32,
+}
+
+/// What the host found walking the lists.
+pub(super) struct Walked {
+    pub stored: u64,
+    /// Links to a node outside the pool.
+    pub bad_links: u64,
+    /// Nodes reached twice (a cycle, or two lists sharing a tail).
+    pub revisits: u64,
+}
+
+impl Lists {
+    /// `heads` empty lists, a pool of `capacity` nodes, `counters` counters.
+    pub fn new(
+        device: &mut Device,
+        prefix: &str,
+        heads: u64,
+        capacity: u64,
+        counters: u64,
+    ) -> Result<Lists, AlgoError> {
+        let capacity = capacity.max(1);
+        if capacity * NODE_WORDS as u64 > fragrace_emu::memory::MAX_BUFFER_WORDS {
+            return Err(AlgoError::Invalid(format!(
+                "{prefix}: a pool of {capacity} nodes is larger than a buffer can hold"
+            )));
+        }
+        let h = device.buffer::<u32>(&format!("{prefix}-heads"), heads)?;
+        device.memory.fill(h, EMPTY)?;
+        let nodes =
+            device.buffer::<u32>(&format!("{prefix}-nodes"), capacity * NODE_WORDS as u64)?;
+        device.memory.fill(nodes, EMPTY)?;
+        Ok(Lists {
+            heads: h,
+            nodes,
+            counters: device.buffer::<u32>(&format!("{prefix}-counters"), counters)?,
+            capacity: capacity as u32,
+        })
+    }
+
+    /// Walks every list on the host (bounded: a node is visited once), appending list `h`'s
+    /// fragments to `out[h % out.len()]`, and sorts each pixel's fragments.
+    pub fn walk(
+        &self,
+        device: &Device,
+        out: &mut [Vec<CapturedFrag>],
+    ) -> Result<Walked, AlgoError> {
+        let heads = device.memory.read(self.heads)?;
+        let nodes = device.memory.read(self.nodes)?;
+        let mut w = Walked {
+            stored: 0,
+            bad_links: 0,
+            revisits: 0,
+        };
+        let mut seen = vec![false; self.capacity as usize];
+        let n = out.len().max(1);
+        for (h, &head) in heads.iter().enumerate() {
+            let list = &mut out[h % n];
+            let mut cur = head;
+            while cur != EMPTY {
+                if cur >= self.capacity {
+                    w.bad_links += 1;
+                    break;
+                }
+                if std::mem::replace(&mut seen[cur as usize], true) {
+                    w.revisits += 1;
+                    break;
+                }
+                let at = (cur * NODE_WORDS) as usize;
+                list.push(CapturedFrag::from_bits(nodes[at], nodes[at + 1]));
+                w.stored += 1;
+                cur = nodes[at + 2];
+            }
+        }
+        for list in out.iter_mut() {
+            sort_fragments(list);
+        }
+        Ok(w)
+    }
+}
+
+/// Writes the fragment into `node` and pushes it onto list `head`: payload first, the atomic
+/// exchange on the head publishes it, then the `next` link the exchange returned (as the
+/// `ll` A-buffer does).
+pub(super) async fn link(f: &Frag<'_>, l: &Lists, head: u32, node: u32) {
+    let at = node * NODE_WORDS;
+    f.store_record(l.nodes, at, &[f.depth().to_bits(), f.primitive_id()])
+        .await;
+    let next = f.atomic_exchange(l.heads, head, node).await;
+    f.store(l.nodes, at + 2, next).await;
 }
 
 /// Pass 2: every fragment at the layer (depth test `EQUAL`) onto its pixel's list.
@@ -167,11 +257,7 @@ impl FragmentKernel for CapturePass {
             f.atomic_add(l.counters, 1, 1).await;
             return;
         }
-        let at = node * NODE_WORDS;
-        f.store_record(l.nodes, at, &[f.depth().to_bits(), f.primitive_id()])
-            .await;
-        let next = f.atomic_exchange(l.heads, f.pixel_index(), node).await;
-        f.store(l.nodes, at + 2, next).await;
+        link(&f, l, f.pixel_index(), node).await;
     }
 }
 
@@ -214,24 +300,9 @@ impl Algorithm for F2bLl {
                 Some(l) => l,
                 None => {
                     // The first depth pass rasterized every fragment: a bound on the pool.
-                    let capacity = depth_pass.stats.fragments_generated.max(1);
-                    if capacity * NODE_WORDS as u64 > fragrace_emu::memory::MAX_BUFFER_WORDS {
-                        return Err(AlgoError::Invalid(format!(
-                            "f2b-ll: a pool of {capacity} nodes is larger than a buffer can hold"
-                        )));
-                    }
-                    let heads = device.buffer::<u32>("f2b-ll-heads", peeled.lists.len() as u64)?;
-                    device.memory.fill(heads, EMPTY)?;
-                    let nodes =
-                        device.buffer::<u32>("f2b-ll-nodes", capacity * NODE_WORDS as u64)?;
-                    device.memory.fill(nodes, EMPTY)?;
-                    let counters = device.buffer::<u32>("f2b-ll-counters", 2)?;
-                    *lists.insert(Lists {
-                        heads,
-                        nodes,
-                        counters,
-                        capacity: capacity as u32,
-                    })
+                    let capacity = depth_pass.stats.fragments_generated;
+                    let pixels = peeled.lists.len() as u64;
+                    *lists.insert(Lists::new(&mut device, "f2b-ll", pixels, capacity, 2)?)
                 }
             };
             let captured = layers.capture(&device, &CapturePass { lists: l }, exec, &mut report)?;
@@ -241,29 +312,12 @@ impl Algorithm for F2bLl {
 
         let mut checks = Vec::new();
         if let Some(l) = lists {
-            let heads = device.memory.read(l.heads)?;
-            let nodes = device.memory.read(l.nodes)?;
             let counters = device.memory.read(l.counters)?;
-            let (mut bad_links, mut revisits, mut stored) = (0u64, 0u64, 0u64);
-            let mut seen = vec![false; l.capacity as usize];
-            for (list, &head) in peeled.lists.iter_mut().zip(&heads) {
-                let mut cur = head;
-                while cur != EMPTY {
-                    if cur >= l.capacity {
-                        bad_links += 1;
-                        break;
-                    }
-                    if std::mem::replace(&mut seen[cur as usize], true) {
-                        revisits += 1;
-                        break;
-                    }
-                    let at = (cur * NODE_WORDS) as usize;
-                    list.push(CapturedFrag::from_bits(nodes[at], nodes[at + 1]));
-                    stored += 1;
-                    cur = nodes[at + 2];
-                }
-                sort_fragments(list);
-            }
+            let Walked {
+                stored,
+                bad_links,
+                revisits,
+            } = l.walk(&device, &mut peeled.lists)?;
             checks.push(Check::new(
                 "the lists hold each captured fragment once, in range, acyclic",
                 bad_links == 0 && revisits == 0 && stored == pushed && u64::from(counters[0]) == pushed,

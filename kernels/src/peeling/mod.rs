@@ -34,6 +34,7 @@
 //! linked list with atomics.
 
 mod dual;
+mod dualll;
 mod f2b;
 mod f2b2p;
 mod f2bb;
@@ -55,6 +56,7 @@ pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
         Box::new(f2bb::F2bB::fab()),
         Box::new(f2bb::F2bB::kb()),
         Box::new(dual::Dual),
+        Box::new(dualll::DualLl),
     ]
 }
 
