@@ -37,6 +37,7 @@ mod dual;
 mod dualll;
 mod f2b;
 mod f2b2p;
+mod f2b3p;
 mod f2bb;
 mod f2bll;
 
@@ -52,6 +53,7 @@ pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![
         Box::new(f2b::F2b),
         Box::new(f2b2p::F2b2p),
+        Box::new(f2b3p::F2b3p),
         Box::new(f2bll::F2bLl),
         Box::new(f2bb::F2bB::fab()),
         Box::new(f2bb::F2bB::kb()),
