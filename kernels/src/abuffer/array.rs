@@ -3,10 +3,11 @@
 //! that walk those ranges.
 //!
 //! The three differ only in where a pixel's range starts ([`Layout`]) and how long it may be;
-//! the arrays ([`FragmentArrays`]), the resolve (sort the range in place, composite it) and
-//! the readback (ranges to a [`Capture`]) are the same, so they are written once here.
+//! the arrays ([`FragmentArrays`]), the write of one fragment ([`store_fragment`]), the
+//! resolve (sort the range in place, composite it) and the readback (the resolve's ranges to
+//! a [`Capture`]) are the same, so they are written once here.
 
-use fragrace_emu::{Buf, Device, Frag, FragmentKernel, KernelInfo};
+use fragrace_emu::{Buf, Device, Frag, FragmentKernel, KernelInfo, Memory};
 
 use crate::algo::{AlgoError, Capture, CapturedFrag, Frame};
 use crate::common::sort_fragments;
@@ -32,30 +33,15 @@ impl FragmentArrays {
             prim: device.buffer::<u32>(&format!("{prefix}-prim"), slots.max(1))?,
         })
     }
+}
 
-    /// Reads per-pixel ranges `(base, len)` of the arrays back as a capture (a range past
-    /// the arrays' end reads as empty).
-    pub(super) fn capture(
-        &self,
-        device: &Device,
-        frame: &Frame<'_>,
-        ranges: &[(u32, u32)],
-    ) -> Result<Capture, AlgoError> {
-        let depth = device.memory.read(self.depth)?;
-        let prim = device.memory.read(self.prim)?;
-        let lists = ranges.iter().map(|&(base, len)| {
-            let (b, l) = (base as usize, len as usize);
-            if l == 0 || b + l > depth.len() {
-                return Vec::new();
-            }
-            depth[b..b + l]
-                .iter()
-                .zip(&prim[b..b + l])
-                .map(|(&depth, &prim)| CapturedFrag { depth, prim })
-                .collect()
-        });
-        Ok(Capture::from_lists(frame.width, frame.height, lists))
-    }
+/// Writes the invoking fragment into `slot` of the arrays, depth then primitive: the write
+/// that ends every array A-buffer's store pass once it holds a slot (FAB and SB:
+/// depth-fighting paper section 2, Fig. 3(a) and (c); DFB: z-thickness paper section 4.3),
+/// one copy so that the three passes make the same accesses.
+pub(super) async fn store_fragment(f: &Frag<'_>, depth: Buf<f32>, prim: Buf<u32>, slot: u32) {
+    f.store(depth, slot, f.depth()).await;
+    f.store(prim, slot, f.primitive_id()).await;
 }
 
 /// Where pixel `p`'s fragments live in the fragment arrays.
@@ -88,6 +74,23 @@ impl Layout {
                 .wrapping_add(f.load(offsets, p).await),
         }
     }
+    /// [`Layout::base`] on the host, for each of `n` pixels (same buffers, same arithmetic).
+    pub(super) fn starts(&self, memory: &Memory, n: usize) -> Result<Vec<u32>, AlgoError> {
+        Ok(match *self {
+            Layout::Fixed { cap } => (0..n as u32).map(|p| p.wrapping_mul(cap)).collect(),
+            Layout::Offsets { offsets } => memory.read(offsets)?,
+            Layout::Grouped {
+                offsets,
+                group_base,
+                groups,
+            } => {
+                let (offsets, bases) = (memory.read(offsets)?, memory.read(group_base)?);
+                (0..n)
+                    .map(|p| bases[p % groups as usize].wrapping_add(offsets[p]))
+                    .collect()
+            }
+        })
+    }
     fn cap(&self) -> u32 {
         match *self {
             Layout::Fixed { cap } => cap,
@@ -108,6 +111,34 @@ pub(super) struct ArrayResolve {
     pub limit: Option<Buf<u32>>,
     pub arrays: FragmentArrays,
     pub composite: Composite,
+}
+
+impl ArrayResolve {
+    /// Reads the arrays back as a capture, each pixel's range as the resolve took it (same
+    /// start, same clamped length; a range past the arrays' end reads as empty), so the
+    /// readback is in resolve order and no algorithm restates where its ranges are.
+    pub(super) fn capture(&self, device: &Device, frame: &Frame<'_>) -> Result<Capture, AlgoError> {
+        let memory = &device.memory;
+        let lens = memory.read(self.lens)?;
+        let limit = self.limit.map(|limit| memory.read(limit)).transpose()?;
+        let starts = self.layout.starts(memory, lens.len())?;
+        let depth = memory.read(self.arrays.depth)?;
+        let prim = memory.read(self.arrays.prim)?;
+        let lists = (0..lens.len()).map(|p| {
+            let len = lens[p].min(self.layout.cap());
+            let l = limit.as_ref().map_or(len, |limit| len.min(limit[p])) as usize;
+            let b = starts[p] as usize;
+            if l == 0 || b + l > depth.len() {
+                return Vec::new();
+            }
+            depth[b..b + l]
+                .iter()
+                .zip(&prim[b..b + l])
+                .map(|(&depth, &prim)| CapturedFrag { depth, prim })
+                .collect()
+        });
+        Ok(Capture::from_lists(frame.width, frame.height, lists))
+    }
 }
 
 impl FragmentKernel for ArrayResolve {

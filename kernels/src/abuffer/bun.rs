@@ -24,7 +24,7 @@
 
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
-use super::ll::{insert, pool_from_params, ListPool, ListResolve, Walk, MAX_POOL_NODES};
+use super::ll::{insert, pool_from_params, ListPool, ListResolve, Walk};
 use super::run::AbRun;
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
@@ -168,12 +168,8 @@ impl Algorithm for BunLl {
                 max
             }
         };
+        // ListPool::new refuses a pool larger than a buffer (before the u32 casts are used).
         let pool_nodes = region * buckets as u64;
-        if pool_nodes > MAX_POOL_NODES {
-            return Err(AlgoError::Invalid(format!(
-                "bun-ll: a pool of {pool_nodes} nodes is larger than a buffer can hold"
-            )));
-        }
         let region = region as u32;
         let pool = ListPool::new(
             &mut run.device,

@@ -16,18 +16,17 @@
 //! word, or allocate a worst-case chunk as the z-thickness paper does with N = 1024).
 //!
 //! The array resolve and readback it shares with FAB and SB are in [`super::array`], the
-//! checks in [`super::checks`], the run scaffolding in [`super::run`].
+//! checks in [`super::checks`], the run scaffolding (with what follows the scan, shared with
+//! SB: [`super::run::Counted`]) in [`super::run`].
 
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
-use super::array::{ArrayResolve, FragmentArrays, Layout};
-use super::checks::{count_store_check, ranges_check, stored_once_check};
-use super::run::AbRun;
+use super::array::{store_fragment, FragmentArrays, Layout};
+use super::run::{AbRun, Counted};
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Frame, HazardClass, Params,
 };
 use crate::basic::CountKernel;
-use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![Box::new(Dfb)]
@@ -143,8 +142,7 @@ impl FragmentKernel for DfbStore {
         };
         let p = f.pixel_index();
         let slot = f.load(self.offsets, p).await.wrapping_add(i);
-        f.store(self.depth, slot, f.depth()).await;
-        f.store(self.prim, slot, f.primitive_id()).await;
+        store_fragment(&f, self.depth, self.prim, slot).await;
     }
 }
 
@@ -208,31 +206,15 @@ impl Algorithm for Dfb {
             prim: arrays.prim,
             overflow,
         };
-        let resolve = ArrayResolve {
+        let counted = Counted {
+            counts,
+            fill,
+            overflow,
             layout: Layout::Offsets { offsets },
-            lens: fill,
-            limit: Some(counts),
             arrays,
-            composite: Composite::of(params),
+            total,
         };
-        let generated = run.store_and_resolve(&mut report, &store, &resolve)?;
-
-        let counts_v = run.device.memory.read(counts)?;
-        let offsets_v = run.device.memory.read(offsets)?;
-        let fill_v = run.device.memory.read(fill)?;
-        let dropped = run.device.memory.read(overflow)?[0] as u64;
-        let ranges: Vec<(u32, u32)> = (0..n)
-            .map(|p| (offsets_v[p], fill_v[p].min(counts_v[p])))
-            .collect();
-        let capture = arrays.capture(&run.device, frame, &ranges)?;
-        let stored = capture.frags.len() as u64;
-        let counted_ranges: Vec<(u32, u32)> = (0..n).map(|p| (offsets_v[p], counts_v[p])).collect();
-        let checks = vec![
-            count_store_check(&counts_v, &fill_v),
-            ranges_check(&counted_ranges, total),
-            stored_once_check(stored, dropped, generated),
-        ];
-        Ok(run.finish(capture, report, dropped, checks, []))
+        counted.store_and_finish(run, report, &store, [])
     }
 }
 

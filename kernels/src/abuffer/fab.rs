@@ -11,7 +11,7 @@
 
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
-use super::array::{ArrayResolve, FragmentArrays, Layout};
+use super::array::{store_fragment, ArrayResolve, FragmentArrays, Layout};
 use super::run::AbRun;
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
@@ -44,9 +44,7 @@ impl FragmentKernel for FabStore {
             f.atomic_add(self.dropped, 0, 1).await;
             return;
         }
-        let i = p * self.cap + slot;
-        f.store(self.depth, i, f.depth()).await;
-        f.store(self.prim, i, f.primitive_id()).await;
+        store_fragment(&f, self.depth, self.prim, p * self.cap + slot).await;
     }
 }
 
@@ -96,19 +94,17 @@ impl Algorithm for Fab {
         };
         let mut report = run.capture(&store)?;
         let generated = report.stats.fragments_generated;
-        report.merge(&run.resolve(&ArrayResolve {
+        let resolve = ArrayResolve {
             layout: Layout::Fixed { cap },
             lens: counts,
             limit: None,
             arrays,
             composite: Composite::of(params),
-        })?);
+        };
+        report.merge(&run.resolve(&resolve)?);
 
         let counts_v = run.device.memory.read(counts)?;
-        let ranges: Vec<(u32, u32)> = (0..n)
-            .map(|p| (p as u32 * cap, counts_v[p].min(cap)))
-            .collect();
-        let capture = arrays.capture(&run.device, frame, &ranges)?;
+        let capture = resolve.capture(&run.device, frame)?;
         let dropped = run.device.memory.read(dropped_buf)?[0] as u64;
         let overflow: u64 = counts_v.iter().map(|&c| c.saturating_sub(cap) as u64).sum();
         let counted: u64 = counts_v.iter().map(|&c| c as u64).sum();

@@ -48,7 +48,7 @@ const PAYLOAD_WORDS: u32 = 2;
 const NEXT: u32 = 2;
 
 /// Most nodes a pool may hold (the node buffer must stay addressable by `u32` word indices).
-pub(super) const MAX_POOL_NODES: u64 = fragrace_emu::memory::MAX_BUFFER_WORDS / NODE_WORDS as u64;
+const MAX_POOL_NODES: u64 = fragrace_emu::memory::MAX_BUFFER_WORDS / NODE_WORDS as u64;
 
 /// The buffers of a node pool split into `regions` (1 for `ll`, one per bucket for `bun-ll`),
 /// each with its own allocation counter and dropped counter.

@@ -7,18 +7,23 @@
 //! returns the capture, the image, the shared invariants ([`super::checks::capture_checks`])
 //! after its own, and the storage of its buffers plus the resolve target. [`AbRun`] does
 //! those steps once for all of them, so that an algorithm's `run` reads as its passes and
-//! its own invariants only. (The k-buffers' counterpart is `kbuffer::rmw::KbRun`.)
+//! its own invariants only. (The k-buffers' counterpart is `kbuffer::rmw::KbRun`.) The
+//! count-scan-store A-buffers (DFB, z-thickness paper section 4.3; SB, depth-fighting paper
+//! section 2) differ only in their scans, so [`Counted`] does what follows the scan once.
 //!
 //! Each algorithm keeps its merged [`PassReport`] itself, starting it from its first pass
 //! (or from an empty report, as `ll` does when its count pass is optional): merging changes
 //! the order of equally hot hotspots, so the starting point is part of the result.
 
-use fragrace_emu::{Device, ExecConfig, FragmentKernel, FragmentState, Framebuffer, PassReport};
+use fragrace_emu::{
+    Buf, Device, ExecConfig, FragmentKernel, FragmentState, Framebuffer, PassReport,
+};
 
-use super::checks::capture_checks;
+use super::array::{ArrayResolve, FragmentArrays, Layout};
+use super::checks::{capture_checks, count_store_check, ranges_check, stored_once_check};
 use crate::algo::{AlgoError, AlgoResult, Capture, Check, Frame, Params};
 use crate::common::{self, capture_state, geometry_pass, pixels};
-use crate::resolve;
+use crate::resolve::{self, Composite};
 
 /// The device, the framebuffer and the inputs of one A-buffer run.
 pub(super) struct AbRun<'a> {
@@ -121,5 +126,59 @@ impl<'a> AbRun<'a> {
             dropped,
             ..Default::default()
         }
+    }
+}
+
+/// A count-scan-store A-buffer once its scan has run: the buffers its store pass and resolve
+/// share (`counts`, `fill` and `overflow` of [`super::dfb::claim_slot`], the fragment arrays),
+/// where the scan put each pixel's range, and the scan's total.
+pub(super) struct Counted {
+    pub counts: Buf<u32>,
+    pub fill: Buf<u32>,
+    pub overflow: Buf<u32>,
+    pub layout: Layout,
+    pub arrays: FragmentArrays,
+    pub total: u32,
+}
+
+impl Counted {
+    /// Runs the store pass `store` (writing into `arrays`) and the resolve, and assembles the
+    /// result with the checks every count-scan-store A-buffer owes, in this order: the store
+    /// pass filled what the count pass counted, the covered pixels' counted ranges tile
+    /// `[0, total)`, the algorithm's `own` checks, every generated fragment stored once.
+    pub(super) fn store_and_finish<S: FragmentKernel>(
+        &self,
+        mut run: AbRun<'_>,
+        mut report: PassReport,
+        store: &S,
+        own: impl IntoIterator<Item = Check>,
+    ) -> Result<AlgoResult, AlgoError> {
+        let resolve = ArrayResolve {
+            layout: self.layout,
+            lens: self.fill,
+            limit: Some(self.counts),
+            arrays: self.arrays,
+            composite: Composite::of(run.params),
+        };
+        let generated = run.store_and_resolve(&mut report, store, &resolve)?;
+
+        let memory = &run.device.memory;
+        let counts = memory.read(self.counts)?;
+        let fill = memory.read(self.fill)?;
+        let dropped = memory.read(self.overflow)?[0] as u64;
+        let starts = self.layout.starts(memory, counts.len())?;
+        let counted: Vec<(u32, u32)> = (0..counts.len())
+            .filter(|&p| counts[p] > 0)
+            .map(|p| (starts[p], counts[p]))
+            .collect();
+        let capture = resolve.capture(&run.device, &run.frame)?;
+        let mut checks = vec![
+            count_store_check(&counts, &fill),
+            ranges_check(&counted, self.total),
+        ];
+        checks.extend(own);
+        let stored = capture.frags.len() as u64;
+        checks.push(stored_once_check(stored, dropped, generated));
+        Ok(run.finish(capture, report, dropped, checks, []))
     }
 }

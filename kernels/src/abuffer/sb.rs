@@ -21,16 +21,14 @@
 
 use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
 
-use super::array::{ArrayResolve, FragmentArrays, Layout};
-use super::checks::{count_store_check, ranges_check, stored_once_check};
+use super::array::{store_fragment, FragmentArrays, Layout};
 use super::dfb::claim_slot;
-use super::run::AbRun;
+use super::run::{AbRun, Counted};
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
 };
 use crate::basic::CountKernel;
 use crate::common::EMPTY;
-use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![Box::new(SBuffer)]
@@ -115,9 +113,7 @@ impl FragmentKernel for SbStore {
             .load(self.group_base, p % self.groups)
             .await
             .wrapping_add(f.load(self.offsets, p).await);
-        f.store(self.depth, base.wrapping_add(i), f.depth()).await;
-        f.store(self.prim, base.wrapping_add(i), f.primitive_id())
-            .await;
+        store_fragment(&f, self.depth, self.prim, base.wrapping_add(i)).await;
     }
 }
 
@@ -173,6 +169,20 @@ impl Algorithm for SBuffer {
         })?);
         let total = run.device.memory.read(total_buf)?[0];
 
+        // Only the allocate pass writes `offsets` (the store pass and the resolve read them),
+        // so its invariant holds from here on.
+        let counts_v = run.device.memory.read(counts)?;
+        let offsets_v = run.device.memory.read(offsets)?;
+        let covered = counts_v.iter().filter(|&&c| c > 0).count();
+        let uncovered_with_range = (0..n)
+            .filter(|&p| counts_v[p] == 0 && offsets_v[p] != EMPTY)
+            .count();
+        let only_covered = Check::new(
+            "only covered pixels get ranges",
+            uncovered_with_range == 0,
+            format!("{uncovered_with_range} uncovered pixels with an offset; {covered} covered"),
+        );
+
         let arrays = FragmentArrays::new(&mut run.device, "sb", total as u64)?;
         let store = SbStore {
             counts,
@@ -184,57 +194,19 @@ impl Algorithm for SBuffer {
             overflow,
             groups,
         };
-        let resolve = ArrayResolve {
+        let counted = Counted {
+            counts,
+            fill,
+            overflow,
             layout: Layout::Grouped {
                 offsets,
                 group_base,
                 groups,
             },
-            lens: fill,
-            limit: Some(counts),
             arrays,
-            composite: Composite::of(params),
+            total,
         };
-        let generated = run.store_and_resolve(&mut report, &store, &resolve)?;
-
-        let counts_v = run.device.memory.read(counts)?;
-        let offsets_v = run.device.memory.read(offsets)?;
-        let bases_v = run.device.memory.read(group_base)?;
-        let fill_v = run.device.memory.read(fill)?;
-        let dropped = run.device.memory.read(overflow)?[0] as u64;
-        let start = |p: usize| bases_v[p % groups as usize].wrapping_add(offsets_v[p]);
-        let uncovered_with_range = (0..n)
-            .filter(|&p| counts_v[p] == 0 && offsets_v[p] != EMPTY)
-            .count();
-        let covered: Vec<(u32, u32)> = (0..n)
-            .filter(|&p| counts_v[p] > 0)
-            .map(|p| (start(p), counts_v[p]))
-            .collect();
-        let ranges: Vec<(u32, u32)> = (0..n)
-            .map(|p| {
-                if counts_v[p] == 0 {
-                    (0, 0)
-                } else {
-                    (start(p), fill_v[p].min(counts_v[p]))
-                }
-            })
-            .collect();
-        let capture = arrays.capture(&run.device, frame, &ranges)?;
-        let stored = capture.frags.len() as u64;
-        let checks = vec![
-            count_store_check(&counts_v, &fill_v),
-            ranges_check(&covered, total),
-            Check::new(
-                "only covered pixels get ranges",
-                uncovered_with_range == 0,
-                format!(
-                    "{uncovered_with_range} uncovered pixels with an offset; {} covered",
-                    covered.len()
-                ),
-            ),
-            stored_once_check(stored, dropped, generated),
-        ];
-        Ok(run.finish(capture, report, dropped, checks, []))
+        counted.store_and_finish(run, report, &store, [only_covered])
     }
 }
 
