@@ -18,7 +18,7 @@
 //! range were peeled before and are discarded. The front layers are kept in order, the back
 //! layers in reverse, and the pixel's list is the front ones then the back ones reversed.
 //! The loop ends when no pixel has a range left (read back from the min-max target), so it
-//! peels every layer: `k` does not apply (`Capacity::All`), `D/2 + 1` passes for a depth
+//! peels every layer: `k` does not apply (`Capacity::All`), `ceil(D/2) + 1` passes for a depth
 //! complexity `D` (Table 1).
 //!
 //! **Coplanarity.** As F2B, DUAL keeps one fragment per layer per direction: of `c` fragments
@@ -107,7 +107,7 @@ impl Algorithm for Dual {
                       through a min-max depth buffer (MAX blending); every layer, coplanar fragments collapse",
             source: "Bavoil & Myers 2008 ([13] of the depth-fighting paper); depth-fighting paper, section 3.1.2 \
                      (Overview) and Table 1 (DUAL)",
-            passes: "1 geometry (initial range) + 1 geometry per iteration (D/2 + 1 in all); k does not apply",
+            passes: "1 geometry (initial range) + 1 geometry per iteration (ceil(D/2) + 1 in all); k does not apply",
             memory: "24 bytes of targets: RG32F min-max range, RG32F front and back layers (depth, id); + 8 bytes \
                      of the previous range read-only (Table 1, DUAL: 6 words)",
             hazard: HazardClass::HazardFree,
@@ -123,11 +123,7 @@ impl Algorithm for Dual {
     ) -> Result<AlgoResult, AlgoError> {
         check_ids_fit_floats(frame)?;
         // Every layer is peeled: no `k` cap on the lists.
-        let unbounded = Params {
-            k: super::MAX_LAYERS,
-            ..params.clone()
-        };
-        let mut peeled = Peeled::new(frame, &unbounded)?;
+        let mut peeled = Peeled::unbounded(frame, params);
         let mut device = crate::common::fresh();
         let at_ends = device.buffer::<u32>("dual-at-ends", 1)?;
         let draw = Draw::new(frame.mesh, frame.view_proj);
@@ -142,6 +138,8 @@ impl Algorithm for Dual {
         let mut backs: Vec<Vec<CapturedFrag>> = vec![Vec::new(); peeled.lists.len()];
         let (mut not_shrinking, mut out_of_order, mut kept) = (0u64, 0u64, 0u64);
         let mut range: Option<Image> = None;
+        let mut generated = 0u64;
+        let mut unfinished = false;
         loop {
             for t in 0..3 {
                 fb.clear_color(t, [NONE.to_bits(), NONE.to_bits(), 0, 0]);
@@ -157,6 +155,9 @@ impl Algorithm for Dual {
                 exec,
             )?;
             report.merge(&pass);
+            if range.is_none() {
+                generated = pass.stats.fragments_generated;
+            }
             let next = fb.image(0);
             if let Some(prev) = &range {
                 peeled.iterations += 1;
@@ -197,7 +198,11 @@ impl Algorithm for Dual {
                 }
             }
             let any_left = next.texels.iter().any(|t| f32::from_bits(t[1]) != NONE);
-            if !any_left || peeled.iterations >= MAX_ITERATIONS {
+            if !any_left {
+                break;
+            }
+            if peeled.iterations >= MAX_ITERATIONS {
+                unfinished = true;
                 break;
             }
             range = Some(next);
@@ -220,10 +225,16 @@ impl Algorithm for Dual {
                 format!("{out_of_order} layers out of order"),
             ),
             Check::new(
-                "every kept layer was met at its range's end (and the rest are lost)",
-                met >= kept,
+                "every fragment is met at a range's end exactly once: kept or lost",
+                !unfinished && met == generated && met >= kept,
                 format!(
-                    "{met} fragments at the ends for {kept} kept; {lost} coplanar fragments lost"
+                    "{met} fragments at the ends of {generated} generated, {kept} kept, {lost} coplanar fragments \
+                     lost{}",
+                    if unfinished {
+                        format!("; stopped after {MAX_ITERATIONS} iterations with ranges left")
+                    } else {
+                        String::new()
+                    }
                 ),
             ),
         ];

@@ -14,7 +14,7 @@
 //! from the end of the node buffer towards the beginning." (3.1.3) Both counters share one
 //! pool, sized by the fragments of the first pass, so the two ends never meet (checked).
 //!
-//! Every layer is peeled (`Capacity::All`; `k` does not apply), `D/2 + 1` iterations of two
+//! Every layer is peeled (`Capacity::All`; `k` does not apply), `ceil(D/2)` iterations of two
 //! passes. The host walks both lists of each pixel and sorts them by (depth, primitive).
 //!
 //! **Invariants (checked on every run).** The lists hold each captured fragment once, in the
@@ -113,9 +113,10 @@ impl Algorithm for DualLl {
                       near end onto a front list and at its far end onto a back list (two counters, one pool \
                       filled from both ends)",
             source: "depth-fighting paper, section 3.1.3 (DUAL-LL) and Table 1",
-            passes: "1 geometry (initial range) + 2 geometry per iteration (D/2 + 1 iterations); k does not apply",
-            memory: "16 + 12 n bytes: RG32F range, the previous range read-only, front and back heads; depth, \
-                     primitive and next per node (Table 1, DUAL-LL: 2C(Zf,Zb) + 6 words)",
+            passes: "1 geometry (initial range) + 2 geometry per iteration (ceil(D/2) iterations); k does not apply",
+            memory: "24 + 12 n bytes: RG32F range, the previous range read-only, front and back heads; depth, \
+                     primitive and next per node, one pool for the whole scene (Table 1's 2C(Zf,Zb) + 6 words \
+                     assume a pool reused per iteration)",
             hazard: HazardClass::HazardFree,
             capacity: Capacity::All,
         }
@@ -127,11 +128,7 @@ impl Algorithm for DualLl {
         params: &Params,
         exec: &fragrace_emu::ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
-        let unbounded = Params {
-            k: super::MAX_LAYERS,
-            ..params.clone()
-        };
-        let mut peeled = Peeled::new(frame, &unbounded)?;
+        let mut peeled = Peeled::unbounded(frame, params);
         let mut device = crate::common::fresh();
         let draw = Draw::new(frame.mesh, frame.view_proj);
         let mut fb = peeled.framebuffer(&[Format::RG32F])?;
@@ -164,9 +161,8 @@ impl Algorithm for DualLl {
         )?;
         let mut let_through = 0u64;
         let mut not_shrinking = 0u64;
-        while range.texels.iter().any(|t| f32::from_bits(t[1]) != NONE)
-            && peeled.iterations < MAX_ITERATIONS
-        {
+        let left = |r: &Image| r.texels.iter().any(|t| f32::from_bits(t[1]) != NONE);
+        while left(&range) && peeled.iterations < MAX_ITERATIONS {
             let kernel = Capture {
                 range: &range,
                 lists,
@@ -185,6 +181,8 @@ impl Algorithm for DualLl {
             }
             range = next;
         }
+        let unfinished = left(&range);
+        let generated = first.stats.fragments_generated;
         let counters = device.memory.read(lists.counters)?;
         let (front, dropped, back) = (
             u64::from(counters[FRONT as usize]),
@@ -199,10 +197,20 @@ impl Algorithm for DualLl {
         let checks = vec![
             Check::new(
                 "the lists hold each captured fragment once, in range, acyclic",
-                bad_links == 0 && revisits == 0 && stored == let_through && front + back == let_through,
+                bad_links == 0
+                    && revisits == 0
+                    && stored == let_through
+                    && front + back == let_through
+                    && let_through == generated
+                    && !unfinished,
                 format!(
-                    "{stored} stored of {let_through} at the ranges' ends ({front} front, {back} back); \
-                     {bad_links} links out of the pool, {revisits} nodes reached twice"
+                    "{stored} stored of {let_through} at the ranges' ends of {generated} generated ({front} front, \
+                     {back} back); {bad_links} links out of the pool, {revisits} nodes reached twice{}",
+                    if unfinished {
+                        format!("; stopped after {MAX_ITERATIONS} iterations with ranges left")
+                    } else {
+                        String::new()
+                    }
                 ),
             ),
             Check::new(

@@ -18,7 +18,9 @@
 //! previous iteration are discarded and thus not considered" (section 3.1.1): of `c`
 //! coplanar fragments one is peeled and `c - 1` are lost. Robustness ratio `R_h < 1` and EPR
 //! above 0 wherever the scene has coplanar fragments (`cubes`, `coplanar-stack`); the same
-//! loss under every executor (no shared memory: the depth test is API ordered).
+//! loss under every executor (no shared memory: the depth test is API ordered). `dropped`
+//! counts the companions of every layer a later pass met again: all of them when the peel
+//! runs to the end, none of the `k`-th layer's when it stops at `k` (no pass follows it).
 //!
 //! **Invariants (checked on every run).** Each pixel's layers are strictly increasing in
 //! depth; a pass whose occlusion query passed samples peels at least one pixel and at most
@@ -118,6 +120,7 @@ impl Algorithm for F2b {
         // Pixels peeled by a pass that another pass followed (which met the peeled fragment
         // again at its layer's depth), and by the last pass.
         let (mut revisited, mut last_gained) = (0u64, 0u64);
+        let (mut kept, mut generated, mut exhausted) = (0u64, 0u64, false);
         while peeled.iterations < peeled.k {
             fb.clear_depth(f32::INFINITY);
             fb.clear_color(0, [f32::INFINITY.to_bits(), EMPTY, 0, 0]);
@@ -133,7 +136,9 @@ impl Algorithm for F2b {
             )?;
             report.merge(&pass);
             revisited += last_gained;
+            generated = pass.stats.fragments_generated;
             if pass.stats.samples_passed == 0 {
+                exhausted = true;
                 break;
             }
             peeled.iterations += 1;
@@ -159,11 +164,13 @@ impl Algorithm for F2b {
                 query_mismatch += 1;
             }
             last_gained = gained;
+            kept += gained;
             prev = Some(layer);
         }
         let at_layers = u64::from(device.memory.read(coplanar)?[0]);
         let lost = at_layers.saturating_sub(revisited);
         let checks = vec![
+            super::conservation(exhausted, kept + lost, generated),
             Check::new(
                 "every peeled fragment is met again, at its layer's depth, by the next pass",
                 at_layers >= revisited,

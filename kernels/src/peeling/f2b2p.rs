@@ -205,6 +205,7 @@ impl Algorithm for F2b2p {
         let (_, mut layer) = peel(None, &mut report)?;
         let (mut ids, mut counted) = count(&layer, None, &mut report)?;
         let (mut not_found, mut backwards, mut stalled) = (0u64, 0u64, 0u64);
+        let generated = counted.stats.fragments_generated;
         while counted.stats.samples_passed > 0 && peeled.iterations < peeled.k {
             let (extracted, next) = peel(Some((&layer, &ids)), &mut report)?;
             peeled.iterations += 1;
@@ -252,7 +253,10 @@ impl Algorithm for F2b2p {
                 v.windows(2).filter(|w| w[0] == w[1]).count() as u64
             })
             .sum();
+        let exhausted = counted.stats.samples_passed == 0;
+        let extracted: u64 = peeled.lists.iter().map(|l| l.len() as u64).sum();
         let checks = vec![
+            super::conservation(exhausted, extracted, generated),
             Check::new(
                 "every extracted fragment is found at its layer's depth",
                 not_found == 0,
@@ -298,11 +302,12 @@ mod tests {
             &fragrace_emu::ExecConfig::ordered(),
         );
         assert_eq!(m.error_pixels, 0, "{:?}", r.checks);
-        // 7 per pixel, two per iteration: 4 iterations; the first pixel's order is
-        // (min, max) of the shrinking id range: the two triangles of quad q are 2q, 2q+1.
+        // 7 per pixel, two per iteration (the ends of the shrinking id range): 4 iterations
+        // of 2 passes after the initial 2. The two triangles of quad q are 2q, 2q+1.
         let c = r.capture.as_ref().unwrap();
         let p = (4 * 8 + 4) as usize;
         let ids: Vec<u32> = c.pixel(p).iter().map(|f| f.prim / 2).collect();
-        assert_eq!(ids, vec![0, 6, 1, 5, 2, 4, 3]);
+        assert_eq!(ids, vec![0, 1, 2, 3, 4, 5, 6]);
+        assert_eq!(r.report.stats.geometry_passes, 10);
     }
 }

@@ -210,6 +210,7 @@ impl Algorithm for F2b3p {
         let mut report = PassReport::default();
         let mut last: Option<(Image, Image)> = None;
         let (mut not_found, mut backwards) = (0u64, 0u64);
+        let (mut generated, mut exhausted) = (0u64, false);
         while peeled.iterations < peeled.k {
             let view = last.as_ref().map(|(layer, ids)| Last { layer, ids });
             fb.clear_depth(f32::INFINITY);
@@ -224,7 +225,9 @@ impl Algorithm for F2b3p {
                 exec,
             )?;
             report.merge(&depth);
+            generated = depth.stats.fragments_generated;
             if depth.stats.samples_passed == 0 {
+                exhausted = true;
                 break;
             }
             report.merge(&device.draw(
@@ -280,7 +283,9 @@ impl Algorithm for F2b3p {
                 v.windows(2).filter(|w| w[0] == w[1]).count() as u64
             })
             .sum();
+        let extracted: u64 = peeled.lists.iter().map(|l| l.len() as u64).sum();
         let checks = vec![
+            super::conservation(exhausted, extracted, generated),
             Check::new(
                 "every extracted fragment is found at its layer's depth",
                 not_found == 0,
@@ -327,7 +332,7 @@ mod tests {
         assert_eq!(m.error_pixels, 0, "{:?}", r.checks);
         let c = r.capture.as_ref().unwrap();
         let ids: Vec<u32> = c.pixel(4 * 8 + 4).iter().map(|f| f.prim / 2).collect();
-        assert_eq!(ids, vec![0, 6, 1, 5, 2, 4, 3]);
+        assert_eq!(ids, vec![0, 1, 2, 3, 4, 5, 6]);
         // 4 iterations of 3 passes, and the depth pass that finds nothing left.
         assert_eq!(r.report.stats.geometry_passes, 13);
     }

@@ -15,11 +15,19 @@
 //!   where ← denotes an atomic memory operation": a per-pixel atomic counter hands out the
 //!   slots. Hazard-free; what does not fit is counted (`dropped`). (The paper wraps the
 //!   counter to 0 at `A.length`, overwriting the first slots; this crate keeps the first `K`
-//!   and counts the rest, so that the loss is exact.)
-//! - **F2B-KB**: "for i = 0 to A.length do if A[i] == 0 then A[i] ← FR.color; break": the
-//!   slot search is a read-modify-write with plain loads and stores, as a k-buffer on render
-//!   targets does it. The paper notes "Performance is degraded when KB is used due to
-//!   concurrent updates": the updates also race. Two coplanar fragments of one pixel in
+//!   and counts the rest, so that the loss is counted exactly. Which `K` of a larger group
+//!   survive depends on the order of the atomics, so the kept primitives, and the image,
+//!   may differ between executors there; the kept depths and the count do not.)
+//! - **F2B-KB**: "for i = 0 to A.length do if A[i] == 0 then A[i] ← FR.color; break". The
+//!   paper's legend under Algorithm 3 says "← denotes an atomic memory operation", and it
+//!   calls the approach RMWH-free ("there is no need for pre-sorting and post-sorting, since
+//!   we peel fragments placed at same memory space (RMWH-free)"); yet it offers KB "when
+//!   advanced APIs are not available" and notes "Performance is degraded when KB is used due
+//!   to concurrent updates": a k-buffer on render targets (Bavoil's, `kb-rmw`) has no atomic
+//!   slot search, only a read of the attachment and a write back. This crate implements that
+//!   reading, the one without atomics: the slot search is a read-modify-write with plain
+//!   loads and stores, and the updates race (an atomic compare-exchange per slot would make
+//!   it hazard-free, as `f2b-fab` is). Two coplanar fragments of one pixel in
 //!   flight together can both find slot `i` empty, and the second store wins: a lost update,
 //!   a fragment gone without a trace. Hazard-prone: only coplanar fragments race (the rest
 //!   never run the capture kernel together), so the hazard shows on coplanar scenes
@@ -129,7 +137,8 @@ impl Algorithm for F2bB {
             source: "depth-fighting paper, section 3.2.1 (F2B-B, Algorithm 3) and Table 1",
             passes: "2 geometry per iteration (at most k), halted by occlusion queries",
             memory: "12 + 8 K bytes (K = 8): depth buffer, R32F layer, the previous layer read-only; K slots of \
-                     depth and primitive (Table 1, F2B-B: K + 4 words)",
+                     depth and primitive (Table 1, F2B-B: K + 4 words with a one-word colour per slot; two \
+                     words here)",
             hazard: HazardClass::HazardFree,
             capacity: Capacity::KNearest,
         };
@@ -139,7 +148,8 @@ impl Algorithm for F2bB {
                           K = 8 slots per pixel handed out by an atomic counter; more than K at one layer are lost \
                           (counted)",
                 memory: "16 + 8 K bytes (K = 8): depth buffer, R32F layer, the previous layer read-only, the \
-                         counter; K slots of depth and primitive (Table 1, F2B-B: K + 4 words)",
+                         counter; K slots of depth and primitive (Table 1, F2B-B: K + 4 words with a one-word \
+                         colour per slot; two words here)",
                 ..common
             },
             Allocation::Search => AlgoInfo {
@@ -228,11 +238,18 @@ impl Algorithm for F2bB {
         )];
         let accounted = kept + dropped == let_through;
         match self.0 {
-            Allocation::Counter => checks.push(Check::new(
-                "every fragment at a layer is kept or counted as dropped",
-                accounted,
-                format!("{kept} kept + {dropped} dropped of {let_through} at the layers"),
-            )),
+            Allocation::Counter => {
+                checks.push(Check::new(
+                    "every fragment at a layer is kept or counted as dropped",
+                    accounted,
+                    format!("{kept} kept + {dropped} dropped of {let_through} at the layers"),
+                ));
+                checks.push(super::conservation(
+                    layers.exhausted,
+                    kept + dropped,
+                    layers.generated,
+                ));
+            }
             Allocation::Search => checks.push(Check::new(
                 "fragments overwritten in a slot by a racing one (informational)",
                 true,

@@ -74,6 +74,10 @@ pub(super) struct LayerPasses<'m> {
     capture_state: PassState,
     /// The last layer (R32F depth), once a depth pass has run.
     prev: Option<Image>,
+    /// Fragments a geometry pass generates (all of the scene's).
+    pub generated: u64,
+    /// A depth pass found nothing left behind the last layer.
+    pub exhausted: bool,
 }
 
 impl<'m> LayerPasses<'m> {
@@ -98,6 +102,8 @@ impl<'m> LayerPasses<'m> {
             depth_state,
             capture_state: capture,
             prev: None,
+            generated: 0,
+            exhausted: false,
         })
     }
 
@@ -115,7 +121,9 @@ impl<'m> LayerPasses<'m> {
         };
         let pass = device.draw(&mut self.fb, &self.draw, &self.depth_state, &kernel, exec)?;
         report.merge(&pass);
+        self.generated = pass.stats.fragments_generated;
         if pass.stats.samples_passed == 0 {
+            self.exhausted = true;
             return Ok(None);
         }
         self.prev = Some(self.fb.image(0));
@@ -274,7 +282,8 @@ impl Algorithm for F2bLl {
             source: "depth-fighting paper, section 3.1.3 (F2B-LL, Algorithm 2) and Table 1",
             passes: "2 geometry per iteration (at most k), halted by occlusion queries",
             memory: "16 + 12 n bytes: depth buffer, R32F layer, the previous layer read-only, list head; depth, \
-                     primitive and next per node (Table 1, F2B-LL: 2C + 4 words)",
+                     primitive and next per node, one pool for the whole scene (Table 1's 2C + 4 words, C the \
+                     largest coplanar group, assume a pool reused per layer)",
             hazard: HazardClass::HazardFree,
             capacity: Capacity::KNearest,
         }
@@ -310,7 +319,11 @@ impl Algorithm for F2bLl {
             pushed += captured.stats.samples_passed;
         }
 
-        let mut checks = Vec::new();
+        let mut checks = vec![super::conservation(
+            layers.exhausted,
+            pushed,
+            layers.generated,
+        )];
         if let Some(l) = lists {
             let counters = device.memory.read(l.counters)?;
             let Walked {

@@ -7,13 +7,15 @@
 //! Algorithm 1; F2B-LL, Algorithm 2), and dual depth peeling (DUAL, Bavoil & Myers 2008,
 //! \[13\] there, section 3.1.2). They share the peel loop's shape, which lives here:
 //!
-//! - every iteration is one or two geometry passes; the host loop ends when the occlusion
-//!   query of the last pass (samples passed) is zero, or after `k` iterations (the paper
-//!   avoids reading the query back with conditional rendering, section 3.3; here the
-//!   read-back costs nothing, so the loop reads it);
-//! - the fragments each iteration extracts are appended to per-pixel lists on the host,
-//!   in extraction order (front to back);
-//! - the image is the front-to-back composite of the extracted layers (what the paper's
+//! - every iteration is one to three geometry passes; the front-to-back peelers' host loop
+//!   ends when the occlusion query of the last depth or count pass (samples passed) is zero,
+//!   or after `k` iterations (the paper avoids reading the query back with conditional
+//!   rendering, section 3.3; here the read-back costs nothing, so the loop reads it); DUAL
+//!   and DUAL-LL end when the min-max target read back holds no range;
+//! - the fragments extracted are gathered into per-pixel lists on the host (after each
+//!   iteration, or by walking the linked lists at the end), sorted by (depth, primitive),
+//!   and the front-to-back peelers keep the first `k`;
+//! - the image is the front-to-back composite of the kept fragments (what the paper's
 //!   blend-under accumulation of each peeled layer computes), by primitive colour at the
 //!   constant opacity `params.alpha`, as every other algorithm's resolve.
 //!
@@ -44,7 +46,7 @@ mod f2bll;
 use fragrace_emu::{Format, Framebuffer, Image, SampleCount};
 
 use crate::algo::{AlgoError, AlgoResult, Capture, CapturedFrag, Check, Frame, Params};
-use crate::common::{self, composite_frags, pixels};
+use crate::common::{self, composite_frags, depth_order, pixels};
 
 use crate::algo::Algorithm;
 
@@ -78,6 +80,17 @@ pub(super) struct Peeled<'a> {
 }
 
 impl<'a> Peeled<'a> {
+    /// A peel of every layer (DUAL, DUAL-LL): no cap on the lists.
+    pub fn unbounded(frame: &Frame<'a>, params: &'a Params) -> Peeled<'a> {
+        Peeled {
+            frame: *frame,
+            params,
+            k: u32::MAX,
+            lists: vec![Vec::new(); pixels(frame)],
+            iterations: 0,
+        }
+    }
+
     pub fn new(frame: &Frame<'a>, params: &'a Params) -> Result<Peeled<'a>, AlgoError> {
         if params.k == 0 || params.k > MAX_LAYERS {
             return Err(AlgoError::Invalid(format!(
@@ -115,6 +128,9 @@ impl<'a> Peeled<'a> {
             .lists
             .into_iter()
             .map(|mut l| {
+                // Extraction order is front to back, but F2B-2P takes a coplanar group's
+                // ids from both ends: the truth's order within a depth is by primitive.
+                l.sort_by(depth_order);
                 beyond += l.len().saturating_sub(k) as u64;
                 l.truncate(k);
                 l
@@ -126,14 +142,15 @@ impl<'a> Peeled<'a> {
             .iter()
             .map(|l| composite_frags(l, alpha, background))
             .collect();
-        checks.push(Check::new(
-            "iterations (informational)",
-            true,
+        let detail = if self.k == u32::MAX {
+            format!("{} iterations, every layer", self.iterations)
+        } else {
             format!(
                 "{} iterations of at most k = {}; {beyond} fragments extracted beyond the k-th of their pixel",
                 self.iterations, self.k
-            ),
-        ));
+            )
+        };
+        checks.push(Check::new("iterations (informational)", true, detail));
         let n = lists.len() as u64;
         AlgoResult {
             capture: Some(Capture::from_lists(
@@ -150,13 +167,28 @@ impl<'a> Peeled<'a> {
     }
 }
 
+/// When a peel ended because nothing was left (not because of `k`), every fragment the
+/// scene generated was peeled, or counted as lost: `accounted` must be `generated`.
+pub(super) fn conservation(exhausted: bool, accounted: u64, generated: u64) -> Check {
+    Check::new(
+        "a peel run to the end accounts for every fragment (peeled or counted lost)",
+        !exhausted || accounted == generated,
+        if exhausted {
+            format!("{accounted} accounted for of {generated} generated")
+        } else {
+            format!("not run to the end (k reached); {accounted} of {generated} so far")
+        },
+    )
+}
+
 /// Texel `p` (row-major pixel index) of a single-sample image as floats.
 pub(super) fn texel_f32(image: &Image, p: usize) -> [f32; 4] {
     image.texels[p].map(f32::from_bits)
 }
 
-/// Primitive ids travel through float targets (blending works on floats, as on the GPU the
-/// paper targets): exact below 2^24.
+/// Primitive ids travel through blended float targets as float values (MAX blending works
+/// on floats, as on the GPU the papers target): exact below 2^24. (F2B, whose target is not
+/// blended, stores the id's bits instead.)
 pub(super) fn check_ids_fit_floats(frame: &Frame<'_>) -> Result<(), AlgoError> {
     let prims = frame.mesh.indices.len() as u64;
     if prims > 1 << 24 {
