@@ -26,3 +26,12 @@ pub fn tilted_quad(mesh: &mut Mesh, r: [f32; 4], z: f32, tilt: f32) {
     mesh.indices.push([b, b + 1, b + 2]);
     mesh.indices.push([b, b + 2, b + 3]);
 }
+
+/// `n` identical quads: one layer of `n` coplanar fragments per covered pixel.
+pub fn coplanar_stack(n: usize) -> Mesh {
+    let mut mesh = Mesh::default();
+    for _ in 0..n {
+        tilted_quad(&mut mesh, [-0.8, 0.8, -0.8, 0.8], 0.1, 0.0);
+    }
+    mesh
+}

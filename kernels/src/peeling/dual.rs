@@ -247,25 +247,13 @@ impl Algorithm for Dual {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kbuffer::rmw::testing::{executors, frame, quads, run};
+    use crate::kbuffer::rmw::testing::{frame, run};
 
     #[test]
     fn peels_every_layer_and_loses_exactly_the_coplanar_ones() {
-        let mesh = quads(16);
-        let params = Params::default();
-        let mut baseline = None;
-        for (what, exec) in executors(1) {
-            let f = frame(&mesh, 16);
-            let (r, m) = run(&Dual, &f, &params, &exec);
-            for c in &r.checks {
-                assert!(c.passed, "{what}: {}: {}", c.name, c.detail);
-            }
-            assert!(m.error_pixels > 0 && m.robustness < 1.0, "{what}: {m:?}");
-            assert!(r.dropped > 0, "{what}");
+        for (what, r, m) in super::super::assert_same_loss_everywhere(&Dual) {
             // Every fragment generated is kept or counted as lost.
             assert_eq!(m.captured + r.dropped, m.expected, "{what}: {m:?}");
-            let b = baseline.get_or_insert(m.error_mask.clone());
-            assert_eq!(*b, m.error_mask, "{what}");
         }
     }
 

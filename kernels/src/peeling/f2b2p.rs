@@ -42,8 +42,7 @@ use fragrace_emu::{
 
 use super::{check_ids_fit_floats, texel_f32, Peeled};
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, CapturedFrag, Check, Frame, HazardClass,
-    Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Frame, HazardClass, Params,
 };
 use crate::common::capture_state;
 
@@ -204,34 +203,15 @@ impl Algorithm for F2b2p {
 
         let (_, mut layer) = peel(None, &mut report)?;
         let (mut ids, mut counted) = count(&layer, None, &mut report)?;
-        let (mut not_found, mut backwards, mut stalled) = (0u64, 0u64, 0u64);
+        let mut extraction = super::IdExtraction::default();
+        let mut stalled = 0u64;
         let generated = counted.stats.fragments_generated;
         while counted.stats.samples_passed > 0 && peeled.iterations < peeled.k {
             let (extracted, next) = peel(Some((&layer, &ids)), &mut report)?;
             peeled.iterations += 1;
             for (p, list) in peeled.lists.iter_mut().enumerate() {
-                let [id_min, id_max, _, n] = texel_f32(&ids, p);
-                if n < 1.0 {
-                    continue;
-                }
                 let d = -texel_f32(&layer, p)[0];
-                let got = texel_f32(&extracted, p);
-                let mut take = |depth: f32, id: f32| {
-                    if depth != d {
-                        not_found += 1;
-                    }
-                    if list.last().is_some_and(|l| l.depth > depth) {
-                        backwards += 1;
-                    }
-                    list.push(CapturedFrag {
-                        depth,
-                        prim: id as u32,
-                    });
-                };
-                take(got[0], -id_min);
-                if n >= 2.0 {
-                    take(got[1], id_max);
-                }
+                let n = extraction.take(list, d, texel_f32(&ids, p), texel_f32(&extracted, p));
                 let next_d = -texel_f32(&next, p)[0];
                 if n > 2.0 && next_d != d {
                     // Fragments left at the layer, yet the peel moved on.
@@ -243,36 +223,8 @@ impl Algorithm for F2b2p {
                 (ids, counted) = count(&layer, Some(&ids), &mut report)?;
             }
         }
-        let twice: u64 = peeled
-            .lists
-            .iter()
-            .map(|l| {
-                let mut v: Vec<(u32, u32)> =
-                    l.iter().map(|f| (f.depth.to_bits(), f.prim)).collect();
-                v.sort_unstable();
-                v.windows(2).filter(|w| w[0] == w[1]).count() as u64
-            })
-            .sum();
         let exhausted = counted.stats.samples_passed == 0;
-        let extracted: u64 = peeled.lists.iter().map(|l| l.len() as u64).sum();
-        let checks = vec![
-            super::conservation(exhausted, extracted, generated),
-            Check::new(
-                "every extracted fragment is found at its layer's depth",
-                not_found == 0,
-                format!("{not_found} ids without their fragment"),
-            ),
-            Check::new(
-                "no fragment is extracted twice",
-                twice == 0,
-                format!("{twice} repeats"),
-            ),
-            Check::new(
-                "layers never go backwards, and stay while fragments are left",
-                backwards == 0 && stalled == 0,
-                format!("{backwards} extractions in front of an earlier one, {stalled} layers left early"),
-            ),
-        ];
+        let checks = extraction.checks(&peeled.lists, exhausted, generated, stalled);
         Ok(peeled.finish(report, checks, device.memory.bytes(), 52))
     }
 }
@@ -290,10 +242,7 @@ mod tests {
     #[test]
     fn a_deep_coplanar_stack_is_peeled_two_by_two() {
         // Seven identical quads: one layer of 7 coplanar fragments per pixel.
-        let mut mesh = fragrace_emu::Mesh::default();
-        for _ in 0..7 {
-            crate::test_scenes::tilted_quad(&mut mesh, [-0.8, 0.8, -0.8, 0.8], 0.1, 0.0);
-        }
+        let mesh = crate::test_scenes::coplanar_stack(7);
         let f = frame(&mesh, 8);
         let (r, m) = run(
             &F2b2p,

@@ -33,8 +33,7 @@ use fragrace_emu::{
 
 use super::{check_ids_fit_floats, texel_f32, Peeled};
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, CapturedFrag, Check, Frame, HazardClass,
-    Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Frame, HazardClass, Params,
 };
 use crate::common::capture_state;
 
@@ -209,7 +208,7 @@ impl Algorithm for F2b3p {
 
         let mut report = PassReport::default();
         let mut last: Option<(Image, Image)> = None;
-        let (mut not_found, mut backwards) = (0u64, 0u64);
+        let mut extraction = super::IdExtraction::default();
         let (mut generated, mut exhausted) = (0u64, false);
         while peeled.iterations < peeled.k {
             let view = last.as_ref().map(|(layer, ids)| Last { layer, ids });
@@ -248,60 +247,13 @@ impl Algorithm for F2b3p {
             peeled.iterations += 1;
             let (layer, extracted) = (fb.image(LAYER), fb.image(EXTRACTED));
             for (p, list) in peeled.lists.iter_mut().enumerate() {
-                let [neg_min, max, _, n] = texel_f32(&ids, p);
-                if n < 1.0 {
-                    continue;
-                }
                 let d = texel_f32(&layer, p)[0];
-                let got = texel_f32(&extracted, p);
-                let mut take = |depth: f32, id: f32| {
-                    if depth != d {
-                        not_found += 1;
-                    }
-                    if list.last().is_some_and(|l| l.depth > depth) {
-                        backwards += 1;
-                    }
-                    list.push(CapturedFrag {
-                        depth,
-                        prim: id as u32,
-                    });
-                };
-                take(got[0], -neg_min);
-                if n >= 2.0 {
-                    take(got[1], max);
-                }
+                extraction.take(list, d, texel_f32(&ids, p), texel_f32(&extracted, p));
             }
             last = Some((layer, ids));
         }
-        let twice: u64 = peeled
-            .lists
-            .iter()
-            .map(|l| {
-                let mut v: Vec<(u32, u32)> =
-                    l.iter().map(|f| (f.depth.to_bits(), f.prim)).collect();
-                v.sort_unstable();
-                v.windows(2).filter(|w| w[0] == w[1]).count() as u64
-            })
-            .sum();
-        let extracted: u64 = peeled.lists.iter().map(|l| l.len() as u64).sum();
-        let checks = vec![
-            super::conservation(exhausted, extracted, generated),
-            Check::new(
-                "every extracted fragment is found at its layer's depth",
-                not_found == 0,
-                format!("{not_found} ids without their fragment"),
-            ),
-            Check::new(
-                "no fragment is extracted twice",
-                twice == 0,
-                format!("{twice} repeats"),
-            ),
-            Check::new(
-                "layers never go backwards",
-                backwards == 0,
-                format!("{backwards} extractions in front of an earlier one"),
-            ),
-        ];
+        // The depth pass picks the layer itself: it cannot leave one early (`stalled` 0).
+        let checks = extraction.checks(&peeled.lists, exhausted, generated, 0);
         Ok(peeled.finish(report, checks, device.memory.bytes(), 52))
     }
 }
@@ -318,10 +270,7 @@ mod tests {
 
     #[test]
     fn peels_a_coplanar_stack_as_f2b_2p_does() {
-        let mut mesh = fragrace_emu::Mesh::default();
-        for _ in 0..7 {
-            crate::test_scenes::tilted_quad(&mut mesh, [-0.8, 0.8, -0.8, 0.8], 0.1, 0.0);
-        }
+        let mesh = crate::test_scenes::coplanar_stack(7);
         let f = frame(&mesh, 8);
         let (r, m) = run(
             &F2b3p,

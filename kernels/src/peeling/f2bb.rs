@@ -278,18 +278,9 @@ mod tests {
         assert_exact_everywhere(&F2bB::fab(), &Params::default(), 1);
     }
 
-    /// `n` identical quads: one layer of `n` coplanar fragments per pixel.
-    fn stack(n: usize) -> fragrace_emu::Mesh {
-        let mut mesh = fragrace_emu::Mesh::default();
-        for _ in 0..n {
-            crate::test_scenes::tilted_quad(&mut mesh, [-0.8, 0.8, -0.8, 0.8], 0.1, 0.0);
-        }
-        mesh
-    }
-
     #[test]
     fn fab_keeps_k_slots_of_a_layer_and_counts_the_rest() {
-        let mesh = stack(11);
+        let mesh = crate::test_scenes::coplanar_stack(11);
         let f = frame(&mesh, 8);
         let params = Params {
             k: 16,
@@ -306,7 +297,7 @@ mod tests {
 
     #[test]
     fn kb_loses_racing_coplanar_fragments_and_the_detector_sees_it() {
-        let mesh = stack(6);
+        let mesh = crate::test_scenes::coplanar_stack(6);
         let f = frame(&mesh, 8);
         let params = Params::default();
         let (r, m) = run(&F2bB::kb(), &f, &params, &ExecConfig::ordered());

@@ -181,9 +181,124 @@ pub(super) fn conservation(exhausted: bool, accounted: u64, generated: u64) -> C
     )
 }
 
+/// The id-range peelers' extraction (F2B-2P, F2B-3P): each iteration takes, per pixel, the
+/// fragments with the smallest and the largest unpeeled id of the layer, as the count pass
+/// chose them and the extract pass found them, and tallies what the checks need.
+#[derive(Default)]
+pub(super) struct IdExtraction {
+    /// Ids whose fragment was not at the layer's depth.
+    not_found: u64,
+    /// Extractions in front of an earlier one of their pixel.
+    backwards: u64,
+}
+
+impl IdExtraction {
+    /// Appends to `list` the extracted fragments of a pixel at layer depth `d`, given its
+    /// count pass texel `(-id_min, id_max, _, count)` and its extract texel `(depth of
+    /// id_min, depth of id_max)`. Returns the count.
+    pub fn take(
+        &mut self,
+        list: &mut Vec<CapturedFrag>,
+        d: f32,
+        ids: [f32; 4],
+        got: [f32; 4],
+    ) -> f32 {
+        let [neg_min, max, _, n] = ids;
+        let mut push = |depth: f32, id: f32| {
+            self.not_found += u64::from(depth != d);
+            self.backwards += u64::from(list.last().is_some_and(|l| l.depth > depth));
+            list.push(CapturedFrag {
+                depth,
+                prim: id as u32,
+            });
+        };
+        if n >= 1.0 {
+            push(got[0], -neg_min);
+        }
+        if n >= 2.0 {
+            push(got[1], max);
+        }
+        n
+    }
+
+    /// The checks of an id-range peel; `stalled`: layers left while fragments remained.
+    pub fn checks(
+        &self,
+        lists: &[Vec<CapturedFrag>],
+        exhausted: bool,
+        generated: u64,
+        stalled: u64,
+    ) -> Vec<Check> {
+        let twice: u64 = lists
+            .iter()
+            .map(|l| {
+                let mut v: Vec<(u32, u32)> =
+                    l.iter().map(|f| (f.depth.to_bits(), f.prim)).collect();
+                v.sort_unstable();
+                v.windows(2).filter(|w| w[0] == w[1]).count() as u64
+            })
+            .sum();
+        let extracted: u64 = lists.iter().map(|l| l.len() as u64).sum();
+        vec![
+            conservation(exhausted, extracted, generated),
+            Check::new(
+                "every extracted fragment is found at its layer's depth",
+                self.not_found == 0,
+                format!("{} ids without their fragment", self.not_found),
+            ),
+            Check::new(
+                "no fragment is extracted twice",
+                twice == 0,
+                format!("{twice} repeats"),
+            ),
+            Check::new(
+                "layers never go backwards, and stay while fragments are left",
+                self.backwards == 0 && stalled == 0,
+                format!(
+                    "{} extractions in front of an earlier one, {stalled} layers left early",
+                    self.backwards
+                ),
+            ),
+        ]
+    }
+}
+
 /// Texel `p` (row-major pixel index) of a single-sample image as floats.
 pub(super) fn texel_f32(image: &Image, p: usize) -> [f32; 4] {
     image.texels[p].map(f32::from_bits)
+}
+
+/// Runs a peeler that loses coplanar fragments by design on the 16-quad scene under every
+/// executor: every check passes, the loss shows (errors, `R_h < 1`) and is counted in
+/// `dropped`, and the error pixels are the same everywhere (fixed-function, API ordered).
+/// Returns each run's result and metrics for further assertions.
+#[cfg(test)]
+pub(super) fn assert_same_loss_everywhere(
+    algo: &dyn Algorithm,
+) -> Vec<(String, AlgoResult, crate::oracle::Metrics)> {
+    use crate::kbuffer::rmw::testing::{executors, frame, quads, run};
+    let mesh = quads(16);
+    let f = frame(&mesh, 16);
+    let mut baseline: Option<Vec<bool>> = None;
+    let mut runs = Vec::new();
+    for (what, exec) in executors(1) {
+        let (r, m) = run(algo, &f, &Params::default(), &exec);
+        for c in &r.checks {
+            assert!(c.passed, "{what}: {}: {}", c.name, c.detail);
+        }
+        assert!(m.error_pixels > 0 && m.robustness < 1.0, "{what}: {m:?}");
+        assert!(
+            r.dropped > 0,
+            "{what}: the coplanar fragments lost are counted"
+        );
+        let b = baseline.get_or_insert_with(|| m.error_mask.clone());
+        assert_eq!(
+            *b, m.error_mask,
+            "{what}: the loss is the same under every executor"
+        );
+        runs.push((what, r, m));
+    }
+    runs
 }
 
 /// Primitive ids travel through blended float targets as float values (MAX blending works
