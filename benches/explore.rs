@@ -6,7 +6,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use fragrace_emu::{
-    Buf, Device, Frag, FragInput, FragmentKernel, KernelInfo, Policy, ScheduleConfig,
+    Buf, Device, FragInput, Fragment, FragmentKernel, KernelInfo, Policy, ScheduleConfig,
 };
 
 /// The loom/shuttle peer's model: take a node with a counter `fetch_add`, publish it with a
@@ -21,7 +21,7 @@ impl FragmentKernel for Push {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("ll-push")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let node = f.atomic_add(self.counter, 0, 1).await;
         let mut old = f.atomic_load(self.head, 0).await;
         loop {

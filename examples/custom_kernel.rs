@@ -6,7 +6,7 @@
 
 use fragrace::scene::{Camera, Scene};
 use fragrace_emu::{
-    Buf, Device, Draw, ExecConfig, Frag, FragmentKernel, Framebuffer, KernelInfo, PassState,
+    Buf, Device, Draw, ExecConfig, Fragment, FragmentKernel, Framebuffer, KernelInfo, PassState,
     Policy, SampleCount,
 };
 
@@ -20,7 +20,7 @@ impl FragmentKernel for TwoNearest {
         KernelInfo::new("two-nearest")
     }
 
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let base = 2 * f.pixel_index();
         let z = f.depth();
         // Every `.await` is a place where another invocation may run: between this load and

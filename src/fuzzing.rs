@@ -30,8 +30,8 @@ use std::sync::OnceLock;
 
 use arbitrary::{Arbitrary, Unstructured};
 use fragrace_emu::{
-    Buf, Device, Draw, ExecConfig, ExecMode, Frag, FragmentKernel, Framebuffer, KernelInfo, Mesh,
-    PassState, Policy, RasterState, SampleCount, ScheduleConfig,
+    Buf, Device, Draw, ExecConfig, ExecMode, Fragment, FragmentKernel, Framebuffer, KernelInfo,
+    Mesh, PassState, Policy, RasterState, SampleCount, ScheduleConfig,
 };
 use fragrace_kernels::abuffer::LinkedList;
 use fragrace_kernels::{Algorithm, HazardClass, Params};
@@ -393,7 +393,7 @@ impl FragmentKernel for CoverageCount {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("fuzz-coverage-count")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let layer = if self.per_primitive {
             self.base + f.primitive_id()
         } else {

@@ -1,6 +1,6 @@
-//! The kernel API: what a fragment (or full-screen) kernel is, and [`Frag`], the context
-//! through which one invocation sees its fragment, writes its outputs and touches shared
-//! memory.
+//! The kernel API: what a fragment (or full-screen) kernel is, and [`Frag`], the general
+//! context ([`crate::fragment::Fragment`]) through which one invocation sees its fragment,
+//! writes its outputs and touches shared memory, and may be suspended at any access.
 //!
 //! A kernel is written once, as an `async fn`, and runs under every executor. Each access
 //! to shared memory is an `.await`: a point where another invocation may run. Under the
@@ -11,7 +11,7 @@
 //! struct Count { counts: Buf<u32> }
 //! impl FragmentKernel for Count {
 //!     fn info(&self) -> KernelInfo { KernelInfo::new("count") }
-//!     async fn shade(&self, f: Frag<'_>) {
+//!     async fn shade(&self, f: impl Fragment) {
 //!         f.atomic_add(self.counts, f.pixel_index(), 1).await;
 //!     }
 //! }
@@ -25,6 +25,7 @@ use std::future::Future;
 use std::pin::Pin;
 use std::task::{Context, Poll};
 
+use crate::fragment::Fragment;
 use crate::framebuffer::Image;
 use crate::interlock::{Interlock, InterlockMode};
 use crate::memory::{Addr, Buf, MemOp, Memory, OpKind, Word};
@@ -70,7 +71,9 @@ impl KernelInfo {
 pub trait FragmentKernel: Sync {
     fn info(&self) -> KernelInfo;
     /// Shades one fragment. Every shared-memory access goes through `f` and is awaited.
-    fn shade(&self, f: Frag<'_>) -> impl Future<Output = ()>;
+    /// Generic over the context, so that each executor runs the kernel with the one that
+    /// fits ([`crate::fragment`]).
+    fn shade(&self, f: impl Fragment) -> impl Future<Output = ()>;
 }
 
 /// Everything a fragment knows about itself before shading.
@@ -324,6 +327,15 @@ impl Invocation {
     #[inline(always)]
     fn reset_fragment(&self, input: FragInput) {
         self.input.set(input);
+        self.reset_results();
+    }
+
+    /// Clears the previous fragment's results (its fault has been taken already) but not
+    /// its input: the fused path without lockstep passes the input in `DirectFrag` and
+    /// writes it into the slot only when a fault report needs it.
+    #[inline(always)]
+    pub(crate) fn reset_results(&self) {
+        debug_assert!(!self.has_fault.get());
         // Only outputs the previous invocation wrote need clearing (most write none).
         let mut written = self.outputs_written.replace(0);
         while written != 0 {
@@ -619,6 +631,23 @@ impl<T: Word> Future for CompareExchange<'_, T> {
     }
 }
 
+/// An access counted in the contention table (`ExecConfig::contention`): out of line, so
+/// that kernels that run without the table (the fused path) stay small enough to inline.
+#[cold]
+#[inline(never)]
+fn apply_contended<T: Word>(
+    memory: &Memory,
+    table: &crate::stats::ContentionTable,
+    addr: Addr,
+    op: MemOp,
+    ordering: crate::sync::Ordering,
+) -> u64 {
+    let guard = table.enter(addr);
+    let bits = memory.apply::<T>(addr, op, ordering);
+    drop(guard);
+    bits
+}
+
 /// A future that never completes: the invocation has faulted and will be dropped.
 struct Halt;
 impl Future for Halt {
@@ -628,72 +657,78 @@ impl Future for Halt {
     }
 }
 
-impl<'a> Frag<'a> {
-    fn input(&self) -> FragInput {
-        self.inv.input.get()
-    }
-    /// Pixel column (0 = left).
+/// A fragment's input with the pass it belongs to: what the getters of both kernel
+/// contexts read (`Frag` keeps the input in its slot, `DirectFrag` in registers).
+#[derive(Clone, Copy)]
+pub(crate) struct FragView<'a> {
+    pub input: FragInput,
+    pub env: &'a PassEnv<'a>,
+}
+
+impl FragView<'_> {
+    #[inline(always)]
     pub fn x(&self) -> u32 {
-        self.input().x
+        self.input.x
     }
-    /// Pixel row (0 = top).
+    #[inline(always)]
     pub fn y(&self) -> u32 {
-        self.input().y
+        self.input.y
     }
-    /// `y * width + x`: the index of this pixel in a row-major per-pixel buffer.
+    #[inline(always)]
     pub fn pixel_index(&self) -> u32 {
-        let i = self.input();
-        i.y * self.env.width + i.x
+        self.input.y * self.env.width + self.input.x
     }
+    #[inline(always)]
     pub fn width(&self) -> u32 {
         self.env.width
     }
+    #[inline(always)]
     pub fn height(&self) -> u32 {
         self.env.height
     }
-    /// Samples per pixel of the pass.
+    #[inline(always)]
     pub fn samples(&self) -> u32 {
         self.env.samples
     }
-    /// Triangle index within the draw (GL's `gl_PrimitiveID`); 0 in full-screen passes.
+    #[inline(always)]
     pub fn primitive_id(&self) -> u32 {
-        self.input().primitive_id
+        self.input.primitive_id
     }
+    #[inline(always)]
     pub fn instance_id(&self) -> u32 {
-        self.input().instance_id
+        self.input.instance_id
     }
+    #[inline(always)]
     pub fn front_facing(&self) -> bool {
-        self.input().front_facing
+        self.input.front_facing
     }
-    /// Window depth in [0,1] at the pixel centre (`gl_FragCoord.z`), interpolated on
-    /// demand (kernels that never read it do not pay for it).
+    #[inline]
     pub fn depth(&self) -> f32 {
-        let i = self.input();
+        let i = self.input;
         match self.env.tris.get(i.tri as usize) {
             Some(t) => t.depth_at(i.x as f32 + 0.5, i.y as f32 + 0.5),
             None => i.depth,
         }
     }
-    /// Covered samples (bit s = sample s).
+    #[inline(always)]
     pub fn coverage(&self) -> u8 {
-        self.input().coverage
+        self.input.coverage
     }
-    /// Position of this invocation in API order within the pass.
+    #[inline(always)]
     pub fn invocation_id(&self) -> u64 {
-        self.input().seq
+        self.input.seq
     }
-    /// Perspective-correct barycentrics of the triangle's three vertices at the pixel
-    /// centre; `[1/3; 3]` in full-screen passes.
+    #[inline]
     pub fn barycentrics(&self) -> [f32; 3] {
-        let i = self.input();
+        let i = self.input;
         match self.env.tris.get(i.tri as usize) {
             Some(t) => t.bary_at(i.x as f32 + 0.5, i.y as f32 + 0.5),
             None => [1.0 / 3.0; 3],
         }
     }
-    /// Depth at sample `s` of this pixel (the centre depth in full-screen passes).
+    #[inline]
     pub fn sample_depth(&self, s: u32) -> f32 {
-        let i = self.input();
+        let i = self.input;
         match self.env.tris.get(i.tri as usize) {
             Some(t) => {
                 let pos = crate::raster::SampleCount::from_count(self.env.samples)
@@ -704,12 +739,96 @@ impl<'a> Frag<'a> {
             None => i.depth,
         }
     }
+}
+
+impl<'a> Frag<'a> {
+    #[inline(always)]
+    pub(crate) fn input(&self) -> FragInput {
+        self.inv.input.get()
+    }
+    #[inline(always)]
+    pub(crate) fn view(&self) -> FragView<'a> {
+        FragView {
+            input: self.input(),
+            env: self.env,
+        }
+    }
+    /// Pixel column (0 = left).
+    #[inline]
+    pub fn x(&self) -> u32 {
+        self.view().x()
+    }
+    /// Pixel row (0 = top).
+    #[inline]
+    pub fn y(&self) -> u32 {
+        self.view().y()
+    }
+    /// `y * width + x`: the index of this pixel in a row-major per-pixel buffer.
+    #[inline]
+    pub fn pixel_index(&self) -> u32 {
+        self.view().pixel_index()
+    }
+    #[inline]
+    pub fn width(&self) -> u32 {
+        self.env.width
+    }
+    #[inline]
+    pub fn height(&self) -> u32 {
+        self.env.height
+    }
+    /// Samples per pixel of the pass.
+    #[inline]
+    pub fn samples(&self) -> u32 {
+        self.env.samples
+    }
+    /// Triangle index within the draw (GL's `gl_PrimitiveID`); 0 in full-screen passes.
+    #[inline]
+    pub fn primitive_id(&self) -> u32 {
+        self.view().primitive_id()
+    }
+    #[inline]
+    pub fn instance_id(&self) -> u32 {
+        self.view().instance_id()
+    }
+    #[inline]
+    pub fn front_facing(&self) -> bool {
+        self.view().front_facing()
+    }
+    /// Window depth in \[0, 1\] at the pixel centre (`gl_FragCoord.z`), interpolated on
+    /// demand (kernels that never read it do not pay for it).
+    #[inline]
+    pub fn depth(&self) -> f32 {
+        self.view().depth()
+    }
+    /// Covered samples (bit s = sample s).
+    #[inline]
+    pub fn coverage(&self) -> u8 {
+        self.view().coverage()
+    }
+    /// Position of this invocation in API order within the pass.
+    #[inline]
+    pub fn invocation_id(&self) -> u64 {
+        self.view().invocation_id()
+    }
+    /// Perspective-correct barycentrics of the triangle's three vertices at the pixel
+    /// centre; `[1/3; 3]` in full-screen passes.
+    #[inline]
+    pub fn barycentrics(&self) -> [f32; 3] {
+        self.view().barycentrics()
+    }
+    /// Depth at sample `s` of this pixel (the centre depth in full-screen passes).
+    #[inline]
+    pub fn sample_depth(&self, s: u32) -> f32 {
+        self.view().sample_depth(s)
+    }
 
     /// Writes colour output `target` as floats (float and RGBA8 targets).
+    #[inline]
     pub fn output(&self, target: usize, value: [f32; 4]) {
         self.output_bits(target, value.map(f32::to_bits));
     }
     /// Writes colour output `target` as unsigned integers (R32UI, RGBA32UI targets).
+    #[inline]
     pub fn output_u32(&self, target: usize, value: [u32; 4]) {
         self.output_bits(target, value);
     }
@@ -727,10 +846,12 @@ impl<'a> Frag<'a> {
     }
     /// Discards the fragment: no colour, depth or stencil write after the shader (memory
     /// writes already made stay, as on a GPU).
+    #[inline]
     pub fn discard(&self) {
         self.inv.discarded.set(true);
     }
     /// Replaces the fragment's depth for the late depth test (`gl_FragDepth`).
+    #[inline]
     pub fn write_depth(&self, z: f32) {
         self.inv.depth_out.set(Some(z));
     }
@@ -806,7 +927,7 @@ impl<'a> Frag<'a> {
     /// watchdog, the operation counter and the operation itself. `Pending` when the
     /// invocation faults (the executor then drops it).
     #[inline(always)]
-    fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
+    pub(crate) fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
         let (inv, env) = (self.inv, self.env);
         if index >= buf.len {
             self.out_of_bounds(buf, index);
@@ -829,12 +950,7 @@ impl<'a> Frag<'a> {
         };
         let bits = match env.contention {
             None => env.memory.apply::<T>(addr, op, ordering),
-            Some(table) => {
-                let guard = table.enter(addr);
-                let bits = env.memory.apply::<T>(addr, op, ordering);
-                drop(guard);
-                bits
-            }
+            Some(table) => apply_contended::<T>(env.memory, table, addr, op, ordering),
         };
         Poll::Ready(T::from_bits(bits))
     }
@@ -932,21 +1048,48 @@ impl<'a> Frag<'a> {
         expected: T,
         new: T,
     ) -> Result<T, T> {
-        let p = self.env.spurious_cas;
-        if p > 0 {
-            let i = self.input();
-            let mut h = i.seq ^ (self.inv.steps.get() << 40) ^ 0x9E37_79B9_7F4A_7C15;
-            h ^= h >> 33;
-            h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
-            h ^= h >> 33;
-            if h % 1000 < p as u64 {
-                // A failed attempt reads the word, as a real failed CAS does.
-                let cur: T = self.access(buf, index, MemOp::AtomicLoad, None).await;
-                return Err(cur);
-            }
+        if self.spurious_cas_failure() {
+            // A failed attempt reads the word, as a real failed CAS does.
+            let cur: T = self.access(buf, index, MemOp::AtomicLoad, None).await;
+            return Err(cur);
         }
         self.atomic_compare_exchange(buf, index, expected, new)
             .await
+    }
+
+    /// Whether this weak compare-exchange fails spuriously: a hash of the invocation and
+    /// its step count, so that a schedule replays exactly.
+    #[inline]
+    pub(crate) fn spurious_cas_failure(&self) -> bool {
+        self.spurious_cas_failure_of(self.input().seq)
+    }
+
+    /// [`Self::spurious_cas_failure`] of the invocation `seq`.
+    #[inline]
+    pub(crate) fn spurious_cas_failure_of(&self, seq: u64) -> bool {
+        let p = self.env.spurious_cas;
+        if p == 0 {
+            return false;
+        }
+        let mut h = seq ^ (self.inv.steps.get() << 40) ^ 0x9E37_79B9_7F4A_7C15;
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        h ^= h >> 33;
+        h % 1000 < p as u64
+    }
+
+    /// A step with no memory access under a direct executor without lockstep (a yield):
+    /// counted for the watchdog. `Pending` when the invocation faults.
+    #[inline(always)]
+    pub(crate) fn direct_step(&self) -> Poll<()> {
+        let inv = self.inv;
+        let steps = inv.steps.get() + 1;
+        if steps > self.env.max_steps || inv.faulted() {
+            inv.set_fault(FaultKind::Watchdog { steps: steps - 1 });
+            return Poll::Pending;
+        }
+        inv.steps.set(steps);
+        Poll::Ready(())
     }
 
     /// Loads a multi-word record `buf[base .. base + out.len()]` with plain loads, one step
@@ -1101,6 +1244,7 @@ impl<'a> Frag<'a> {
     }
 
     /// A read-only image from an earlier pass (not shared memory: no step).
+    #[inline]
     pub fn texel(&self, image: &Image, x: u32, y: u32, sample: u32) -> [u32; 4] {
         image.texel(
             x.min(image.width.saturating_sub(1)),

@@ -4,8 +4,9 @@
 //! geometry passes ([`Device::draw`]) that rasterize a [`Draw`] into a [`Framebuffer`] and
 //! run a [`FragmentKernel`] once per fragment, and full-screen passes
 //! ([`Device::fullscreen`]) that run it once per pixel. Kernels are `async fn`s over a
-//! [`Frag`]: every shared-memory access is awaited, a place where another invocation may
-//! run. An [`ExecConfig`] picks the executor: `ordered` (the reference), `parallel` (real
+//! [`Fragment`] context: every shared-memory access is awaited, a place where another
+//! invocation may run. The executor picks the context ([`fragment`]): [`Frag`] where an
+//! invocation can be suspended, [`DirectFrag`] where accesses complete at once. An [`ExecConfig`] picks the executor: `ordered` (the reference), `parallel` (real
 //! threads, fragments of one pixel at once on different threads) or `scheduled` (a seeded
 //! [`Policy`] interleaves invocations at every access, a hazard detector watches).
 //!
@@ -14,10 +15,11 @@
 //!
 //! Module map: [`raster`] (clipping, setup, binning, coverage), [`state`] (depth, stencil,
 //! blending), [`framebuffer`] (tile-major targets), [`memory`] (buffers, atomics),
-//! [`kernel`] (the kernel API), [`exec`] (executors and policies), [`interlock`],
+//! [`kernel`] (the kernel API), [`fragment`] (the kernel contexts), [`exec`] (executors and policies), [`interlock`],
 //! [`hazard`] (the detector), [`stats`], [`pipeline`] (passes), [`sync`] (std or loom).
 
 pub mod exec;
+pub mod fragment;
 pub mod framebuffer;
 pub mod geometry;
 pub mod hazard;
@@ -31,6 +33,7 @@ pub mod stats;
 pub mod sync;
 
 pub use exec::{ExecConfig, ExecMode, Policy, ScheduleConfig};
+pub use fragment::{DirectFrag, Fragment, Performed};
 pub use framebuffer::{Framebuffer, Image};
 pub use geometry::{Draw, Mesh, MeshError};
 pub use hazard::{Hazard, HazardCounts, HazardKind};

@@ -2,7 +2,7 @@
 //! per pixel, no rasterizer involved); draws for the fused path of the direct executors.
 
 use fragrace_emu::{
-    Buf, Device, ExecConfig, ExecMode, FaultKind, Format, Frag, FragmentKernel, FragmentState,
+    Buf, Device, ExecConfig, ExecMode, FaultKind, Format, Fragment, FragmentKernel, FragmentState,
     Framebuffer, KernelInfo, Policy, SampleCount, ScheduleConfig, TargetState,
 };
 
@@ -20,7 +20,7 @@ impl FragmentKernel for GlobalCounter {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("global-counter")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         if self.atomic {
             f.atomic_add(self.counter, 0, 1).await;
         } else {
@@ -163,7 +163,7 @@ impl FragmentKernel for OutOfBounds {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("oob")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         f.store(self.buf, f.pixel_index() + 10, 1).await;
         f.output(0, [1.0; 4]);
     }
@@ -174,7 +174,7 @@ impl FragmentKernel for Panics {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("panics")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         if f.x() == 3 {
             panic!("kernel bug at x=3");
         }
@@ -188,7 +188,7 @@ impl FragmentKernel for SpinsForever {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("spins")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         // The lock is never released: every invocation but possibly one spins forever.
         while f.atomic_compare_exchange(self.lock, 0, 7, 1).await.is_err() {}
     }
@@ -272,7 +272,7 @@ impl FragmentKernel for UndeclaredInterlock {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("undeclared")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         f.interlock_begin().await;
     }
 }
@@ -298,7 +298,7 @@ impl FragmentKernel for Record {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("record")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         if self.write && f.x().is_multiple_of(2) {
             f.store_record(self.buf, 0, &[f.x(), f.x(), f.x()]).await;
         } else {
@@ -352,7 +352,7 @@ impl FragmentKernel for AllOps {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("all-ops")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         assert_eq!(f.atomic_add(self.u, 0, 5).await, 10);
         assert_eq!(f.atomic_sub(self.u, 0, 3).await, 15);
         assert_eq!(f.atomic_min(self.u, 0, 4).await, 12);
@@ -457,7 +457,7 @@ impl FragmentKernel for WeakCas {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("weak-cas")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let mut old = f.atomic_load(self.counter, 0).await;
         loop {
             match f
@@ -595,7 +595,7 @@ impl FragmentKernel for PanicsInDraw {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("panics-in-draw")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         f.atomic_add(self.counter, 0, 1).await;
         if f.x() == 3 {
             panic!("kernel bug at x=3");
@@ -632,7 +632,7 @@ fn faults_in_draws_are_reported_under_the_direct_executors() {
             fn info(&self) -> KernelInfo {
                 KernelInfo::new("oob-draw")
             }
-            async fn shade(&self, f: Frag<'_>) {
+            async fn shade(&self, f: impl Fragment) {
                 f.store(self.buf, f.pixel_index() + 100, 1).await;
                 f.output(0, [1.0; 4]);
             }

@@ -3,7 +3,7 @@
 //! every executor.
 
 use fragrace_emu::{
-    Buf, Device, Draw, ExecConfig, ExecMode, Frag, FragmentKernel, Framebuffer, InterlockMode,
+    Buf, Device, Draw, ExecConfig, ExecMode, Fragment, FragmentKernel, Framebuffer, InterlockMode,
     KernelInfo, Mesh, PassReport, PassState, Policy, RasterState, SampleCount, ScheduleConfig,
 };
 use glam::{Mat4, Vec3};
@@ -21,7 +21,7 @@ impl FragmentKernel for Logger {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("logger").with_interlock(self.mode)
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         f.interlock_begin().await;
         for s in 0..8u32 {
@@ -183,7 +183,7 @@ impl FragmentKernel for Inside {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("inside").with_interlock(self.mode)
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         f.interlock_begin().await;
         let before = f.atomic_add(self.inside, p, 1).await;
@@ -243,7 +243,7 @@ impl FragmentKernel for PixelRmw {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("pixel-rmw").with_interlock(self.mode)
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         f.interlock_begin().await;
         let c = f.load(self.count, p).await;
@@ -309,7 +309,7 @@ impl FragmentKernel for PanicsInside {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("panics-inside").with_interlock(InterlockMode::ORDERED)
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         if f.primitive_id() == 1 {
             // Dies before its turn: its turn must still be passed on.
             panic!("early death");
@@ -358,7 +358,7 @@ impl FragmentKernel for Enters {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("enters").with_interlock(InterlockMode::ORDERED)
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         f.interlock_begin().await;
         f.interlock_end().await;
     }

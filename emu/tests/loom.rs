@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
 use fragrace_emu::exec::run_on_threads;
 use fragrace_emu::kernel::FragInput;
 use fragrace_emu::sync::Arc;
-use fragrace_emu::{Buf, Frag, FragmentKernel, InterlockMode, KernelInfo, Memory};
+use fragrace_emu::{Buf, Fragment, FragmentKernel, InterlockMode, KernelInfo, Memory};
 
 fn frag(seq: u64, x: u32, ticket: u32) -> FragInput {
     FragInput {
@@ -39,7 +39,7 @@ impl FragmentKernel for Add {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("add")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         if self.plain {
             let v = f.load(self.c, 0).await;
             f.store(self.c, 0, v + 1).await;
@@ -90,7 +90,7 @@ impl FragmentKernel for Critical {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("critical").with_interlock(self.mode)
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         f.interlock_begin().await;
         let v = f.load(self.count, 0).await;
         f.store(self.log, v, f.primitive_id()).await;
@@ -160,7 +160,7 @@ impl FragmentKernel for SkipFirst {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("skip-first").with_interlock(InterlockMode::ORDERED)
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         if f.primitive_id() == 0 {
             f.discard();
             return;

@@ -3,7 +3,7 @@
 //! spins complete.
 
 use fragrace_emu::{
-    Buf, Device, ExecConfig, ExecMode, FaultKind, Frag, FragInput, FragmentKernel, KernelInfo,
+    Buf, Device, ExecConfig, ExecMode, FaultKind, FragInput, Fragment, FragmentKernel, KernelInfo,
     PassReport, Policy, ScheduleConfig,
 };
 
@@ -23,7 +23,7 @@ impl FragmentKernel for SpinLock {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("spinlock")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let mut attempts = 0u32;
         while f.atomic_compare_exchange(self.lock, p, 0, 1).await.is_err() {
@@ -53,7 +53,7 @@ impl FragmentKernel for Push {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("push")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let node = f.atomic_add(self.counter, 0, 1).await;
         let mut old = f.atomic_load(self.head, f.pixel_index()).await;
         loop {

@@ -3,7 +3,7 @@
 //! algorithm is checked against.
 
 use fragrace_emu::{
-    Buf, CompareFunc, DepthState, ExecConfig, Format, Frag, FragmentKernel, KernelInfo,
+    Buf, CompareFunc, DepthState, ExecConfig, Format, Fragment, FragmentKernel, KernelInfo,
     SampleCount, TargetState,
 };
 
@@ -25,7 +25,7 @@ impl FragmentKernel for CountKernel {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("count")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         f.atomic_add(self.counts, f.pixel_index(), 1).await;
     }
 }
@@ -40,7 +40,7 @@ impl FragmentKernel for CountPlainKernel {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("count-plain")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let c = f.load(self.counts, p).await;
         f.store(self.counts, p, c + 1).await;
@@ -154,7 +154,7 @@ impl FragmentKernel for OpaqueKernel {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("opaque")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let c = common::unpack_color(common::prim_color_packed(f.primitive_id()));
         // Headlight-style shading by depth keeps the silhouette readable without normals.
         let shade = 1.0 - 0.5 * f.depth();
@@ -249,7 +249,7 @@ impl FragmentKernel for TruthStore {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("truth-store")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let base = f.load(self.offsets, p).await;
         let slot = base + f.atomic_add(self.fill, p, 1).await;

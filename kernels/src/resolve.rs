@@ -9,7 +9,7 @@
 //! once, so that every algorithm's image and storage figure are produced the same way.
 
 use fragrace_emu::{
-    Device, ExecConfig, Format, Frag, FragmentKernel, FragmentState, Framebuffer, PassReport,
+    Device, ExecConfig, Format, Fragment, FragmentKernel, FragmentState, Framebuffer, PassReport,
     SampleCount, TargetState,
 };
 
@@ -68,7 +68,7 @@ impl Composite {
     }
 
     /// Writes the composite of `frags` (already in front-to-back order) to target 0.
-    pub fn output(&self, f: &Frag<'_>, frags: &[CapturedFrag]) {
+    pub fn output(&self, f: &impl Fragment, frags: &[CapturedFrag]) {
         f.output(0, composite_frags(frags, self.alpha, self.background));
     }
 }

@@ -28,7 +28,7 @@ use std::time::{Duration, Instant};
 use fragrace_emu::exec::{run_on_threads, ThreadOutcome};
 use fragrace_emu::kernel::FragInput;
 use fragrace_emu::sync::Arc;
-use fragrace_emu::{Buf, Device, ExecConfig, Frag, FragmentKernel, InterlockMode, KernelInfo};
+use fragrace_emu::{Buf, Device, ExecConfig, Fragment, FragmentKernel, InterlockMode, KernelInfo};
 use fragrace_kernels::common::EMPTY;
 use fragrace_kernels::protocols::*;
 
@@ -520,7 +520,7 @@ impl FragmentKernel for PlainReleaseSpin {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("spinlock-plain-release")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let s = &self.s;
         let mut attempts = 0;
         while f.atomic_compare_exchange(s.lock, 0, 0, 1).await.is_err() {

@@ -235,6 +235,25 @@ impl Acc {
         passed
     }
 
+    /// [`Self::count_passing`] for one invocation (the fused path without lockstep retires
+    /// each fragment as soon as it is shaded): whether its samples passed (it neither
+    /// discarded nor faulted).
+    #[inline(always)]
+    pub(crate) fn count_passing_one(&mut self, inv: &Invocation) -> bool {
+        if inv.faulted() {
+            self.count(inv);
+            return false;
+        }
+        let d = inv.discarded.get();
+        let s = inv.steps.get();
+        let st = &mut self.stats;
+        st.shaded += 1;
+        st.discarded += u64::from(d);
+        st.steps += s;
+        st.max_steps_per_invocation = st.max_steps_per_invocation.max(s);
+        !d
+    }
+
     /// Adds operation counters kept across invocations (see [`Invocation::reset_keep_ops`]).
     pub(crate) fn add_ops(&mut self, inv: &Invocation) {
         for (a, o) in self.ops.iter_mut().zip(&inv.ops) {

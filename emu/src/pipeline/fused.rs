@@ -26,8 +26,9 @@ use std::pin::Pin;
 use std::task::{Context, Poll, Waker};
 
 use crate::exec::{record_panic, Acc, ShadeOutcome};
+use crate::fragment::DirectFrag;
 use crate::framebuffer::TileMemory;
-use crate::kernel::{Frag, FragInput, FragmentKernel, Invocation, PassEnv};
+use crate::kernel::{Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv};
 use crate::raster::{Binned, SampleCount, Segment};
 use crate::state::FragmentState;
 use crate::sync::pool;
@@ -251,6 +252,11 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let per_sample_depth = self.env.samples > 1 && !pass.single;
         let (x0, y0) = (tile.tile().x0, tile.tile().y0);
         let lanes = self.slots.len();
+        // Without lockstep (or with one lane) nothing interleaves inside a worker.
+        let direct = !pass.lockstep || lanes == 1;
+        let late_tests = !pass.early && (state.depth.test || state.stencil.enabled);
+        // Nothing to test or write after shading (capture and counting passes).
+        let count_only = !late_tests && pass.targets == 0;
         binned.raster_segment_spans(seg, |span| {
             let cov = if pass.single && span.coverage & 1 != 0 {
                 self.all_samples
@@ -298,7 +304,11 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                         continue;
                     }
                 }
-                let input = FragInput {
+                // Without lockstep each fragment runs to its end before the next starts,
+                // in the one slot; lockstep lanes gather into a warp. Written straight
+                // into the slot (a copy of a built input stalled on store forwarding).
+                let lane = if direct { 0 } else { self.filled };
+                self.slots[lane].reset_direct(FragInput {
                     seq: row_seq.wrapping_add(x as u64),
                     x,
                     y: span.y,
@@ -309,8 +319,28 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                     front_facing: span.front_facing,
                     depth,
                     ticket: 0,
-                };
-                self.slots[self.filled].reset_direct(input);
+                });
+                if direct {
+                    // Shade it and retire it now: API order holds.
+                    let slot = &self.slots[0];
+                    shade_direct(self.kernel, slot, self.env);
+                    if count_only {
+                        if self.acc.count_passing_one(slot) {
+                            self.counts.samples_passed += u64::from(samples_of(cov));
+                        }
+                    } else {
+                        late(
+                            pass,
+                            self.env,
+                            self.positions,
+                            &mut self.acc,
+                            &mut self.counts,
+                            slot,
+                            &mut tile,
+                        );
+                    }
+                    continue;
+                }
                 self.filled += 1;
                 if self.filled == lanes {
                     self.flush(&mut tile);
@@ -329,11 +359,9 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         }
         self.filled = 0;
         let slots = &self.slots[..n];
-        if self.pass.lockstep && n > 1 {
-            shade_lockstep(self.kernel, slots, self.env);
-        } else {
-            shade_in_turn(self.kernel, slots, self.env);
-        }
+        // Only lockstep warps are gathered (see `run_segment`).
+        debug_assert!(self.pass.lockstep);
+        shade_lockstep(self.kernel, slots, self.env);
         let state = self.pass.state;
         let late_tests = !self.pass.early && (state.depth.test || state.stencil.enabled);
         if !late_tests && self.pass.targets == 0 {
@@ -404,26 +432,39 @@ fn shade_lockstep<K: FragmentKernel>(kernel: &K, slots: &[Invocation], env: &Pas
     }
 }
 
-/// Shades `slots` one after the other, each to its end (direct mode: an access completes
-/// at once; a spin loop runs until it gets in or the watchdog ends it). One `catch_unwind`
-/// covers the whole warp; a panic ends the invocation that raised it.
-fn shade_in_turn<K: FragmentKernel>(kernel: &K, slots: &[Invocation], env: &PassEnv<'_>) {
-    let mut cx = Context::from_waker(Waker::noop());
-    let mut next = 0;
-    while next < slots.len() {
-        let r = catch_unwind(AssertUnwindSafe(|| {
-            while next < slots.len() {
-                let inv = &slots[next];
-                next += 1;
-                // Interlock is not used on this path, so the kernel is the whole invocation.
-                let mut fut = std::pin::pin!(kernel.shade(Frag { inv, env }));
-                while fut.as_mut().poll(&mut cx).is_pending() && !inv.faulted() {}
-            }
-        }));
-        if let Err(payload) = r {
-            record_panic(&slots[next - 1], payload.as_ref());
+/// Shades one invocation to its end through [`DirectFrag`] (no lockstep: an access never
+/// suspends, so the kernel's state machine folds into this loop). A panic ends it.
+#[inline(always)]
+fn shade_direct<K: FragmentKernel>(kernel: &K, inv: &Invocation, env: &PassEnv<'_>) {
+    debug_assert!(matches!(env.mode, Mode::Direct { .. }));
+    let r = catch_unwind(AssertUnwindSafe(|| {
+        let mut cx = Context::from_waker(Waker::noop());
+        // Interlock is not used on this path, so the kernel is the whole invocation.
+        let frag = DirectFrag(Frag { inv, env });
+        // One poll: under `DirectFrag` nothing suspends, and an invocation is pending
+        // only once it has faulted (it is then dropped).
+        let pending = std::pin::pin!(kernel.shade(frag))
+            .poll(&mut cx)
+            .is_pending();
+        if pending && !inv.faulted() {
+            pending_without_fault(inv);
         }
+    }));
+    if let Err(payload) = r {
+        record_panic(inv, payload.as_ref());
     }
+}
+
+/// A kernel under `DirectFrag` returned `Pending` with no fault: a future that is not the
+/// kernel API's suspended it (an invocation cannot wait on anything else).
+#[cold]
+#[inline(never)]
+fn pending_without_fault(inv: &Invocation) {
+    inv.set_fault(crate::kernel::FaultKind::Misuse {
+        message: "the kernel awaited a future that is not a kernel API access, and it did \
+                  not complete"
+            .into(),
+    });
 }
 
 /// Counts a shaded fragment and runs its late tests and target writes.
@@ -474,4 +515,20 @@ fn late(
             t.write_outputs(state, lx, ly, mask, &colors[..pass.targets]);
         }
     }
+}
+
+/// Covered samples in a coverage mask (`count_ones` without `popcnt`, which the baseline
+/// x86-64 target lacks: a table lookup rather than a dozen bit operations per fragment).
+#[inline(always)]
+fn samples_of(coverage: u8) -> u8 {
+    const TABLE: [u8; 256] = {
+        let mut t = [0u8; 256];
+        let mut i = 0;
+        while i < 256 {
+            t[i] = (i as u8).count_ones() as u8;
+            i += 1;
+        }
+        t
+    };
+    TABLE[coverage as usize]
 }

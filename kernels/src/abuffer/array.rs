@@ -7,7 +7,7 @@
 //! resolve (sort the range in place, composite it) and the readback (the resolve's ranges to
 //! a [`Capture`]) are the same, so they are written once here.
 
-use fragrace_emu::{Buf, Device, Frag, FragmentKernel, KernelInfo, Memory};
+use fragrace_emu::{Buf, Device, Fragment, FragmentKernel, KernelInfo, Memory};
 
 use crate::algo::{AlgoError, Capture, CapturedFrag, Frame};
 use crate::common::sort_fragments;
@@ -39,7 +39,7 @@ impl FragmentArrays {
 /// that ends every array A-buffer's store pass once it holds a slot (FAB and SB:
 /// depth-fighting paper section 2, Fig. 3(a) and (c); DFB: z-thickness paper section 4.3),
 /// one copy so that the three passes make the same accesses.
-pub(super) async fn store_fragment(f: &Frag<'_>, depth: Buf<f32>, prim: Buf<u32>, slot: u32) {
+pub(super) async fn store_fragment(f: &impl Fragment, depth: Buf<f32>, prim: Buf<u32>, slot: u32) {
     f.store(depth, slot, f.depth()).await;
     f.store(prim, slot, f.primitive_id()).await;
 }
@@ -60,7 +60,7 @@ pub(super) enum Layout {
 }
 
 impl Layout {
-    async fn base(&self, f: &Frag<'_>, p: u32) -> u32 {
+    async fn base(&self, f: &impl Fragment, p: u32) -> u32 {
         match *self {
             Layout::Fixed { cap } => p.wrapping_mul(cap),
             Layout::Offsets { offsets } => f.load(offsets, p).await,
@@ -145,7 +145,7 @@ impl FragmentKernel for ArrayResolve {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("abuffer-array-resolve")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let mut n = f.load(self.lens, p).await.min(self.layout.cap());
         if let Some(limit) = self.limit {

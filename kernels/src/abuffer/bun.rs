@@ -22,7 +22,7 @@
 //! - the resolve sorts each bucket's list and concatenates the buckets front to back (the
 //!   bucket of a depth is monotonic in the depth, so the concatenation is in depth order).
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
+use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
 use super::ll::{insert, pool_from_params, ListPool, ListResolve, Walk};
 use super::run::AbRun;
@@ -62,7 +62,7 @@ impl FragmentKernel for RangeKernel {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("bun-ll-range")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         f.atomic_min(self.zmin, p, f.depth()).await;
         f.atomic_max(self.zmax, p, f.depth()).await;
@@ -70,7 +70,7 @@ impl FragmentKernel for RangeKernel {
 }
 
 /// The bucket of the invoking fragment, from its pixel's range.
-async fn bucket(f: &Frag<'_>, zmin: Buf<f32>, zmax: Buf<f32>, buckets: u32) -> u32 {
+async fn bucket(f: &impl Fragment, zmin: Buf<f32>, zmax: Buf<f32>, buckets: u32) -> u32 {
     let p = f.pixel_index();
     let lo = f.load(zmin, p).await;
     let hi = f.load(zmax, p).await;
@@ -89,7 +89,7 @@ impl FragmentKernel for BucketCount {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("bun-ll-count")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let b = bucket(&f, self.zmin, self.zmax, self.buckets).await;
         f.atomic_add(self.counts, b, 1).await;
     }
@@ -108,7 +108,7 @@ impl FragmentKernel for BunInsert {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("bun-ll-insert")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let b = bucket(&f, self.zmin, self.zmax, self.buckets).await;
         let head = f.pixel_index() * self.buckets + b;
         insert(&f, &self.pool, head, b, b * self.region, self.region, false).await;

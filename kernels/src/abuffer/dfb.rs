@@ -19,7 +19,7 @@
 //! checks in [`super::checks`], the run scaffolding (with what follows the scan, shared with
 //! SB: [`super::run::Counted`]) in [`super::run`].
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
+use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
 use super::array::{store_fragment, FragmentArrays, Layout};
 use super::run::{AbRun, Counted};
@@ -45,7 +45,7 @@ impl FragmentKernel for RowScan {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("dfb-scan-rows")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         if f.x() != 0 {
             return;
         }
@@ -71,7 +71,7 @@ impl FragmentKernel for RowTotalsScan {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("dfb-scan-row-totals")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         if f.pixel_index() != 0 {
             return;
         }
@@ -95,7 +95,7 @@ impl FragmentKernel for AddRowBase {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("dfb-scan-add")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let base = f.load(self.row_base, f.y()).await;
         let o = f.load(self.offsets, p).await;
@@ -108,7 +108,7 @@ impl FragmentKernel for AddRowBase {
 /// the count and store passes disagree) the fragment gets none: it is dropped and counted in
 /// `overflow[0]` rather than written into another pixel's range.
 pub(super) async fn claim_slot(
-    f: &Frag<'_>,
+    f: &impl Fragment,
     counts: Buf<u32>,
     fill: Buf<u32>,
     overflow: Buf<u32>,
@@ -136,7 +136,7 @@ impl FragmentKernel for DfbStore {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("dfb-store")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let Some(i) = claim_slot(&f, self.counts, self.fill, self.overflow).await else {
             return;
         };

@@ -9,7 +9,7 @@
 //! whatever the depth complexity is FAB's known cost (section 4.2 and 4.4: "extremely large
 //! memory requirements"). The resolve sorts each pixel's array and composites.
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
+use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
 use super::array::{store_fragment, ArrayResolve, FragmentArrays, Layout};
 use super::run::AbRun;
@@ -37,7 +37,7 @@ impl FragmentKernel for FabStore {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("fab-store")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let slot = f.atomic_add(self.counts, p, 1).await;
         if slot >= self.cap {

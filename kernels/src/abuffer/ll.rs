@@ -26,7 +26,7 @@
 //! ([`LinkedList::concurrent_reader`]), where the hazard detector reports the reader's
 //! payload record as torn and the reader itself counts half-written nodes.
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo, PassReport};
+use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo, PassReport};
 
 use super::run::AbRun;
 use crate::algo::{
@@ -100,7 +100,7 @@ impl ListPool {
 /// fragment is dropped and counted; otherwise node `base + i` is written and published.
 /// Returns the node, if any.
 pub(super) async fn insert(
-    f: &Frag<'_>,
+    f: &impl Fragment,
     pool: &ListPool,
     head: u32,
     region: u32,
@@ -150,7 +150,7 @@ impl FragmentKernel for ListResolve {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("list-resolve")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let mut all = Vec::new();
         for b in 0..self.lists {
@@ -304,7 +304,7 @@ impl FragmentKernel for LlInsert {
             "ll-insert"
         })
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         insert(&f, &self.pool, p, 0, 0, self.cap, self.publish_before_write).await;
         let Some(seen) = self.reader else { return };

@@ -19,7 +19,7 @@
 //! allocate invocations ran), but they are disjoint and cover `[0, total)` exactly, which is
 //! checked on every run together with "the count pass equals the store pass".
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
+use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
 use super::array::{store_fragment, FragmentArrays, Layout};
 use super::dfb::claim_slot;
@@ -50,7 +50,7 @@ impl FragmentKernel for SparseAllocate {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("sb-allocate")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let c = f.load(self.counts, p).await;
         if c == 0 {
@@ -73,7 +73,7 @@ impl FragmentKernel for GroupScan {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("sb-group-scan")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         if f.pixel_index() != 0 {
             return;
         }
@@ -104,7 +104,7 @@ impl FragmentKernel for SbStore {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("sb-store")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let Some(i) = claim_slot(&f, self.counts, self.fill, self.overflow).await else {
             return;
         };

@@ -21,7 +21,7 @@
 //! - `kb-atomic64`: one pass on 64-bit keys `depth bits << 32 | primitive id`; keys are unique
 //!   per pixel, so the kept set is exactly the k nearest in the truth's order.
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo, Word};
+use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo, Word};
 
 use super::rmw::{depth_key, pack64, KbRun, Shape, Slots};
 use crate::algo::{
@@ -51,7 +51,7 @@ impl Census {
         })
     }
 
-    async fn record(&self, f: Frag<'_>) {
+    async fn record(&self, f: impl Fragment) {
         f.atomic_add(self.count, f.pixel_index(), 1).await;
         let z = f.depth();
         if z < 0.0 || z.is_nan() {
@@ -81,7 +81,14 @@ impl Census {
 /// The atomic-min insertion chain of `v` into the k slots at `base` (`oit.py`'s
 /// `FS_KBUF_ATOMIC_DEPTH`, on 32- or 64-bit words); `empty` is the key of an empty slot,
 /// the largest of its width.
-async fn chain<T: Word + Ord>(f: Frag<'_>, key: Buf<T>, base: u32, k: u32, mut v: T, empty: T) {
+async fn chain<T: Word + Ord>(
+    f: impl Fragment,
+    key: Buf<T>,
+    base: u32,
+    k: u32,
+    mut v: T,
+    empty: T,
+) {
     for i in 0..k {
         let old = f.atomic_min(key, base + i, v).await;
         if old == empty {
@@ -102,7 +109,7 @@ impl FragmentKernel for Depth32 {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("kb-atomic32-depth")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         self.census.record(f).await;
         chain(
             f,
@@ -133,7 +140,7 @@ impl FragmentKernel for Claim32 {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("kb-atomic32-claim")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let base = f.pixel_index() * self.k;
         let v = depth_key(f.depth());
         if v > f.load(self.key, base + self.k - 1).await {
@@ -168,7 +175,7 @@ impl FragmentKernel for Store64 {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("kb-atomic64-store")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         self.census.record(f).await;
         chain(
             f,

@@ -18,7 +18,7 @@
 //! read-modify-write: exact only if the critical section excludes, so it also checks mutual
 //! exclusion: the sum must equal the fragments shaded).
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, InterlockMode, KernelInfo};
+use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, InterlockMode, KernelInfo};
 
 use super::rmw::{rmw_insert, KbRun, Shape, Slots, SplitSlots};
 use crate::algo::{
@@ -53,7 +53,7 @@ impl FragmentKernel for InterlockStore {
         };
         KernelInfo::new(name).with_interlock(self.mode)
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let prim = f.primitive_id();
         f.interlock_begin().await;

@@ -25,7 +25,7 @@
 //! still the k smallest (which of two equal depths is kept is not an error for the
 //! oracle's `KNearest` comparison).
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, InterlockMode, KernelInfo};
+use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, InterlockMode, KernelInfo};
 
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
@@ -75,12 +75,12 @@ impl Store {
         (p * self.k + i) * SLOT_WORDS
     }
 
-    async fn depth_at(&self, f: &Frag<'_>, p: u32, i: u32) -> f32 {
+    async fn depth_at(&self, f: &impl Fragment, p: u32, i: u32) -> f32 {
         f32::from_bits(f.load(self.slots, self.slot(p, i)).await)
     }
 
     /// The farthest kept depth and its slot (max-array: the tracked position; heap: the root).
-    async fn maximum(&self, f: &Frag<'_>, p: u32) -> (u32, f32) {
+    async fn maximum(&self, f: &impl Fragment, p: u32) -> (u32, f32) {
         let pos = match self.max_pos {
             Some(mp) => f.load(mp, p).await,
             None => 0,
@@ -90,7 +90,7 @@ impl Store {
 
     /// Max-array insertion into a non-full array: append, and move the maximum's position if
     /// the newcomer is farther.
-    async fn array_append(&self, f: &Frag<'_>, p: u32, n: u32, rec: [u32; 2]) {
+    async fn array_append(&self, f: &impl Fragment, p: u32, n: u32, rec: [u32; 2]) {
         let Some(mp) = self.max_pos else { return };
         f.store_record(self.slots, self.slot(p, n), &rec).await;
         let z = f32::from_bits(rec[0]);
@@ -106,7 +106,7 @@ impl Store {
 
     /// Max-array replacement of the maximum by a nearer fragment, then the O(k) scan for the
     /// new maximum. Returns the new maximum depth.
-    async fn array_replace(&self, f: &Frag<'_>, p: u32, pos: u32, rec: [u32; 2]) -> f32 {
+    async fn array_replace(&self, f: &impl Fragment, p: u32, pos: u32, rec: [u32; 2]) -> f32 {
         let Some(mp) = self.max_pos else {
             return f32::INFINITY;
         };
@@ -123,7 +123,7 @@ impl Store {
     }
 
     /// Max-heap insertion into a non-full heap of `n` elements: sift up from slot `n`.
-    async fn heap_push(&self, f: &Frag<'_>, p: u32, n: u32, rec: [u32; 2]) {
+    async fn heap_push(&self, f: &impl Fragment, p: u32, n: u32, rec: [u32; 2]) {
         let z = f32::from_bits(rec[0]);
         let mut i = n;
         while i > 0 {
@@ -143,7 +143,7 @@ impl Store {
 
     /// Max-heap replacement of the root by a nearer fragment: sift down from the root.
     /// Returns the new root depth.
-    async fn heap_replace_root(&self, f: &Frag<'_>, p: u32, rec: [u32; 2]) -> f32 {
+    async fn heap_replace_root(&self, f: &impl Fragment, p: u32, rec: [u32; 2]) -> f32 {
         let z = f32::from_bits(rec[0]);
         let mut i = 0;
         let mut root = z;
@@ -191,7 +191,7 @@ impl FragmentKernel for Store {
             .with_interlock(InterlockMode::ORDERED)
     }
 
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let z = f.depth();
         let rec = [z.to_bits(), f.primitive_id()];
@@ -245,7 +245,7 @@ impl FragmentKernel for Resolve {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("kplus-resolve")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let n = f.load(self.count, p).await.min(self.k);
         let mut frags = Vec::with_capacity(n as usize);

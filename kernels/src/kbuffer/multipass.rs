@@ -53,7 +53,7 @@
 //! rasterizer that broke this.
 
 use fragrace_emu::{
-    Buf, CompareFunc, DepthState, EarlyTests, ExecConfig, Format, Frag, FragmentKernel,
+    Buf, CompareFunc, DepthState, EarlyTests, ExecConfig, Format, Fragment, FragmentKernel,
     FragmentState, Image, KernelInfo, SampleCount, TargetState,
 };
 
@@ -115,7 +115,7 @@ impl FragmentKernel for Capture {
         // Discards: fragments at or before the bound must not reach the depth test.
         KernelInfo::new("kb-multipass-capture").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let s = &self.s;
         let p = f.pixel_index();
         let (z, prim) = (f.depth(), f.primitive_id());
@@ -150,7 +150,7 @@ struct Merge<'i> {
 }
 
 impl Merge<'_> {
-    async fn bump(&self, f: Frag<'_>, which: u32, by: u32) {
+    async fn bump(&self, f: impl Fragment, which: u32, by: u32) {
         f.atomic_add(self.s.stats, which, by).await;
     }
 }
@@ -159,7 +159,7 @@ impl FragmentKernel for Merge<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("kb-multipass-merge")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let s = &self.s;
         let p = f.pixel_index();
         let lo = (f.load(s.lo_depth, p).await, f.load(s.lo_prim, p).await);

@@ -14,7 +14,7 @@
 //! exact.
 
 use fragrace_emu::{
-    Buf, Device, ExecConfig, Frag, FragmentKernel, KernelInfo, PassReport, SampleCount,
+    Buf, Device, ExecConfig, Fragment, FragmentKernel, KernelInfo, PassReport, SampleCount,
 };
 
 use crate::algo::{
@@ -80,7 +80,7 @@ impl SplitSlots {
 /// store them all back. Returns whether it inserted. Correct only if no other fragment of the
 /// pixel touches the slots meanwhile (a serial run, a lock, or pixel interlock).
 pub(super) async fn rmw_insert(
-    f: Frag<'_>,
+    f: impl Fragment,
     kb: SplitSlots,
     base: u32,
     cap: usize,
@@ -121,7 +121,7 @@ pub(super) enum Slots {
 
 impl Slots {
     /// Slot `i` as a kernel reads it (plain loads); `None` when empty.
-    async fn load(&self, f: Frag<'_>, i: u32) -> Option<CapturedFrag> {
+    async fn load(&self, f: impl Fragment, i: u32) -> Option<CapturedFrag> {
         match *self {
             Slots::Split(s) => {
                 let depth = f.load(s.depth, i).await;
@@ -209,7 +209,7 @@ impl FragmentKernel for Resolve {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("kb-resolve")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let base = f.pixel_index() * self.k;
         let mut frags = [CapturedFrag {
             depth: 0.0,
@@ -418,7 +418,7 @@ impl FragmentKernel for RmwStore {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("kb-rmw-store")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let base = f.pixel_index() * self.k;
         rmw_insert(
             f,

@@ -32,7 +32,7 @@
 //! so with the cap every such warp-mate gives up, and without one (`spin_cap` u32::MAX) the
 //! warp deadlocks (a reported `SimtDeadlock` fault; `kernels/tests/simt.rs`).
 
-use fragrace_emu::{Buf, ExecConfig, Frag, FragmentKernel, KernelInfo};
+use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
 use super::rmw::{rmw_insert, KbRun, Shape, Slots, SplitSlots};
 use crate::algo::{
@@ -60,7 +60,7 @@ impl FragmentKernel for SpinStore {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("kb-spinlock-store")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
         let mut attempts = 0;
         loop {

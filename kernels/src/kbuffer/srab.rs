@@ -40,8 +40,8 @@
 //! them: with multisampling off none is, and only the fragments beyond 8 are lost.
 
 use fragrace_emu::{
-    Buf, CompareFunc, ExecConfig, Format, Frag, FragmentKernel, FragmentState, Framebuffer, Image,
-    KernelInfo, PassState, RasterState, SampleCount, StencilFace, StencilOp, StencilState,
+    Buf, CompareFunc, ExecConfig, Format, Fragment, FragmentKernel, FragmentState, Framebuffer,
+    Image, KernelInfo, PassState, RasterState, SampleCount, StencilFace, StencilOp, StencilState,
     TargetState,
 };
 
@@ -103,7 +103,7 @@ impl FragmentKernel for StencilInit {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("srab-stencil-init")
     }
-    async fn shade(&self, _f: Frag<'_>) {}
+    async fn shade(&self, _f: impl Fragment) {}
 }
 
 /// The capture: depth and primitive id to the one sample the stencil test lets through.
@@ -117,7 +117,7 @@ impl FragmentKernel for Capture8 {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("srab-capture").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         if f.coverage() != FULL {
             f.discard();
             return;
@@ -138,7 +138,7 @@ impl FragmentKernel for Resolve<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("srab-resolve")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let mut frags = Vec::with_capacity(SAMPLES);
         for s in 0..SAMPLES as u32 {
             let t = f.texel(self.image, f.x(), f.y(), s);

@@ -29,7 +29,7 @@
 //! overflowed RGBA16F.
 
 use fragrace_emu::{
-    BlendEquation, BlendFactor, BlendState, ExecConfig, Format, Frag, FragmentKernel, Image,
+    BlendEquation, BlendFactor, BlendState, ExecConfig, Format, Fragment, FragmentKernel, Image,
     KernelInfo, SampleCount, TargetState,
 };
 
@@ -67,7 +67,7 @@ impl FragmentKernel for Accumulate {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("wboit-accumulate")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let c = unpack_color(prim_color_packed(f.primitive_id()));
         let a = self.alpha;
         let w = weight(f.depth(), a);
@@ -87,7 +87,7 @@ impl FragmentKernel for Resolve<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("wboit-resolve")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let (x, y) = (f.x(), f.y());
         let acc = f.texel(self.accum, x, y, 0).map(f32::from_bits);
         let r = f32::from_bits(f.texel(self.revealage, x, y, 0)[0]);

@@ -32,7 +32,7 @@
 //! the kept fragments plus the lost ones are the fragments met at the layers' ends.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, Buf, Draw, Format, Frag, FragmentKernel, Image, KernelInfo,
+    BlendEquation, BlendState, Buf, Draw, Format, Fragment, FragmentKernel, Image, KernelInfo,
     PassReport, TargetState,
 };
 
@@ -59,7 +59,7 @@ impl FragmentKernel for Peel<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("dual-peel").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let z = f.depth();
         let id = f.primitive_id() as f32;
         let none = [NONE, NONE, 0.0, 0.0];

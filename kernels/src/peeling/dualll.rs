@@ -22,8 +22,8 @@
 //! through); the front and back allocations never meet; nothing is dropped.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, Draw, Format, Frag, FragmentKernel, Image, KernelInfo, PassReport,
-    TargetState,
+    BlendEquation, BlendState, Draw, Format, Fragment, FragmentKernel, Image, KernelInfo,
+    PassReport, TargetState,
 };
 
 use super::f2bll::{link, Lists, Walked};
@@ -49,7 +49,7 @@ impl FragmentKernel for Range<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("dual-ll-range").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let z = f.depth();
         if let Some(prev) = self.prev {
             let [neg_near, far, ..] = f.texel(prev, f.x(), f.y(), 0).map(f32::from_bits);
@@ -73,7 +73,7 @@ impl FragmentKernel for Capture<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("dual-ll-capture").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let z = f.depth();
         let [neg_near, far, ..] = f.texel(self.range, f.x(), f.y(), 0).map(f32::from_bits);
         let l = &self.lists;

@@ -27,7 +27,7 @@
 //! companion).
 
 use fragrace_emu::{
-    Buf, CompareFunc, DepthState, Draw, Format, Frag, FragmentKernel, Image, KernelInfo,
+    Buf, CompareFunc, DepthState, Draw, Format, Fragment, FragmentKernel, Image, KernelInfo,
     PassReport, PassState, TargetState,
 };
 
@@ -51,7 +51,7 @@ impl FragmentKernel for Peel<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("f2b-peel").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let z = f.depth();
         if let Some(prev) = self.prev {
             // At or in front of the last peeled layer: peeled already, or coplanar with it

@@ -36,8 +36,8 @@
 //! (asserted by the differential harness). No shared memory: the same under every executor.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, Draw, Format, Frag, FragmentKernel, Image, KernelInfo, PassReport,
-    PassState, TargetState,
+    BlendEquation, BlendState, Draw, Format, Fragment, FragmentKernel, Image, KernelInfo,
+    PassReport, PassState, TargetState,
 };
 
 use super::{check_ids_fit_floats, texel_f32, Peeled};
@@ -58,7 +58,7 @@ impl FragmentKernel for Peel<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("f2b-2p-peel").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let z = f.depth();
         let Some((layer, ids)) = self.current else {
             // The initial pass: the nearest layer.
@@ -95,7 +95,7 @@ impl FragmentKernel for Count<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("f2b-2p-count").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let z = f.depth();
         let (x, y) = (f.x(), f.y());
         let id = f.primitive_id() as f32;

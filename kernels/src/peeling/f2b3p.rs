@@ -27,7 +27,7 @@
 //! pass per iteration.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, CompareFunc, DepthState, Draw, EarlyTests, Format, Frag,
+    BlendEquation, BlendState, CompareFunc, DepthState, Draw, EarlyTests, Format, Fragment,
     FragmentKernel, Image, KernelInfo, PassReport, PassState, TargetState,
 };
 
@@ -63,7 +63,7 @@ struct Last<'i> {
 }
 
 impl Last<'_> {
-    fn at(&self, f: &Frag<'_>) -> (f32, [f32; 4]) {
+    fn at(&self, f: &impl Fragment) -> (f32, [f32; 4]) {
         let (x, y) = (f.x(), f.y());
         (
             f32::from_bits(f.texel(self.layer, x, y, 0)[0]),
@@ -81,7 +81,7 @@ impl FragmentKernel for DepthPass<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("f2b-3p-depth").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let z = f.depth();
         let last = self.last.map(|l| l.at(&f));
         if !non_peeled(z, f.primitive_id() as f32, last) {
@@ -101,7 +101,7 @@ impl FragmentKernel for CountPass<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("f2b-3p-count").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let id = f.primitive_id() as f32;
         let last = self.last.map(|l| l.at(&f));
         if !non_peeled(f.depth(), id, last) {
@@ -121,7 +121,7 @@ impl FragmentKernel for ExtractPass<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("f2b-3p-extract")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let z = f.depth();
         let id = f.primitive_id() as f32;
         let [neg_min, max, ..] = f.texel(self.ids, f.x(), f.y(), 0).map(f32::from_bits);

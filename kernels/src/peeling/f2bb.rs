@@ -37,7 +37,7 @@
 //! kept fragment is at its layer's depth and once per pixel; F2B-FAB: kept + dropped = the
 //! fragments the capture passes let through.
 
-use fragrace_emu::{Buf, Frag, FragmentKernel, KernelInfo, PassReport};
+use fragrace_emu::{Buf, Fragment, FragmentKernel, KernelInfo, PassReport};
 
 use super::f2bll::LayerPasses;
 use super::Peeled;
@@ -70,7 +70,7 @@ impl FragmentKernel for FabCapture {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("f2b-fab-capture")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let s = &self.s;
         let p = f.pixel_index();
         let i = f.atomic_add(s.counters, p, 1).await;
@@ -93,7 +93,7 @@ impl FragmentKernel for KbCapture {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("f2b-kb-capture")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let s = &self.s;
         let base = f.pixel_index() * SLOTS;
         for i in 0..SLOTS {

@@ -28,7 +28,7 @@
 //! `R_h = 1` under every executor (asserted by the differential harness).
 
 use fragrace_emu::{
-    Buf, CompareFunc, DepthState, Device, Draw, EarlyTests, ExecConfig, Format, Frag,
+    Buf, CompareFunc, DepthState, Device, Draw, EarlyTests, ExecConfig, Format, Fragment,
     FragmentKernel, Framebuffer, Image, KernelInfo, PassReport, PassState, TargetState,
 };
 
@@ -52,7 +52,7 @@ impl FragmentKernel for DepthPass<'_> {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("f2b-ll-depth").with_discard()
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let z = f.depth();
         if let Some(prev) = self.prev {
             if z <= f32::from_bits(f.texel(prev, f.x(), f.y(), 0)[0]) {
@@ -241,7 +241,7 @@ impl Lists {
 /// Writes the fragment into `node` and pushes it onto list `head`: payload first, the atomic
 /// exchange on the head publishes it, then the `next` link the exchange returned (as the
 /// `ll` A-buffer does).
-pub(super) async fn link(f: &Frag<'_>, l: &Lists, head: u32, node: u32) {
+pub(super) async fn link(f: &impl Fragment, l: &Lists, head: u32, node: u32) {
     let at = node * NODE_WORDS;
     f.store_record(l.nodes, at, &[f.depth().to_bits(), f.primitive_id()])
         .await;
@@ -258,7 +258,7 @@ impl FragmentKernel for CapturePass {
     fn info(&self) -> KernelInfo {
         KernelInfo::new("f2b-ll-capture")
     }
-    async fn shade(&self, f: Frag<'_>) {
+    async fn shade(&self, f: impl Fragment) {
         let l = &self.lists;
         let node = f.atomic_add(l.counters, 0, 1).await;
         if node >= l.capacity {
