@@ -23,7 +23,9 @@ mod threads;
 pub use policy::{Policy, PolicyParseError};
 pub use run::Execution;
 pub use run::Fault;
-pub(crate) use run::{explore, record_panic, shade, shade_chunks, Acc, FragOut, ShadeOutcome};
+pub(crate) use run::{
+    explore, record_panic, shade, shade_chunks, Acc, FragOut, ShadeOutcome, Tally,
+};
 pub use threads::{run_on_threads, ThreadOutcome};
 
 /// Configuration of the `scheduled` executor.

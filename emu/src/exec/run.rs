@@ -156,6 +156,17 @@ pub(crate) fn pass_deferred(
 }
 
 /// Per-worker accumulation.
+/// Counts of invocations that finished without a fault (see [`Acc::tally_one`]).
+#[derive(Clone, Copy, Default)]
+pub(crate) struct Tally {
+    pub shaded: u64,
+    pub discarded: u64,
+    pub steps: u64,
+    pub max_steps: u64,
+    /// Covered samples of those that did not discard.
+    pub samples_passed: u64,
+}
+
 #[derive(Default)]
 pub(crate) struct Acc {
     stats: Stats,
@@ -236,22 +247,34 @@ impl Acc {
     }
 
     /// [`Self::count_passing`] for one invocation (the fused path without lockstep retires
-    /// each fragment as soon as it is shaded): whether its samples passed (it neither
-    /// discarded nor faulted).
+    /// each fragment as soon as it is shaded), into a `tally` kept in registers for a span
+    /// (added by [`Self::add_tally`]). `samples`: its covered samples, which pass unless it
+    /// discarded or faulted.
     #[inline(always)]
-    pub(crate) fn count_passing_one(&mut self, inv: &Invocation) -> bool {
+    pub(crate) fn tally_one(&mut self, tally: &mut Tally, inv: &Invocation, samples: u8) {
         if inv.faulted() {
             self.count(inv);
-            return false;
+            return;
         }
         let d = inv.discarded.get();
         let s = inv.steps.get();
+        tally.shaded += 1;
+        tally.discarded += u64::from(d);
+        tally.steps += s;
+        tally.max_steps = tally.max_steps.max(s);
+        if !d {
+            tally.samples_passed += u64::from(samples);
+        }
+    }
+
+    /// Adds a tally of invocations that did not fault.
+    #[inline]
+    pub(crate) fn add_tally(&mut self, t: &Tally) {
         let st = &mut self.stats;
-        st.shaded += 1;
-        st.discarded += u64::from(d);
-        st.steps += s;
-        st.max_steps_per_invocation = st.max_steps_per_invocation.max(s);
-        !d
+        st.shaded += t.shaded;
+        st.discarded += t.discarded;
+        st.steps += t.steps;
+        st.max_steps_per_invocation = st.max_steps_per_invocation.max(t.max_steps);
     }
 
     /// Adds operation counters kept across invocations (see [`Invocation::reset_keep_ops`]).

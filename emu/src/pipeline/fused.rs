@@ -25,11 +25,12 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::pin::Pin;
 use std::task::{Context, Poll, Waker};
 
-use crate::exec::{record_panic, Acc, ShadeOutcome};
+use crate::exec::{record_panic, Acc, ShadeOutcome, Tally};
 use crate::fragment::DirectFrag;
 use crate::framebuffer::TileMemory;
 use crate::kernel::{Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv};
-use crate::raster::{Binned, SampleCount, Segment};
+
+use crate::raster::{Binned, SampleCount, Segment, Span};
 use crate::state::FragmentState;
 use crate::sync::pool;
 
@@ -195,6 +196,147 @@ fn on_threads<R: Send>(threads: usize, work: impl Fn() -> R + Sync) -> Vec<R> {
     })
 }
 
+/// What the fragments of a segment share before shading: coverage masking and the early
+/// tests (both paths of [`Worker::run_segment`] rasterize the same way).
+struct RowSetup<'p> {
+    pass: &'p FusedPass<'p>,
+    tests: bool,
+    sample_mask: u8,
+    all_samples: u8,
+    per_sample_depth: bool,
+    positions: &'static [(f32, f32)],
+    /// The tile's origin.
+    origin: (u32, u32),
+    width: u32,
+    pixels: u64,
+}
+
+/// What the pixels of one span share.
+struct Row<'p> {
+    cov: u8,
+    /// The setup record (planes), only for the tests: loading it per span cost a cache
+    /// miss per triangle on large meshes.
+    planes: Option<&'p crate::raster::SetupTriangle>,
+    fy: f32,
+    /// `seq` of the span's pixel 0: unique and increasing in API order (triangle, then
+    /// pixel).
+    row_seq: u64,
+}
+
+impl<'p> RowSetup<'p> {
+    fn new(
+        pass: &'p FusedPass<'p>,
+        env: &PassEnv<'_>,
+        all_samples: u8,
+        pixels: u64,
+        tile: &TileAccess<'_>,
+    ) -> Self {
+        let state = pass.state;
+        RowSetup {
+            pass,
+            tests: pass.early && (state.depth.test || state.stencil.enabled),
+            sample_mask: state.sample_mask & all_samples,
+            all_samples,
+            per_sample_depth: env.samples > 1 && !pass.single,
+            positions: SampleCount::from_count(env.samples)
+                .map(|c| c.positions())
+                .unwrap_or(&[(0.5, 0.5)]),
+            origin: (tile.tile().x0, tile.tile().y0),
+            width: env.width,
+            pixels,
+        }
+    }
+
+    /// The span's shared values (`None`: masked out); counts its fragments as generated.
+    #[inline(always)]
+    fn row(&self, span: &Span, counts: &mut FusedCounts) -> Option<Row<'p>> {
+        let pass = self.pass;
+        let cov = if pass.single && span.coverage & 1 != 0 {
+            self.all_samples
+        } else {
+            span.coverage
+        };
+        let cov = cov & self.sample_mask;
+        if cov == 0 {
+            return None;
+        }
+        counts.generated += u64::from(span.x1 - span.x0);
+        Some(Row {
+            cov,
+            planes: self.tests.then(|| &pass.binned.tris[span.tri as usize]),
+            fy: span.y as f32,
+            row_seq: pass
+                .seq_base
+                .wrapping_add(span.tri as u64 * self.pixels)
+                .wrapping_add(span.y as u64 * self.width as u64),
+        })
+    }
+}
+
+impl Row<'_> {
+    /// The early tests of pixel `x`: its surviving coverage and centre depth, or `None`
+    /// when they cull it. The depth is interpolated here only for the tests (NaN otherwise:
+    /// `Frag::depth` does it on demand).
+    #[inline(always)]
+    fn early(
+        &self,
+        rows: &RowSetup<'_>,
+        span: &Span,
+        x: u32,
+        tile: &mut TileAccess<'_>,
+        counts: &mut FusedCounts,
+    ) -> Option<(u8, f32)> {
+        let Some(t) = self.planes else {
+            return Some((self.cov, f32::NAN));
+        };
+        let fx = x as f32;
+        let depth = t.depth_at(fx + 0.5, self.fy + 0.5);
+        let mut depths = [depth; 8];
+        if rows.per_sample_depth {
+            for (s, p) in rows.positions.iter().enumerate() {
+                depths[s] = t.depth_at(fx + p.0, self.fy + p.1);
+            }
+        }
+        let (x0, y0) = rows.origin;
+        let cov = tile.test(
+            rows.pass.state,
+            (x - x0, span.y - y0),
+            self.cov,
+            &depths,
+            span.front_facing,
+        );
+        if cov == 0 {
+            counts.early_culled += 1;
+            return None;
+        }
+        Some((cov, depth))
+    }
+
+    /// The input of pixel `x`.
+    #[inline(always)]
+    fn input(
+        &self,
+        rows: &RowSetup<'_>,
+        span: &Span,
+        x: u32,
+        coverage: u8,
+        depth: f32,
+    ) -> FragInput {
+        FragInput {
+            seq: self.row_seq.wrapping_add(x as u64),
+            x,
+            y: span.y,
+            tri: span.tri,
+            primitive_id: span.source,
+            instance_id: rows.pass.instance,
+            coverage,
+            front_facing: span.front_facing,
+            depth,
+            ticket: 0,
+        }
+    }
+}
+
 /// One worker thread's state: its warp of invocation slots and its tallies.
 struct Worker<'a, K> {
     kernel: &'a K,
@@ -243,104 +385,85 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
     }
 
     /// Rasterizes, tests, shades and writes one segment; hands the tile access back.
-    fn run_segment<'t>(&mut self, seg: &Segment, mut tile: TileAccess<'t>) -> TileAccess<'t> {
-        let pass = self.pass;
-        let state = pass.state;
-        let binned = pass.binned;
-        let tests = pass.early && (state.depth.test || state.stencil.enabled);
-        let sample_mask = state.sample_mask & self.all_samples;
-        let per_sample_depth = self.env.samples > 1 && !pass.single;
-        let (x0, y0) = (tile.tile().x0, tile.tile().y0);
-        let lanes = self.slots.len();
+    fn run_segment<'t>(&mut self, seg: &Segment, tile: TileAccess<'t>) -> TileAccess<'t> {
         // Without lockstep (or with one lane) nothing interleaves inside a worker.
-        let direct = !pass.lockstep || lanes == 1;
+        if !self.pass.lockstep || self.slots.len() == 1 {
+            self.run_segment_direct(seg, tile)
+        } else {
+            self.run_segment_lockstep(seg, tile)
+        }
+    }
+
+    /// [`Self::run_segment`] without lockstep: each fragment is shaded through
+    /// [`DirectFrag`] as soon as it is rasterized and tested, runs to its end and is retired
+    /// at once (API order holds), in one slot, with no warp to gather.
+    fn run_segment_direct<'t>(
+        &mut self,
+        seg: &Segment,
+        mut tile: TileAccess<'t>,
+    ) -> TileAccess<'t> {
+        let Worker {
+            kernel,
+            env,
+            pass,
+            slots,
+            acc,
+            counts,
+            positions,
+            ..
+        } = self;
+        let (kernel, env, pass, positions) = (*kernel, *env, *pass, *positions);
+        let state = pass.state;
         let late_tests = !pass.early && (state.depth.test || state.stencil.enabled);
         // Nothing to test or write after shading (capture and counting passes).
         let count_only = !late_tests && pass.targets == 0;
-        binned.raster_segment_spans(seg, |span| {
-            let cov = if pass.single && span.coverage & 1 != 0 {
-                self.all_samples
-            } else {
-                span.coverage
-            };
-            let cov = cov & sample_mask;
-            if cov == 0 {
+        let slot = &slots[0];
+        let rows = RowSetup::new(pass, env, self.all_samples, self.pixels, &tile);
+        pass.binned.raster_segment_spans(seg, |span| {
+            let Some(row) = rows.row(&span, counts) else {
                 return;
-            }
-            // What the pixels of a run share.
-            let tri = span.tri;
-            // The setup record (planes) only for the tests: loading it per run cost a cache
-            // miss per triangle on large meshes.
-            let planes = tests.then(|| &binned.tris[tri as usize]);
-            let fy = span.y as f32;
-            // Unique and increasing in API order (triangle, then pixel).
-            let row_seq = pass
-                .seq_base
-                .wrapping_add(tri as u64 * self.pixels)
-                .wrapping_add(span.y as u64 * self.env.width as u64);
-            self.counts.generated += u64::from(span.x1 - span.x0);
+            };
+            let mut tally = Tally::default();
             for x in span.x0..span.x1 {
-                let mut cov = cov;
-                // Interpolated here only for the tests (`Frag::depth` does it on demand).
-                let mut depth = f32::NAN;
-                if let Some(t) = planes {
-                    let fx = x as f32;
-                    depth = t.depth_at(fx + 0.5, fy + 0.5);
-                    let mut depths = [depth; 8];
-                    if per_sample_depth {
-                        for (s, p) in self.positions.iter().enumerate() {
-                            depths[s] = t.depth_at(fx + p.0, fy + p.1);
-                        }
-                    }
-                    cov = tile.test(
-                        state,
-                        (x - x0, span.y - y0),
-                        cov,
-                        &depths,
-                        span.front_facing,
-                    );
-                    if cov == 0 {
-                        self.counts.early_culled += 1;
-                        continue;
-                    }
-                }
-                // Without lockstep each fragment runs to its end before the next starts,
-                // in the one slot; lockstep lanes gather into a warp. Written straight
-                // into the slot (a copy of a built input stalled on store forwarding).
-                let lane = if direct { 0 } else { self.filled };
-                self.slots[lane].reset_direct(FragInput {
-                    seq: row_seq.wrapping_add(x as u64),
-                    x,
-                    y: span.y,
-                    tri,
-                    primitive_id: span.source,
-                    instance_id: pass.instance,
-                    coverage: cov,
-                    front_facing: span.front_facing,
-                    depth,
-                    ticket: 0,
-                });
-                if direct {
-                    // Shade it and retire it now: API order holds.
-                    let slot = &self.slots[0];
-                    shade_direct(self.kernel, slot, self.env);
-                    if count_only {
-                        if self.acc.count_passing_one(slot) {
-                            self.counts.samples_passed += u64::from(samples_of(cov));
-                        }
-                    } else {
-                        late(
-                            pass,
-                            self.env,
-                            self.positions,
-                            &mut self.acc,
-                            &mut self.counts,
-                            slot,
-                            &mut tile,
-                        );
-                    }
+                let Some((cov, depth)) = row.early(&rows, &span, x, &mut tile, counts) else {
                     continue;
+                };
+                // Written straight into the slot: a copy of a built input stalled on store
+                // forwarding.
+                slot.reset_direct(row.input(&rows, &span, x, cov, depth));
+                shade_direct(kernel, slot, env);
+                if count_only {
+                    acc.tally_one(&mut tally, slot, samples_of(cov));
+                } else {
+                    late(pass, env, positions, acc, counts, slot, &mut tile);
                 }
+            }
+            acc.add_tally(&tally);
+            counts.samples_passed += tally.samples_passed;
+        });
+        tile
+    }
+
+    /// [`Self::run_segment`] with lockstep warps: fragments gather into a warp of slots,
+    /// whose lanes take turns at every access ([`shade_lockstep`]).
+    fn run_segment_lockstep<'t>(
+        &mut self,
+        seg: &Segment,
+        mut tile: TileAccess<'t>,
+    ) -> TileAccess<'t> {
+        let pass = self.pass;
+        let lanes = self.slots.len();
+        let rows = RowSetup::new(pass, self.env, self.all_samples, self.pixels, &tile);
+        pass.binned.raster_segment_spans(seg, |span| {
+            let Some(row) = rows.row(&span, &mut self.counts) else {
+                return;
+            };
+            for x in span.x0..span.x1 {
+                let Some((cov, depth)) = row.early(&rows, &span, x, &mut tile, &mut self.counts)
+                else {
+                    continue;
+                };
+                self.slots[self.filled].reset_direct(row.input(&rows, &span, x, cov, depth));
                 self.filled += 1;
                 if self.filled == lanes {
                     self.flush(&mut tile);
