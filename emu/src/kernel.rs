@@ -322,6 +322,27 @@ impl Invocation {
         self.reset_fragment(input);
     }
 
+    /// [`Self::reset_direct`] for the next pixel of the same span as the slot's last
+    /// fragment (the fused path without lockstep shades a span's pixels one after the
+    /// other in one slot): only what differs between them is written, the position and,
+    /// when early tests ran, the coverage and depth.
+    #[inline(always)]
+    pub(crate) fn reset_direct_next(&self, seq: u64, x: u32, coverage: u8, depth: f32) {
+        debug_assert!(!self.has_fault.get());
+        let p = self.input.as_ptr();
+        // SAFETY: `Cell` never hands out references to its value (`get` copies), the slot
+        // is used by one thread (`Invocation` is `!Sync`), and no `get`/`set` runs during
+        // these writes: writing fields through `as_ptr` is then the same as `set` of the
+        // whole input with these fields changed, without building and copying it.
+        unsafe {
+            (*p).seq = seq;
+            (*p).x = x;
+            (*p).coverage = coverage;
+            (*p).depth = depth;
+        }
+        self.reset_results();
+    }
+
     /// What every reset does: the new input, and the previous fragment's results cleared
     /// (its fault has been taken already).
     #[inline(always)]

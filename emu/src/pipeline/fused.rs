@@ -312,6 +312,12 @@ impl Row<'_> {
         Some((cov, depth))
     }
 
+    /// The invocation id of pixel `x`.
+    #[inline(always)]
+    fn seq(&self, x: u32) -> u64 {
+        self.row_seq.wrapping_add(x as u64)
+    }
+
     /// The input of pixel `x`.
     #[inline(always)]
     fn input(
@@ -323,7 +329,7 @@ impl Row<'_> {
         depth: f32,
     ) -> FragInput {
         FragInput {
-            seq: self.row_seq.wrapping_add(x as u64),
+            seq: self.seq(x),
             x,
             y: span.y,
             tri: span.tri,
@@ -424,13 +430,20 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 return;
             };
             let mut tally = Tally::default();
+            // The slot holds the input of the span's previous pixel (`first`: not yet).
+            let mut first = true;
             for x in span.x0..span.x1 {
                 let Some((cov, depth)) = row.early(&rows, &span, x, &mut tile, counts) else {
                     continue;
                 };
-                // Written straight into the slot: a copy of a built input stalled on store
-                // forwarding.
-                slot.reset_direct(row.input(&rows, &span, x, cov, depth));
+                if first {
+                    // Written straight into the slot: a copy of a built input stalled on
+                    // store forwarding.
+                    slot.reset_direct(row.input(&rows, &span, x, cov, depth));
+                    first = false;
+                } else {
+                    slot.reset_direct_next(row.seq(x), x, cov, depth);
+                }
                 shade_direct(kernel, slot, env);
                 if count_only {
                     acc.tally_one(&mut tally, slot, samples_of(cov));
