@@ -76,7 +76,7 @@ fn run_count(frame: &Frame<'_>, exec: &ExecConfig, plain: bool) -> Result<AlgoRe
         )?
     };
     let values = device.memory.take(counts)?;
-    let total: u64 = values.iter().map(|&c| c as u64).sum();
+    let total = common::parallel_sum(&values, exec.threads);
     let generated = report.stats.fragments_generated;
     let checks = vec![Check::new(
         "every fragment counted once",

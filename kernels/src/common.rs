@@ -162,3 +162,26 @@ pub fn pixels(frame: &Frame<'_>) -> usize {
 pub fn fresh() -> Device {
     Device::new()
 }
+
+/// The sum of `values`, split over `threads` threads: checks that read every pixel's count
+/// are bound by memory bandwidth (16 MB at 2048x2048), which one core does not saturate.
+pub fn parallel_sum(values: &[u32], threads: usize) -> u64 {
+    // Below this a thread costs more than it saves.
+    const MIN_PER_THREAD: usize = 1 << 18;
+    let threads = threads.clamp(1, values.len() / MIN_PER_THREAD + 1);
+    let sum = |part: &[u32]| part.iter().map(|&c| u64::from(c)).sum::<u64>();
+    if threads == 1 {
+        return sum(values);
+    }
+    let chunk = values.len().div_ceil(threads);
+    fragrace_emu::sync::pool::scope(|s| {
+        let parts: Vec<_> = values
+            .chunks(chunk)
+            .map(|part| s.spawn(move || sum(part)))
+            .collect();
+        parts
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .sum()
+    })
+}
