@@ -425,11 +425,12 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let count_only = !late_tests && pass.targets == 0;
         let slot = &slots[0];
         let rows = RowSetup::new(pass, env, self.all_samples, self.pixels, &tile);
+        // Counts of the segment's invocations, added to the worker's once at the end.
+        let mut tally = Tally::default();
         pass.binned.raster_segment_spans(seg, |span| {
             let Some(row) = rows.row(&span, counts) else {
                 return;
             };
-            let mut tally = Tally::default();
             // The slot holds the input of the span's previous pixel (`first`: not yet).
             let mut first = true;
             for x in span.x0..span.x1 {
@@ -451,9 +452,9 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                     late(pass, env, positions, acc, counts, slot, &mut tile);
                 }
             }
-            acc.add_tally(&tally);
-            counts.samples_passed += tally.samples_passed;
         });
+        acc.add_tally(&tally);
+        counts.samples_passed += tally.samples_passed;
         tile
     }
 
