@@ -13,8 +13,8 @@ M=../shared/models
 PEER=../shared/peers/llvmpipe/oit.py
 have_peer=0
 python3 -c "import moderngl" 2>/dev/null && have_peer=1
-echo "| mesh | size | threads | fragrace frame ms (median) | passes alone | --no-lockstep frame | llvmpipe ms (median) | ratio (frame) |"
-echo "|---|---|---|---|---|---|---|---|"
+echo "| mesh | size | threads | fragrace frame ms (median, lockstep warps) | passes alone | --no-lockstep frame | llvmpipe ms (median) | ratio (lockstep) | ratio (--no-lockstep) |"
+echo "|---|---|---|---|---|---|---|---|---|"
 for case in "dragon.obj.gz 512" "dragon.obj.gz 2048" "bunny.obj.gz 2048" "dragon_res2.obj.gz 512"; do
     set -- $case
     for threads in 1 2; do
@@ -22,11 +22,13 @@ for case in "dragon.obj.gz 512" "dragon.obj.gz 2048" "bunny.obj.gz 2048" "dragon
         free=$($F bench --obj "$M/$1" --algo count --threads "$threads" --width "$2" --height "$2" --frames 15 --warmup 3 --no-lockstep --json | python3 -c "import json,sys; print(round(json.load(sys.stdin)['median_ms'], 2))")
         theirs="-"
         ratio="-"
+        ratio_free="-"
         if [ "$have_peer" = 1 ] && [ "$threads" = 2 ]; then
             theirs=$(LP_NUM_THREADS=$threads python3 "$PEER" "$M/$1" --algo count --width "$2" --height "$2" --frames 15 --warmup 3 2>/dev/null | tail -1 | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d.get('median_ms', d.get('frame_ms_median', 0)), 2))")
             ratio=$(python3 -c "print(f'{$ours / $theirs:.2f}' if $theirs else '-')")
+            ratio_free=$(python3 -c "print(f'{$free / $theirs:.2f}' if $theirs else '-')")
         fi
-        echo "| $1 | $2 | $threads | $ours | $passes | $free | $theirs | $ratio |"
+        echo "| $1 | $2 | $threads | $ours | $passes | $free | $theirs | $ratio | $ratio_free |"
     done
 done
 echo
