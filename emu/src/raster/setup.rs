@@ -498,27 +498,29 @@ fn vec4_f64(p: Vec4) -> [f64; 4] {
 }
 
 /// Depth plane and barycentric planes of a positively oriented snapped triangle, referred to
-/// pixel `(rx, ry)`. `zw` is the window depth and `q[i][k]` the value of `b_k / w` at vertex `i`.
+/// pixel `(rx, ry)`. `a[i]` holds vertex `i`'s window depth and the values of `b_k / w`
+/// (`k = 0, 1, 2`); the result is the depth plane then the three barycentric planes.
 ///
 /// The vertices are taken in canonical order (sorted by y, then x) so that the same three
-/// vertices give bit-identical planes whatever their order.
+/// vertices give bit-identical planes whatever their order. The four planes go through the
+/// same f64 operations side by side (written as loops over the four attributes so that the
+/// compiler can pair them in SIMD registers: the same IEEE operations, so the same bits).
 #[inline]
-fn planes(
-    v: &[[i32; 2]; 3],
-    zw: &[f32; 3],
-    q: &[[f32; 3]; 3],
-    rx: i32,
-    ry: i32,
-) -> ([f32; 3], [[f32; 3]; 3]) {
-    let key = |i: usize| (v[i][1], v[i][0]);
+fn planes(v: &[[i32; 2]; 3], a: &[[f32; 4]; 3], rx: i32, ry: i32) -> [[f32; 3]; 4] {
+    // (y, x) lexicographically, as one integer (|x| < 2^31).
+    let key = |i: usize| ((v[i][1] as i64) << 32) + v[i][0] as i64;
+    let (k0, k1, k2) = (key(0), key(1), key(2));
     let mut o = [0usize, 1, 2];
-    if key(o[1]) < key(o[0]) {
+    let mut k = [k0, k1, k2];
+    if k[1] < k[0] {
         o.swap(0, 1);
+        k.swap(0, 1);
     }
-    if key(o[2]) < key(o[1]) {
+    if k[2] < k[1] {
         o.swap(1, 2);
+        k.swap(1, 2);
     }
-    if key(o[1]) < key(o[0]) {
+    if k[1] < k[0] {
         o.swap(0, 1);
     }
     let s = 1.0 / ONE as f64;
@@ -533,20 +535,22 @@ fn planes(
     // Coefficients of the attribute values at the three (canonical) vertices.
     let (cx1, cx2) = (dy2 * inv_d, -dy1 * inv_d);
     let (cy1, cy2) = (-dx2 * inv_d, dx1 * inv_d);
-    #[inline(always)]
-    fn plane(a0: f64, a1: f64, a2: f64, c: [f64; 6]) -> [f32; 3] {
-        let [cx1, cx2, cy1, cy2, ox, oy] = c;
-        let (da1, da2) = (a1 - a0, a2 - a0);
-        let gx = da1 * cx1 + da2 * cx2;
-        let gy = da1 * cy1 + da2 * cy2;
-        [(a0 + gx * ox + gy * oy) as f32, gx as f32, gy as f32]
+    let wide = |i: usize| a[i].map(|x| x as f64);
+    let (a0, a1, a2) = (wide(o[0]), wide(o[1]), wide(o[2]));
+    let mut gx = [0.0f64; 4];
+    let mut gy = [0.0f64; 4];
+    let mut c = [0.0f64; 4];
+    for k in 0..4 {
+        let (da1, da2) = (a1[k] - a0[k], a2[k] - a0[k]);
+        gx[k] = da1 * cx1 + da2 * cx2;
+        gy[k] = da1 * cy1 + da2 * cy2;
+        c[k] = a0[k] + gx[k] * ox + gy[k] * oy;
     }
-    let c = [cx1, cx2, cy1, cy2, ox, oy];
-    let [i0, i1, i2] = o;
-    let depth = plane(zw[i0] as f64, zw[i1] as f64, zw[i2] as f64, c);
-    let b = |k: usize| plane(q[i0][k] as f64, q[i1][k] as f64, q[i2][k] as f64, c);
-    let bary = [b(0), b(1), b(2)];
-    (depth, bary)
+    let mut out = [[0.0f32; 3]; 4];
+    for k in 0..4 {
+        out[k] = [c[k] as f32, gx[k] as f32, gy[k] as f32];
+    }
+    out
 }
 
 /// Everything a worker needs, shared read-only.
@@ -575,6 +579,14 @@ struct Ctx<'a> {
 
 /// Triangles per batch of the reject loop.
 const BATCH: usize = 256;
+
+/// A triangle kept by [`Ctx::reject`]: its index and pixel rectangle (meaningful only when
+/// no vertex needs clipping and the indices are in range).
+#[derive(Clone, Copy, Debug, Default)]
+struct Kept {
+    t: u32,
+    r: [i32; 4],
+}
 
 /// What one chunk of triangles produced.
 struct ChunkOut {
@@ -644,7 +656,7 @@ impl Ctx<'_> {
     /// Sets up a range of triangles, in batches: a branch-free reject pass first, then the
     /// full setup of the few that remain.
     fn run(&self, range: std::ops::Range<usize>, out: &mut ChunkOut) {
-        let mut keep = [0u32; BATCH];
+        let mut keep = [Kept::default(); BATCH];
         let mut t = range.start;
         while t < range.end {
             let end = (t + BATCH).min(range.end);
@@ -656,8 +668,8 @@ impl Ctx<'_> {
             if self.xy.is_empty() {
                 out.rejected += (end - t) as u64; // every index is out of range
             }
-            for &k in &keep[..n] {
-                self.setup(k as usize, out);
+            for k in &keep[..n] {
+                self.setup(k, out);
             }
             t = end;
         }
@@ -667,38 +679,44 @@ impl Ctx<'_> {
     /// `keep` the triangles whose snapped bounding box reaches a sample (or that need
     /// clipping or have bad indices, handled by [`Ctx::setup`]) and returns their number.
     ///
-    /// Branch-free and minimal (about 30 instructions): whether a sub-pixel triangle's box
-    /// reaches a sample is a coin toss that a branch predictor cannot learn, and without
-    /// branches the CPU overlaps the vertex loads of many triangles. Everything else (area,
-    /// culling, exact coverage) is done only for the triangles kept.
+    /// Branch-free and minimal: whether a sub-pixel triangle's box reaches a sample is a
+    /// coin toss that a branch predictor cannot learn, and without branches the CPU overlaps
+    /// the vertex loads of many triangles. Everything else (area, culling, exact coverage) is
+    /// done only for the triangles kept. The pixel rectangle computed here goes along with
+    /// the triangle, so that setup does not compute it again.
     #[inline(never)]
-    fn reject(&self, range: std::ops::Range<usize>, keep: &mut [u32; BATCH]) -> usize {
+    fn reject(&self, range: std::ops::Range<usize>, keep: &mut [Kept; BATCH]) -> usize {
         let xy = self.xy;
         let last = xy.len() - 1;
         let si = &self.si;
         let (w1, h1) = (self.w - 1, self.h - 1);
         let mut n = 0;
-        for t in range {
-            let [ia, ib, ic] = self.indices[t];
+        for (t, tri) in range.clone().zip(&self.indices[range]) {
+            let [ia, ib, ic] = *tri;
             let (ia, ib, ic) = (ia as usize, ib as usize, ic as usize);
             let bad_index = (ia > last) | (ib > last) | (ic > last);
             let (a, b, c) = (xy[ia.min(last)], xy[ib.min(last)], xy[ic.min(last)]);
             // OUT is i32::MIN: the minimum x is OUT iff a vertex needs clipping.
             let xmin = a[0].min(b[0]).min(c[0]);
             let special = bad_index | (xmin == OUT);
+            // As [`SampleInfo::pixel_rect`] (the clamp to -2^30 only keeps OUT from
+            // overflowing: other coordinates are within [`COORD_LIMIT`]).
             let x0 = (xmin.max(-(1 << 30)) - si.max_x + (ONE - 1)) >> SUBPIXEL_BITS;
             let x1 = (a[0].max(b[0]).max(c[0]).max(-(1 << 30)) - si.min_x) >> SUBPIXEL_BITS;
             let y0 = (a[1].min(b[1]).min(c[1]) - si.max_y + (ONE - 1)) >> SUBPIXEL_BITS;
             let y1 = (a[1].max(b[1]).max(c[1]) - si.min_y) >> SUBPIXEL_BITS;
-            let reaches = (x0.max(0) <= x1.min(w1)) & (y0.max(0) <= y1.min(h1));
-            keep[n] = t as u32;
+            let r = [x0.max(0), y0.max(0), x1.min(w1), y1.min(h1)];
+            let reaches = (r[0] <= r[2]) & (r[1] <= r[3]);
+            keep[n] = Kept { t: t as u32, r };
             n += usize::from(special | reaches);
         }
         n
     }
 
     /// Full setup of one triangle that passed [`Ctx::reject`].
-    fn setup(&self, t: usize, out: &mut ChunkOut) {
+    #[inline]
+    fn setup(&self, k: &Kept, out: &mut ChunkOut) {
+        let t = k.t as usize;
         let [ia, ib, ic] = self.indices[t];
         let (Some(&a), Some(&b), Some(&c)) = (
             self.xy.get(ia as usize),
@@ -712,10 +730,9 @@ impl Ctx<'_> {
             self.clipped(t as u32, [ia, ib, ic], [a, b, c], out);
             return;
         }
+        // Not special, so `reject` kept it for reaching a sample: `r` is its pixel rectangle.
+        let r = k.r;
         let v = [a, b, c];
-        let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else {
-            return;
-        };
         let a2 = area2(&v);
         if a2 == 0 {
             return;
@@ -723,18 +740,21 @@ impl Ctx<'_> {
         let Some(front) = self.facing(a2 < 0) else {
             return;
         };
-        let idx = if a2 > 0 { [ia, ib, ic] } else { [ia, ic, ib] };
-        let perm = if a2 > 0 { [0, 1, 2] } else { [0, 2, 1] };
-        let v = if a2 > 0 { v } else { [v[0], v[2], v[1]] };
+        // Positively oriented for coverage. The planes do not depend on the vertex order
+        // (see [`planes`]), so their attributes stay in input order: vertex `i` carries
+        // `1/w` as `b_i / w`.
+        let pv = v;
+        let v = if a2 > 0 { v } else { [a, c, b] };
         let Some(cov) = self.coverage(&v, r) else {
             return;
         };
-        let zw = idx.map(|i| self.zw[i as usize]);
-        let mut q = [[0.0f32; 3]; 3];
-        for i in 0..3 {
-            q[i][perm[i]] = zw[i][1];
-        }
-        self.finish(out, t as u32, front, false, cov, v, r, zw.map(|z| z[0]), q);
+        let [za, zb, zc] = [ia, ib, ic].map(|i| self.zw[i as usize]);
+        let attrs = [
+            [za[0], za[1], 0.0, 0.0],
+            [zb[0], 0.0, zb[1], 0.0],
+            [zc[0], 0.0, 0.0, zc[1]],
+        ];
+        self.finish(out, t as u32, front, false, cov, v, r, (&pv, &attrs));
     }
 
     /// Slow path: a vertex is outside a clip plane (or not finite).
@@ -793,13 +813,17 @@ impl Ctx<'_> {
             let Some(cov) = self.coverage(&v, r) else {
                 continue;
             };
-            let zw = h.map(|j| proj[j].z);
-            let q = h.map(|j| {
+            let attrs = h.map(|j| {
                 let b = poly.v[j].b;
                 let iw = proj[j].iw as f64;
-                [(b[0] * iw) as f32, (b[1] * iw) as f32, (b[2] * iw) as f32]
+                [
+                    proj[j].z,
+                    (b[0] * iw) as f32,
+                    (b[1] * iw) as f32,
+                    (b[2] * iw) as f32,
+                ]
             });
-            self.finish(out, source, front, m > 3, cov, v, r, zw, q);
+            self.finish(out, source, front, m > 3, cov, v, r, (&v, &attrs));
         }
     }
 
@@ -820,7 +844,14 @@ impl Ctx<'_> {
         }
         let (w, h) = (r[2] - r[0], r[3] - r[1]);
         if self.si.offs.len() == 1 && w < 4 && h < 4 {
-            let bits = coverage::block_mask(&Edges::new(v), &self.si, r);
+            let bb = bbox(v);
+            let bits = if bb[2] - bb[0] < coverage::BLOCK_EXTENT
+                && bb[3] - bb[1] < coverage::BLOCK_EXTENT
+            {
+                coverage::block_mask(v, &self.si, r)
+            } else {
+                coverage::block_mask_wide(&Edges::new(v), &self.si, r)
+            };
             return match bits.count_ones() {
                 0 => None,
                 1 => {
@@ -846,7 +877,8 @@ impl Ctx<'_> {
 
     /// Stores the setup triangle and bins it into the tiles its
     /// pixel rectangle `r` touches (skipping, for large triangles, tiles that lie entirely
-    /// outside one edge).
+    /// outside one edge). `v` is positively oriented; the planes come from `pv`, the same
+    /// vertices in the order of their attributes `attrs` (see [`planes`]).
     #[allow(clippy::too_many_arguments)]
     #[inline]
     fn finish(
@@ -858,11 +890,10 @@ impl Ctx<'_> {
         cov: SetupCoverage,
         v: [[i32; 2]; 3],
         r: [i32; 4],
-        zw: [f32; 3],
-        q: [[f32; 3]; 3],
+        (pv, attrs): (&[[i32; 2]; 3], &[[f32; 4]; 3]),
     ) {
         let sh = self.tile_shift;
-        let (depth, bary) = planes(&v, &zw, &q, r[0], r[1]);
+        let [depth, b0, b1, b2] = planes(pv, attrs, r[0], r[1]);
         let tri = out.tris.len() as u32;
         out.meta.push(TriMeta {
             source,
@@ -874,7 +905,7 @@ impl Ctx<'_> {
             rx: r[0],
             ry: r[1],
             depth,
-            bary,
+            bary: [b0, b1, b2],
         });
         let piece = if piece { PIECE } else { 0 };
         let (tx0, ty0, tx1, ty1) = (r[0] >> sh, r[1] >> sh, r[2] >> sh, r[3] >> sh);
@@ -895,6 +926,14 @@ impl Ctx<'_> {
                 let index = out.smalls.len() as u32 - 1;
                 debug_assert!(index & FLAGS == 0, "a chunk of over 2^29 triangles");
                 let info = index | SMALL | piece;
+                if tx0 == tx1 && ty0 == ty1 {
+                    // The whole pixel rectangle is in one tile (the common case).
+                    out.bins.push((
+                        ty0 as u32 * self.tiles_x + tx0 as u32,
+                        BinEntry { tri, info },
+                    ));
+                    return;
+                }
                 // Only the tiles holding a covered pixel.
                 for ty in ty0..=ty1 {
                     for tx in tx0..=tx1 {
@@ -1205,17 +1244,14 @@ mod tests {
     #[test]
     fn planes_are_order_independent() {
         let v = [[100, 7], [900, 300], [-50, 800]];
-        let z = [0.25f32, 0.75, 0.5];
-        let q = [[1.0f32, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 2.0]];
-        let a = planes(&v, &z, &q, 0, 0);
-        let b = planes(
-            &[v[2], v[0], v[1]],
-            &[z[2], z[0], z[1]],
-            &[q[2], q[0], q[1]],
-            0,
-            0,
-        );
-        assert_eq!(a, b);
+        let a = [
+            [0.25f32, 1.0, 0.0, 0.0],
+            [0.75, 0.0, 0.5, 0.0],
+            [0.5, 0.0, 0.0, 2.0],
+        ];
+        let p = planes(&v, &a, 0, 0);
+        let q = planes(&[v[2], v[0], v[1]], &[a[2], a[0], a[1]], 0, 0);
+        assert_eq!(p, q);
     }
 
     #[test]
