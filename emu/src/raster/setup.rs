@@ -502,9 +502,9 @@ fn vec4_f64(p: Vec4) -> [f64; 4] {
 /// (`k = 0, 1, 2`); the result is the depth plane then the three barycentric planes.
 ///
 /// The vertices are taken in canonical order (sorted by y, then x) so that the same three
-/// vertices give bit-identical planes whatever their order. The four planes go through the
-/// same f64 operations side by side (written as loops over the four attributes so that the
-/// compiler can pair them in SIMD registers: the same IEEE operations, so the same bits).
+/// vertices give bit-identical planes whatever their order (so the attributes may come in
+/// any vertex order, as long as `v` comes in the same one). The four planes go through the
+/// same f64 operations side by side ([`plane_values`]).
 #[inline]
 fn planes(v: &[[i32; 2]; 3], a: &[[f32; 4]; 3], rx: i32, ry: i32) -> [[f32; 3]; 4] {
     // (y, x) lexicographically, as one integer (|x| < 2^31).
@@ -524,33 +524,100 @@ fn planes(v: &[[i32; 2]; 3], a: &[[f32; 4]; 3], rx: i32, ry: i32) -> [[f32; 3]; 
         o.swap(0, 1);
     }
     let s = 1.0 / ONE as f64;
-    let p = |i: usize| (v[i][0] as f64 * s, v[i][1] as f64 * s);
-    let (x0, y0) = p(o[0]);
-    let (x1, y1) = p(o[1]);
-    let (x2, y2) = p(o[2]);
-    let (dx1, dy1, dx2, dy2) = (x1 - x0, y1 - y0, x2 - x0, y2 - y0);
+    let [i0, i1, i2] = o;
+    // Differences of snapped coordinates (below 2^31) scaled to pixels: exact, so the same
+    // values as differences of the scaled coordinates.
+    let d = |i: usize, j: usize, c: usize| (v[j][c] - v[i][c]) as f64 * s;
+    let (dx1, dy1, dx2, dy2) = (d(i0, i1, 0), d(i0, i1, 1), d(i0, i2, 0), d(i0, i2, 1));
     let inv_d = 1.0 / (dx1 * dy2 - dx2 * dy1);
-    // Offset of the reference pixel from the canonical first vertex.
-    let (ox, oy) = (rx as f64 - x0, ry as f64 - y0);
+    // Offset of the reference pixel from the canonical first vertex (exact as well).
+    let ox = ((rx << SUBPIXEL_BITS) - v[i0][0]) as f64 * s;
+    let oy = ((ry << SUBPIXEL_BITS) - v[i0][1]) as f64 * s;
     // Coefficients of the attribute values at the three (canonical) vertices.
     let (cx1, cx2) = (dy2 * inv_d, -dy1 * inv_d);
     let (cy1, cy2) = (-dx2 * inv_d, dx1 * inv_d);
-    let wide = |i: usize| a[i].map(|x| x as f64);
-    let (a0, a1, a2) = (wide(o[0]), wide(o[1]), wide(o[2]));
-    let mut gx = [0.0f64; 4];
-    let mut gy = [0.0f64; 4];
-    let mut c = [0.0f64; 4];
-    for k in 0..4 {
-        let (da1, da2) = (a1[k] - a0[k], a2[k] - a0[k]);
-        gx[k] = da1 * cx1 + da2 * cx2;
-        gy[k] = da1 * cy1 + da2 * cy2;
-        c[k] = a0[k] + gx[k] * ox + gy[k] * oy;
-    }
+    plane_values([&a[i0], &a[i1], &a[i2]], [cx1, cx2, cy1, cy2, ox, oy])
+}
+
+/// The four planes `[a0 + gx ox + gy oy, gx, gy]` from the attribute values `a` at the three
+/// canonical vertices and the coefficients `[cx1, cx2, cy1, cy2, ox, oy]`:
+/// `gx = (a1 - a0) cx1 + (a2 - a0) cx2`, `gy` alike, all in f64.
+#[cfg(any(test, not(target_arch = "x86_64")))]
+#[inline]
+fn plane_values_scalar(a: [&[f32; 4]; 3], c: [f64; 6]) -> [[f32; 3]; 4] {
+    let [cx1, cx2, cy1, cy2, ox, oy] = c;
     let mut out = [[0.0f32; 3]; 4];
-    for k in 0..4 {
-        out[k] = [c[k] as f32, gx[k] as f32, gy[k] as f32];
+    for (k, out) in out.iter_mut().enumerate() {
+        let (a0, a1, a2) = (a[0][k] as f64, a[1][k] as f64, a[2][k] as f64);
+        let (da1, da2) = (a1 - a0, a2 - a0);
+        let gx = da1 * cx1 + da2 * cx2;
+        let gy = da1 * cy1 + da2 * cy2;
+        *out = [(a0 + gx * ox + gy * oy) as f32, gx as f32, gy as f32];
     }
     out
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+#[inline]
+fn plane_values(a: [&[f32; 4]; 3], c: [f64; 6]) -> [[f32; 3]; 4] {
+    plane_values_scalar(a, c)
+}
+
+/// [`plane_values_scalar`] with two attributes per SSE2 register: the same IEEE operations
+/// in the same order (Rust does not contract `a * b + c`), so the same bits, for half the
+/// instructions (a large part of setting up a small triangle).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn plane_values(a: [&[f32; 4]; 3], c: [f64; 6]) -> [[f32; 3]; 4] {
+    use std::arch::x86_64::{
+        _mm_add_pd, _mm_cvtpd_ps, _mm_cvtps_pd, _mm_loadu_ps, _mm_movehl_ps, _mm_movelh_ps,
+        _mm_mul_pd, _mm_set1_pd, _mm_shuffle_ps, _mm_storeu_ps, _mm_sub_pd, _mm_unpackhi_ps,
+        _mm_unpacklo_ps,
+    };
+    let mut out = [0.0f32; 12];
+    // SAFETY: SSE2 is part of the x86_64 baseline; the loads read the three `[f32; 4]`
+    // behind the references and the stores write the 12 floats of `out`, all in bounds.
+    unsafe {
+        let (cx1, cx2, cy1, cy2) = (
+            _mm_set1_pd(c[0]),
+            _mm_set1_pd(c[1]),
+            _mm_set1_pd(c[2]),
+            _mm_set1_pd(c[3]),
+        );
+        let (ox, oy) = (_mm_set1_pd(c[4]), _mm_set1_pd(c[5]));
+        // Attributes 0, 1 (`lo`) and 2, 3 (`hi`) of each vertex, widened to f64.
+        let wide = |a: &[f32; 4]| {
+            let v = _mm_loadu_ps(a.as_ptr());
+            (_mm_cvtps_pd(v), _mm_cvtps_pd(_mm_movehl_ps(v, v)))
+        };
+        let (a0, a1, a2) = (wide(a[0]), wide(a[1]), wide(a[2]));
+        let half = |a0, a1, a2| {
+            let (da1, da2) = (_mm_sub_pd(a1, a0), _mm_sub_pd(a2, a0));
+            let gx = _mm_add_pd(_mm_mul_pd(da1, cx1), _mm_mul_pd(da2, cx2));
+            let gy = _mm_add_pd(_mm_mul_pd(da1, cy1), _mm_mul_pd(da2, cy2));
+            let c = _mm_add_pd(_mm_add_pd(a0, _mm_mul_pd(gx, ox)), _mm_mul_pd(gy, oy));
+            (_mm_cvtpd_ps(c), _mm_cvtpd_ps(gx), _mm_cvtpd_ps(gy))
+        };
+        let (c_lo, gx_lo, gy_lo) = half(a0.0, a1.0, a2.0);
+        let (c_hi, gx_hi, gy_hi) = half(a0.1, a1.1, a2.1);
+        // [c, gx, gy] of the four attributes, then interleaved into `out`.
+        let c = _mm_movelh_ps(c_lo, c_hi);
+        let gx = _mm_movelh_ps(gx_lo, gx_hi);
+        let gy = _mm_movelh_ps(gy_lo, gy_hi);
+        let t0 = _mm_unpacklo_ps(c, gx); // c0 gx0 c1 gx1
+        let t1 = _mm_unpackhi_ps(c, gx); // c2 gx2 c3 gx3
+        let u0 = _mm_shuffle_ps::<0b11_10_00_00>(gy, t0); // gy0 gy0 c1 gx1
+        let o0 = _mm_shuffle_ps::<0b10_00_01_00>(t0, u0); // c0 gx0 gy0 c1
+        let u1 = _mm_shuffle_ps::<0b01_01_11_11>(t0, gy); // gx1 gx1 gy1 gy1
+        let o1 = _mm_shuffle_ps::<0b01_00_10_00>(u1, t1); // gx1 gy1 c2 gx2
+        let u2 = _mm_shuffle_ps::<0b11_10_11_10>(t1, gy); // c3 gx3 gy2 gy3
+        let o2 = _mm_shuffle_ps::<0b11_01_00_10>(u2, u2); // gy2 c3 gx3 gy3
+        _mm_storeu_ps(out.as_mut_ptr(), o0);
+        _mm_storeu_ps(out.as_mut_ptr().add(4), o1);
+        _mm_storeu_ps(out.as_mut_ptr().add(8), o2);
+    }
+    let p = |k: usize| [out[k], out[k + 1], out[k + 2]];
+    [p(0), p(3), p(6), p(9)]
 }
 
 /// Everything a worker needs, shared read-only.
@@ -577,7 +644,7 @@ struct Ctx<'a> {
     ccw_front: bool,
 }
 
-/// Triangles per batch of the reject loop.
+/// Triangles per batch of the reject loop (a power of two).
 const BATCH: usize = 256;
 
 /// A triangle kept by [`Ctx::reject`]: its index and pixel rectangle (meaningful only when
@@ -699,15 +766,18 @@ impl Ctx<'_> {
             // OUT is i32::MIN: the minimum x is OUT iff a vertex needs clipping.
             let xmin = a[0].min(b[0]).min(c[0]);
             let special = bad_index | (xmin == OUT);
-            // As [`SampleInfo::pixel_rect`] (the clamp to -2^30 only keeps OUT from
-            // overflowing: other coordinates are within [`COORD_LIMIT`]).
-            let x0 = (xmin.max(-(1 << 30)) - si.max_x + (ONE - 1)) >> SUBPIXEL_BITS;
-            let x1 = (a[0].max(b[0]).max(c[0]).max(-(1 << 30)) - si.min_x) >> SUBPIXEL_BITS;
-            let y0 = (a[1].min(b[1]).min(c[1]) - si.max_y + (ONE - 1)) >> SUBPIXEL_BITS;
+            // As [`SampleInfo::pixel_rect`]. Coordinates are within [`COORD_LIMIT`], so
+            // nothing wraps, except with OUT: then the triangle is special, kept anyway, and
+            // its rectangle unused.
+            let x0 = xmin.wrapping_add(ONE - 1 - si.max_x) >> SUBPIXEL_BITS;
+            let x1 = a[0].max(b[0]).max(c[0]).wrapping_sub(si.min_x) >> SUBPIXEL_BITS;
+            let y0 = (a[1].min(b[1]).min(c[1]) + (ONE - 1 - si.max_y)) >> SUBPIXEL_BITS;
             let y1 = (a[1].max(b[1]).max(c[1]) - si.min_y) >> SUBPIXEL_BITS;
             let r = [x0.max(0), y0.max(0), x1.min(w1), y1.min(h1)];
             let reaches = (r[0] <= r[2]) & (r[1] <= r[3]);
-            keep[n] = Kept { t: t as u32, r };
+            // `n < BATCH` (one per triangle of the batch at most): the mask only spares
+            // the bounds check.
+            keep[n & (BATCH - 1)] = Kept { t: t as u32, r };
             n += usize::from(special | reaches);
         }
         n
@@ -852,17 +922,19 @@ impl Ctx<'_> {
             } else {
                 coverage::block_mask_wide(&Edges::new(v), &self.si, r)
             };
-            return match bits.count_ones() {
-                0 => None,
-                1 => {
-                    let k = bits.trailing_zeros() as i32;
-                    Some(single(r[0] + k % 4, r[1] + k / 4, 1))
-                }
-                _ => Some(SetupCoverage::Small(SmallCoverage {
+            // Not `count_ones`: without POPCNT (not in the x86_64 baseline) that is a dozen
+            // instructions.
+            return if bits == 0 {
+                None
+            } else if bits & (bits - 1) == 0 {
+                let k = bits.trailing_zeros() as i32;
+                Some(single(r[0] + k % 4, r[1] + k / 4, 1))
+            } else {
+                Some(SetupCoverage::Small(SmallCoverage {
                     x: r[0],
                     y: r[1],
                     bits,
-                })),
+                }))
             };
         }
         if w <= 1 && h <= 1 {
@@ -1252,6 +1324,35 @@ mod tests {
         let p = planes(&v, &a, 0, 0);
         let q = planes(&[v[2], v[0], v[1]], &[a[2], a[0], a[1]], 0, 0);
         assert_eq!(p, q);
+    }
+
+    #[test]
+    fn plane_values_match_scalar() {
+        let mut seed = 3u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let m = ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 4.0;
+            // Zeros of both signs too (their sign survives into the planes).
+            match seed % 7 {
+                0 => 0.0,
+                1 => -0.0,
+                _ => m * 10f64.powi((seed >> 3) as i32 % 9 - 4),
+            }
+        };
+        for _ in 0..20000 {
+            let a: [[f32; 4]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| rnd() as f32));
+            let c: [f64; 6] = std::array::from_fn(|_| rnd());
+            let (p, q) = (
+                plane_values([&a[0], &a[1], &a[2]], c),
+                plane_values_scalar([&a[0], &a[1], &a[2]], c),
+            );
+            assert_eq!(
+                p.map(|p| p.map(f32::to_bits)),
+                q.map(|q| q.map(f32::to_bits))
+            );
+        }
     }
 
     #[test]
