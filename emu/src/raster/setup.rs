@@ -1140,8 +1140,17 @@ fn project_vertices(
     zw: &mut [[f32; 2]],
 ) {
     for ((xy, zw), &p) in xy.iter_mut().zip(zw.iter_mut()).zip(src) {
+        // Finite as f32 iff finite as f64: tested on the f32 bits (exponent not all ones),
+        // a few instructions for the four instead of a few each.
+        let finite = p.to_array().iter().fold(true, |ok, c| {
+            ok & (c.to_bits() & 0x7f80_0000 != 0x7f80_0000)
+        });
         let p = vec4_f64(p);
-        let oc = planes.outcode(&p);
+        let oc = if finite {
+            planes.outcode_finite(&p)
+        } else {
+            NON_FINITE
+        };
         if oc != 0 {
             *xy = [OUT, oc as i32];
             *zw = [0.0; 2];
