@@ -64,15 +64,24 @@ impl Planes {
         }
     }
 
-    /// Bit `i` set when `p` is outside plane `i`; [`NON_FINITE`] for NaN or infinite input.
-    /// Written out plane by plane (the same expressions as [`Planes::dist`], so a vertex is
-    /// classified identically here and by the clipper).
+    /// [`Planes::outcode_finite`], or [`NON_FINITE`] for NaN or infinite input (setup tests
+    /// finiteness on the f32 input instead).
+    #[cfg(test)]
     #[inline]
     pub fn outcode(&self, p: &[f64; 4]) -> u32 {
         let [x, y, z, w] = *p;
         if !(x.is_finite() && y.is_finite() && z.is_finite() && w.is_finite()) {
             return NON_FINITE;
         }
+        self.outcode_finite(p)
+    }
+
+    /// Bit `i` set when the finite point `p` is outside plane `i`. Written out plane by
+    /// plane (the same expressions as [`Planes::dist`], so a vertex is classified
+    /// identically here and by the clipper).
+    #[inline]
+    pub fn outcode_finite(&self, p: &[f64; 4]) -> u32 {
+        let [x, y, z, w] = *p;
         u32::from(w - W_EPSILON < 0.0)
             | u32::from(w + z < 0.0) << 1
             | u32::from(w - z < 0.0) << 2

@@ -260,30 +260,62 @@ pub(crate) fn pixel_mask(v: &[[i32; 2]; 3], si: &SampleInfo, px: i32, py: i32) -
     m
 }
 
+/// Largest bounding box extent (sub-pixel units, exclusive) of a triangle that
+/// [`block_mask`] takes: a box narrower than 5 pixels reaches the samples of at most 4
+/// columns of pixels.
+pub(crate) const BLOCK_EXTENT: i32 = 5 * ONE;
+
 /// One-sample coverage of the pixels of the inclusive rectangle `r`, at most 4x4 pixels:
-/// bit `4 j + i` is pixel `(r[0] + i, r[1] + j)`. The same edge functions as [`raster`],
-/// evaluated exactly: after the first sample in `i64`, the 16 samples of the block differ
-/// from it by at most 3 pixels in x and y, and the edge slopes of a triangle whose box
-/// fits in such a block are at most 5 pixels (`1280` sub-pixel units), so every value fits
-/// an `i32` (`|E| < 2^24`), which lets the block be evaluated as 16 independent lanes.
+/// bit `4 j + i` is pixel `(r[0] + i, r[1] + j)`, for a positively oriented triangle whose
+/// bounding box is less than [`BLOCK_EXTENT`] wide and high. The same edge functions as
+/// [`raster`], evaluated exactly in `i32` relative to the block's first sample: the
+/// vertices lie within 2 [`BLOCK_EXTENT`] of it and the edge deltas below
+/// [`BLOCK_EXTENT`], so the edge functions at the 16 samples stay below 2^24 in magnitude,
+/// which lets the block be evaluated as 16 independent lanes.
+///
+/// The bound is on the box, not on `r`: `r` is clamped to the viewport, so a small `r` can
+/// belong to a sliver reaching far off screen, whose edge functions need [`Edges`]' `i64`.
 #[inline]
-pub(crate) fn block_mask(e: &Edges, si: &SampleInfo, r: [i32; 4]) -> u16 {
+pub(crate) fn block_mask(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4]) -> u16 {
     debug_assert!(si.offs.len() == 1 && r[2] - r[0] < 4 && r[3] - r[1] < 4);
+    debug_assert!({
+        let b = bbox(v);
+        b[2] - b[0] < BLOCK_EXTENT && b[3] - b[1] < BLOCK_EXTENT
+    });
     let (ox, oy) = si.offs[0];
-    let origin = e.at(
-        ((r[0] as i64) << SUBPIXEL_BITS) + ox as i64,
-        ((r[1] as i64) << SUBPIXEL_BITS) + oy as i64,
-    );
-    let narrow = |v: i64| {
-        debug_assert!(v.unsigned_abs() < 1 << 30);
-        v as i32
-    };
-    let base = origin.map(narrow);
-    let sx = e.a.map(|a| narrow(a << SUBPIXEL_BITS));
-    let sy = e.b.map(|b| narrow(b << SUBPIXEL_BITS));
+    let (bx, by) = ((r[0] << SUBPIXEL_BITS) + ox, (r[1] << SUBPIXEL_BITS) + oy);
+    let x = [v[0][0] - bx, v[1][0] - bx, v[2][0] - bx];
+    let y = [v[0][1] - by, v[1][1] - by, v[2][1] - by];
+    let mut base = [0i32; 3];
+    let mut sx = [0i32; 3];
+    let mut sy = [0i32; 3];
+    for i in 0..3 {
+        let j = (i + 1) % 3;
+        let (dx, dy) = (x[j] - x[i], y[j] - y[i]);
+        // E(s) = dx (s_y - y_i) - dy (s_x - x_i), at s = 0, minus one off the top-left edges.
+        let bias = i32::from(is_top_left(dx as i64, dy as i64)) - 1;
+        base[i] = dy * x[i] - dx * y[i] + bias;
+        sx[i] = -dy << SUBPIXEL_BITS;
+        sy[i] = dx << SUBPIXEL_BITS;
+    }
     let cols = (1u32 << (r[2] - r[0] + 1)) - 1;
     let rows = (r[3] - r[1] + 1) as u32;
     block_rows(base, sx, sy, cols, rows)
+}
+
+/// [`block_mask`] for any triangle (edge functions in `i64`), one sample at a time: for the
+/// rare small pixel rectangle of a large triangle (a sliver reaching off screen).
+#[cold]
+pub(crate) fn block_mask_wide(e: &Edges, si: &SampleInfo, r: [i32; 4]) -> u16 {
+    debug_assert!(si.offs.len() == 1 && r[2] - r[0] < 4 && r[3] - r[1] < 4);
+    let mut bits = 0u16;
+    for y in r[1]..=r[3] {
+        for x in r[0]..=r[2] {
+            let m = e.mask_at(si, (x as i64) << SUBPIXEL_BITS, (y as i64) << SUBPIXEL_BITS);
+            bits |= u16::from(m) << (4 * (y - r[1]) + (x - r[0]));
+        }
+    }
+    bits
 }
 
 /// [`block_mask`]'s evaluation: a row of four samples per edge in one SSE2 register,

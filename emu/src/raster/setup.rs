@@ -498,55 +498,126 @@ fn vec4_f64(p: Vec4) -> [f64; 4] {
 }
 
 /// Depth plane and barycentric planes of a positively oriented snapped triangle, referred to
-/// pixel `(rx, ry)`. `zw` is the window depth and `q[i][k]` the value of `b_k / w` at vertex `i`.
+/// pixel `(rx, ry)`. `a[i]` holds vertex `i`'s window depth and the values of `b_k / w`
+/// (`k = 0, 1, 2`); the result is the depth plane then the three barycentric planes.
 ///
 /// The vertices are taken in canonical order (sorted by y, then x) so that the same three
-/// vertices give bit-identical planes whatever their order.
+/// vertices give bit-identical planes whatever their order (so the attributes may come in
+/// any vertex order, as long as `v` comes in the same one). The four planes go through the
+/// same f64 operations side by side ([`plane_values`]).
 #[inline]
-fn planes(
-    v: &[[i32; 2]; 3],
-    zw: &[f32; 3],
-    q: &[[f32; 3]; 3],
-    rx: i32,
-    ry: i32,
-) -> ([f32; 3], [[f32; 3]; 3]) {
-    let key = |i: usize| (v[i][1], v[i][0]);
+fn planes(v: &[[i32; 2]; 3], a: &[[f32; 4]; 3], rx: i32, ry: i32) -> [[f32; 3]; 4] {
+    // (y, x) lexicographically, as one integer (|x| < 2^31).
+    let key = |i: usize| ((v[i][1] as i64) << 32) + v[i][0] as i64;
+    let (k0, k1, k2) = (key(0), key(1), key(2));
     let mut o = [0usize, 1, 2];
-    if key(o[1]) < key(o[0]) {
+    let mut k = [k0, k1, k2];
+    if k[1] < k[0] {
         o.swap(0, 1);
+        k.swap(0, 1);
     }
-    if key(o[2]) < key(o[1]) {
+    if k[2] < k[1] {
         o.swap(1, 2);
+        k.swap(1, 2);
     }
-    if key(o[1]) < key(o[0]) {
+    if k[1] < k[0] {
         o.swap(0, 1);
     }
     let s = 1.0 / ONE as f64;
-    let p = |i: usize| (v[i][0] as f64 * s, v[i][1] as f64 * s);
-    let (x0, y0) = p(o[0]);
-    let (x1, y1) = p(o[1]);
-    let (x2, y2) = p(o[2]);
-    let (dx1, dy1, dx2, dy2) = (x1 - x0, y1 - y0, x2 - x0, y2 - y0);
+    let [i0, i1, i2] = o;
+    // Differences of snapped coordinates (below 2^31) scaled to pixels: exact, so the same
+    // values as differences of the scaled coordinates.
+    let d = |i: usize, j: usize, c: usize| (v[j][c] - v[i][c]) as f64 * s;
+    let (dx1, dy1, dx2, dy2) = (d(i0, i1, 0), d(i0, i1, 1), d(i0, i2, 0), d(i0, i2, 1));
     let inv_d = 1.0 / (dx1 * dy2 - dx2 * dy1);
-    // Offset of the reference pixel from the canonical first vertex.
-    let (ox, oy) = (rx as f64 - x0, ry as f64 - y0);
+    // Offset of the reference pixel from the canonical first vertex (exact as well).
+    let ox = ((rx << SUBPIXEL_BITS) - v[i0][0]) as f64 * s;
+    let oy = ((ry << SUBPIXEL_BITS) - v[i0][1]) as f64 * s;
     // Coefficients of the attribute values at the three (canonical) vertices.
     let (cx1, cx2) = (dy2 * inv_d, -dy1 * inv_d);
     let (cy1, cy2) = (-dx2 * inv_d, dx1 * inv_d);
-    #[inline(always)]
-    fn plane(a0: f64, a1: f64, a2: f64, c: [f64; 6]) -> [f32; 3] {
-        let [cx1, cx2, cy1, cy2, ox, oy] = c;
+    plane_values([&a[i0], &a[i1], &a[i2]], [cx1, cx2, cy1, cy2, ox, oy])
+}
+
+/// The four planes `[a0 + gx ox + gy oy, gx, gy]` from the attribute values `a` at the three
+/// canonical vertices and the coefficients `[cx1, cx2, cy1, cy2, ox, oy]`:
+/// `gx = (a1 - a0) cx1 + (a2 - a0) cx2`, `gy` alike, all in f64.
+#[cfg(any(test, not(target_arch = "x86_64")))]
+#[inline]
+fn plane_values_scalar(a: [&[f32; 4]; 3], c: [f64; 6]) -> [[f32; 3]; 4] {
+    let [cx1, cx2, cy1, cy2, ox, oy] = c;
+    let mut out = [[0.0f32; 3]; 4];
+    for (k, out) in out.iter_mut().enumerate() {
+        let (a0, a1, a2) = (a[0][k] as f64, a[1][k] as f64, a[2][k] as f64);
         let (da1, da2) = (a1 - a0, a2 - a0);
         let gx = da1 * cx1 + da2 * cx2;
         let gy = da1 * cy1 + da2 * cy2;
-        [(a0 + gx * ox + gy * oy) as f32, gx as f32, gy as f32]
+        *out = [(a0 + gx * ox + gy * oy) as f32, gx as f32, gy as f32];
     }
-    let c = [cx1, cx2, cy1, cy2, ox, oy];
-    let [i0, i1, i2] = o;
-    let depth = plane(zw[i0] as f64, zw[i1] as f64, zw[i2] as f64, c);
-    let b = |k: usize| plane(q[i0][k] as f64, q[i1][k] as f64, q[i2][k] as f64, c);
-    let bary = [b(0), b(1), b(2)];
-    (depth, bary)
+    out
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+#[inline]
+fn plane_values(a: [&[f32; 4]; 3], c: [f64; 6]) -> [[f32; 3]; 4] {
+    plane_values_scalar(a, c)
+}
+
+/// [`plane_values_scalar`] with two attributes per SSE2 register: the same IEEE operations
+/// in the same order (Rust does not contract `a * b + c`), so the same bits, for half the
+/// instructions (a large part of setting up a small triangle).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn plane_values(a: [&[f32; 4]; 3], c: [f64; 6]) -> [[f32; 3]; 4] {
+    use std::arch::x86_64::{
+        _mm_add_pd, _mm_cvtpd_ps, _mm_cvtps_pd, _mm_loadu_ps, _mm_movehl_ps, _mm_movelh_ps,
+        _mm_mul_pd, _mm_set1_pd, _mm_shuffle_ps, _mm_storeu_ps, _mm_sub_pd, _mm_unpackhi_ps,
+        _mm_unpacklo_ps,
+    };
+    let mut out = [0.0f32; 12];
+    // SAFETY: SSE2 is part of the x86_64 baseline; the loads read the three `[f32; 4]`
+    // behind the references and the stores write the 12 floats of `out`, all in bounds.
+    unsafe {
+        let (cx1, cx2, cy1, cy2) = (
+            _mm_set1_pd(c[0]),
+            _mm_set1_pd(c[1]),
+            _mm_set1_pd(c[2]),
+            _mm_set1_pd(c[3]),
+        );
+        let (ox, oy) = (_mm_set1_pd(c[4]), _mm_set1_pd(c[5]));
+        // Attributes 0, 1 (`lo`) and 2, 3 (`hi`) of each vertex, widened to f64.
+        let wide = |a: &[f32; 4]| {
+            let v = _mm_loadu_ps(a.as_ptr());
+            (_mm_cvtps_pd(v), _mm_cvtps_pd(_mm_movehl_ps(v, v)))
+        };
+        let (a0, a1, a2) = (wide(a[0]), wide(a[1]), wide(a[2]));
+        let half = |a0, a1, a2| {
+            let (da1, da2) = (_mm_sub_pd(a1, a0), _mm_sub_pd(a2, a0));
+            let gx = _mm_add_pd(_mm_mul_pd(da1, cx1), _mm_mul_pd(da2, cx2));
+            let gy = _mm_add_pd(_mm_mul_pd(da1, cy1), _mm_mul_pd(da2, cy2));
+            let c = _mm_add_pd(_mm_add_pd(a0, _mm_mul_pd(gx, ox)), _mm_mul_pd(gy, oy));
+            (_mm_cvtpd_ps(c), _mm_cvtpd_ps(gx), _mm_cvtpd_ps(gy))
+        };
+        let (c_lo, gx_lo, gy_lo) = half(a0.0, a1.0, a2.0);
+        let (c_hi, gx_hi, gy_hi) = half(a0.1, a1.1, a2.1);
+        // [c, gx, gy] of the four attributes, then interleaved into `out`.
+        let c = _mm_movelh_ps(c_lo, c_hi);
+        let gx = _mm_movelh_ps(gx_lo, gx_hi);
+        let gy = _mm_movelh_ps(gy_lo, gy_hi);
+        let t0 = _mm_unpacklo_ps(c, gx); // c0 gx0 c1 gx1
+        let t1 = _mm_unpackhi_ps(c, gx); // c2 gx2 c3 gx3
+        let u0 = _mm_shuffle_ps::<0b11_10_00_00>(gy, t0); // gy0 gy0 c1 gx1
+        let o0 = _mm_shuffle_ps::<0b10_00_01_00>(t0, u0); // c0 gx0 gy0 c1
+        let u1 = _mm_shuffle_ps::<0b01_01_11_11>(t0, gy); // gx1 gx1 gy1 gy1
+        let o1 = _mm_shuffle_ps::<0b01_00_10_00>(u1, t1); // gx1 gy1 c2 gx2
+        let u2 = _mm_shuffle_ps::<0b11_10_11_10>(t1, gy); // c3 gx3 gy2 gy3
+        let o2 = _mm_shuffle_ps::<0b11_01_00_10>(u2, u2); // gy2 c3 gx3 gy3
+        _mm_storeu_ps(out.as_mut_ptr(), o0);
+        _mm_storeu_ps(out.as_mut_ptr().add(4), o1);
+        _mm_storeu_ps(out.as_mut_ptr().add(8), o2);
+    }
+    let p = |k: usize| [out[k], out[k + 1], out[k + 2]];
+    [p(0), p(3), p(6), p(9)]
 }
 
 /// Everything a worker needs, shared read-only.
@@ -573,8 +644,16 @@ struct Ctx<'a> {
     ccw_front: bool,
 }
 
-/// Triangles per batch of the reject loop.
+/// Triangles per batch of the reject loop (a power of two).
 const BATCH: usize = 256;
+
+/// A triangle kept by [`Ctx::reject`]: its index and pixel rectangle (meaningful only when
+/// no vertex needs clipping and the indices are in range).
+#[derive(Clone, Copy, Debug, Default)]
+struct Kept {
+    t: u32,
+    r: [i32; 4],
+}
 
 /// What one chunk of triangles produced.
 struct ChunkOut {
@@ -644,7 +723,7 @@ impl Ctx<'_> {
     /// Sets up a range of triangles, in batches: a branch-free reject pass first, then the
     /// full setup of the few that remain.
     fn run(&self, range: std::ops::Range<usize>, out: &mut ChunkOut) {
-        let mut keep = [0u32; BATCH];
+        let mut keep = [Kept::default(); BATCH];
         let mut t = range.start;
         while t < range.end {
             let end = (t + BATCH).min(range.end);
@@ -656,8 +735,8 @@ impl Ctx<'_> {
             if self.xy.is_empty() {
                 out.rejected += (end - t) as u64; // every index is out of range
             }
-            for &k in &keep[..n] {
-                self.setup(k as usize, out);
+            for k in &keep[..n] {
+                self.setup(k, out);
             }
             t = end;
         }
@@ -667,38 +746,47 @@ impl Ctx<'_> {
     /// `keep` the triangles whose snapped bounding box reaches a sample (or that need
     /// clipping or have bad indices, handled by [`Ctx::setup`]) and returns their number.
     ///
-    /// Branch-free and minimal (about 30 instructions): whether a sub-pixel triangle's box
-    /// reaches a sample is a coin toss that a branch predictor cannot learn, and without
-    /// branches the CPU overlaps the vertex loads of many triangles. Everything else (area,
-    /// culling, exact coverage) is done only for the triangles kept.
+    /// Branch-free and minimal: whether a sub-pixel triangle's box reaches a sample is a
+    /// coin toss that a branch predictor cannot learn, and without branches the CPU overlaps
+    /// the vertex loads of many triangles. Everything else (area, culling, exact coverage) is
+    /// done only for the triangles kept. The pixel rectangle computed here goes along with
+    /// the triangle, so that setup does not compute it again.
     #[inline(never)]
-    fn reject(&self, range: std::ops::Range<usize>, keep: &mut [u32; BATCH]) -> usize {
+    fn reject(&self, range: std::ops::Range<usize>, keep: &mut [Kept; BATCH]) -> usize {
         let xy = self.xy;
         let last = xy.len() - 1;
         let si = &self.si;
         let (w1, h1) = (self.w - 1, self.h - 1);
         let mut n = 0;
-        for t in range {
-            let [ia, ib, ic] = self.indices[t];
+        for (t, tri) in range.clone().zip(&self.indices[range]) {
+            let [ia, ib, ic] = *tri;
             let (ia, ib, ic) = (ia as usize, ib as usize, ic as usize);
             let bad_index = (ia > last) | (ib > last) | (ic > last);
             let (a, b, c) = (xy[ia.min(last)], xy[ib.min(last)], xy[ic.min(last)]);
             // OUT is i32::MIN: the minimum x is OUT iff a vertex needs clipping.
             let xmin = a[0].min(b[0]).min(c[0]);
             let special = bad_index | (xmin == OUT);
-            let x0 = (xmin.max(-(1 << 30)) - si.max_x + (ONE - 1)) >> SUBPIXEL_BITS;
-            let x1 = (a[0].max(b[0]).max(c[0]).max(-(1 << 30)) - si.min_x) >> SUBPIXEL_BITS;
-            let y0 = (a[1].min(b[1]).min(c[1]) - si.max_y + (ONE - 1)) >> SUBPIXEL_BITS;
+            // As [`SampleInfo::pixel_rect`]. Coordinates are within [`COORD_LIMIT`], so
+            // nothing wraps, except with OUT: then the triangle is special, kept anyway, and
+            // its rectangle unused.
+            let x0 = xmin.wrapping_add(ONE - 1 - si.max_x) >> SUBPIXEL_BITS;
+            let x1 = a[0].max(b[0]).max(c[0]).wrapping_sub(si.min_x) >> SUBPIXEL_BITS;
+            let y0 = (a[1].min(b[1]).min(c[1]) + (ONE - 1 - si.max_y)) >> SUBPIXEL_BITS;
             let y1 = (a[1].max(b[1]).max(c[1]) - si.min_y) >> SUBPIXEL_BITS;
-            let reaches = (x0.max(0) <= x1.min(w1)) & (y0.max(0) <= y1.min(h1));
-            keep[n] = t as u32;
+            let r = [x0.max(0), y0.max(0), x1.min(w1), y1.min(h1)];
+            let reaches = (r[0] <= r[2]) & (r[1] <= r[3]);
+            // `n < BATCH` (one per triangle of the batch at most): the mask only spares
+            // the bounds check.
+            keep[n & (BATCH - 1)] = Kept { t: t as u32, r };
             n += usize::from(special | reaches);
         }
         n
     }
 
     /// Full setup of one triangle that passed [`Ctx::reject`].
-    fn setup(&self, t: usize, out: &mut ChunkOut) {
+    #[inline]
+    fn setup(&self, k: &Kept, out: &mut ChunkOut) {
+        let t = k.t as usize;
         let [ia, ib, ic] = self.indices[t];
         let (Some(&a), Some(&b), Some(&c)) = (
             self.xy.get(ia as usize),
@@ -712,10 +800,9 @@ impl Ctx<'_> {
             self.clipped(t as u32, [ia, ib, ic], [a, b, c], out);
             return;
         }
+        // Not special, so `reject` kept it for reaching a sample: `r` is its pixel rectangle.
+        let r = k.r;
         let v = [a, b, c];
-        let Some(r) = self.si.pixel_rect(bbox(&v), self.w, self.h) else {
-            return;
-        };
         let a2 = area2(&v);
         if a2 == 0 {
             return;
@@ -723,18 +810,21 @@ impl Ctx<'_> {
         let Some(front) = self.facing(a2 < 0) else {
             return;
         };
-        let idx = if a2 > 0 { [ia, ib, ic] } else { [ia, ic, ib] };
-        let perm = if a2 > 0 { [0, 1, 2] } else { [0, 2, 1] };
-        let v = if a2 > 0 { v } else { [v[0], v[2], v[1]] };
+        // Positively oriented for coverage. The planes do not depend on the vertex order
+        // (see [`planes`]), so their attributes stay in input order: vertex `i` carries
+        // `1/w` as `b_i / w`.
+        let pv = v;
+        let v = if a2 > 0 { v } else { [a, c, b] };
         let Some(cov) = self.coverage(&v, r) else {
             return;
         };
-        let zw = idx.map(|i| self.zw[i as usize]);
-        let mut q = [[0.0f32; 3]; 3];
-        for i in 0..3 {
-            q[i][perm[i]] = zw[i][1];
-        }
-        self.finish(out, t as u32, front, false, cov, v, r, zw.map(|z| z[0]), q);
+        let [za, zb, zc] = [ia, ib, ic].map(|i| self.zw[i as usize]);
+        let attrs = [
+            [za[0], za[1], 0.0, 0.0],
+            [zb[0], 0.0, zb[1], 0.0],
+            [zc[0], 0.0, 0.0, zc[1]],
+        ];
+        self.finish(out, t as u32, front, false, cov, v, r, (&pv, &attrs));
     }
 
     /// Slow path: a vertex is outside a clip plane (or not finite).
@@ -793,13 +883,17 @@ impl Ctx<'_> {
             let Some(cov) = self.coverage(&v, r) else {
                 continue;
             };
-            let zw = h.map(|j| proj[j].z);
-            let q = h.map(|j| {
+            let attrs = h.map(|j| {
                 let b = poly.v[j].b;
                 let iw = proj[j].iw as f64;
-                [(b[0] * iw) as f32, (b[1] * iw) as f32, (b[2] * iw) as f32]
+                [
+                    proj[j].z,
+                    (b[0] * iw) as f32,
+                    (b[1] * iw) as f32,
+                    (b[2] * iw) as f32,
+                ]
             });
-            self.finish(out, source, front, m > 3, cov, v, r, zw, q);
+            self.finish(out, source, front, m > 3, cov, v, r, (&v, &attrs));
         }
     }
 
@@ -820,18 +914,27 @@ impl Ctx<'_> {
         }
         let (w, h) = (r[2] - r[0], r[3] - r[1]);
         if self.si.offs.len() == 1 && w < 4 && h < 4 {
-            let bits = coverage::block_mask(&Edges::new(v), &self.si, r);
-            return match bits.count_ones() {
-                0 => None,
-                1 => {
-                    let k = bits.trailing_zeros() as i32;
-                    Some(single(r[0] + k % 4, r[1] + k / 4, 1))
-                }
-                _ => Some(SetupCoverage::Small(SmallCoverage {
+            let bb = bbox(v);
+            let bits = if bb[2] - bb[0] < coverage::BLOCK_EXTENT
+                && bb[3] - bb[1] < coverage::BLOCK_EXTENT
+            {
+                coverage::block_mask(v, &self.si, r)
+            } else {
+                coverage::block_mask_wide(&Edges::new(v), &self.si, r)
+            };
+            // Not `count_ones`: without POPCNT (not in the x86_64 baseline) that is a dozen
+            // instructions.
+            return if bits == 0 {
+                None
+            } else if bits & (bits - 1) == 0 {
+                let k = bits.trailing_zeros() as i32;
+                Some(single(r[0] + k % 4, r[1] + k / 4, 1))
+            } else {
+                Some(SetupCoverage::Small(SmallCoverage {
                     x: r[0],
                     y: r[1],
                     bits,
-                })),
+                }))
             };
         }
         if w <= 1 && h <= 1 {
@@ -846,7 +949,8 @@ impl Ctx<'_> {
 
     /// Stores the setup triangle and bins it into the tiles its
     /// pixel rectangle `r` touches (skipping, for large triangles, tiles that lie entirely
-    /// outside one edge).
+    /// outside one edge). `v` is positively oriented; the planes come from `pv`, the same
+    /// vertices in the order of their attributes `attrs` (see [`planes`]).
     #[allow(clippy::too_many_arguments)]
     #[inline]
     fn finish(
@@ -858,11 +962,10 @@ impl Ctx<'_> {
         cov: SetupCoverage,
         v: [[i32; 2]; 3],
         r: [i32; 4],
-        zw: [f32; 3],
-        q: [[f32; 3]; 3],
+        (pv, attrs): (&[[i32; 2]; 3], &[[f32; 4]; 3]),
     ) {
         let sh = self.tile_shift;
-        let (depth, bary) = planes(&v, &zw, &q, r[0], r[1]);
+        let [depth, b0, b1, b2] = planes(pv, attrs, r[0], r[1]);
         let tri = out.tris.len() as u32;
         out.meta.push(TriMeta {
             source,
@@ -874,7 +977,7 @@ impl Ctx<'_> {
             rx: r[0],
             ry: r[1],
             depth,
-            bary,
+            bary: [b0, b1, b2],
         });
         let piece = if piece { PIECE } else { 0 };
         let (tx0, ty0, tx1, ty1) = (r[0] >> sh, r[1] >> sh, r[2] >> sh, r[3] >> sh);
@@ -895,6 +998,14 @@ impl Ctx<'_> {
                 let index = out.smalls.len() as u32 - 1;
                 debug_assert!(index & FLAGS == 0, "a chunk of over 2^29 triangles");
                 let info = index | SMALL | piece;
+                if tx0 == tx1 && ty0 == ty1 {
+                    // The whole pixel rectangle is in one tile (the common case).
+                    out.bins.push((
+                        ty0 as u32 * self.tiles_x + tx0 as u32,
+                        BinEntry { tri, info },
+                    ));
+                    return;
+                }
                 // Only the tiles holding a covered pixel.
                 for ty in ty0..=ty1 {
                     for tx in tx0..=tx1 {
@@ -1029,8 +1140,17 @@ fn project_vertices(
     zw: &mut [[f32; 2]],
 ) {
     for ((xy, zw), &p) in xy.iter_mut().zip(zw.iter_mut()).zip(src) {
+        // Finite as f32 iff finite as f64: tested on the f32 bits (exponent not all ones),
+        // a few instructions for the four instead of a few each.
+        let finite = p.to_array().iter().fold(true, |ok, c| {
+            ok & (c.to_bits() & 0x7f80_0000 != 0x7f80_0000)
+        });
         let p = vec4_f64(p);
-        let oc = planes.outcode(&p);
+        let oc = if finite {
+            planes.outcode_finite(&p)
+        } else {
+            NON_FINITE
+        };
         if oc != 0 {
             *xy = [OUT, oc as i32];
             *zw = [0.0; 2];
@@ -1205,17 +1325,43 @@ mod tests {
     #[test]
     fn planes_are_order_independent() {
         let v = [[100, 7], [900, 300], [-50, 800]];
-        let z = [0.25f32, 0.75, 0.5];
-        let q = [[1.0f32, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 2.0]];
-        let a = planes(&v, &z, &q, 0, 0);
-        let b = planes(
-            &[v[2], v[0], v[1]],
-            &[z[2], z[0], z[1]],
-            &[q[2], q[0], q[1]],
-            0,
-            0,
-        );
-        assert_eq!(a, b);
+        let a = [
+            [0.25f32, 1.0, 0.0, 0.0],
+            [0.75, 0.0, 0.5, 0.0],
+            [0.5, 0.0, 0.0, 2.0],
+        ];
+        let p = planes(&v, &a, 0, 0);
+        let q = planes(&[v[2], v[0], v[1]], &[a[2], a[0], a[1]], 0, 0);
+        assert_eq!(p, q);
+    }
+
+    #[test]
+    fn plane_values_match_scalar() {
+        let mut seed = 3u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let m = ((seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 4.0;
+            // Zeros of both signs too (their sign survives into the planes).
+            match seed % 7 {
+                0 => 0.0,
+                1 => -0.0,
+                _ => m * 10f64.powi((seed >> 3) as i32 % 9 - 4),
+            }
+        };
+        for _ in 0..20000 {
+            let a: [[f32; 4]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| rnd() as f32));
+            let c: [f64; 6] = std::array::from_fn(|_| rnd());
+            let (p, q) = (
+                plane_values([&a[0], &a[1], &a[2]], c),
+                plane_values_scalar([&a[0], &a[1], &a[2]], c),
+            );
+            assert_eq!(
+                p.map(|p| p.map(f32::to_bits)),
+                q.map(|q| q.map(f32::to_bits))
+            );
+        }
     }
 
     #[test]
