@@ -774,74 +774,7 @@ impl<'a> Frag<'a> {
             env: self.env,
         }
     }
-    /// Pixel column (0 = left).
-    #[inline]
-    pub fn x(&self) -> u32 {
-        self.view().x()
-    }
-    /// Pixel row (0 = top).
-    #[inline]
-    pub fn y(&self) -> u32 {
-        self.view().y()
-    }
-    /// `y * width + x`: the index of this pixel in a row-major per-pixel buffer.
-    #[inline]
-    pub fn pixel_index(&self) -> u32 {
-        self.view().pixel_index()
-    }
-    #[inline]
-    pub fn width(&self) -> u32 {
-        self.env.width
-    }
-    #[inline]
-    pub fn height(&self) -> u32 {
-        self.env.height
-    }
-    /// Samples per pixel of the pass.
-    #[inline]
-    pub fn samples(&self) -> u32 {
-        self.env.samples
-    }
-    /// Triangle index within the draw (GL's `gl_PrimitiveID`); 0 in full-screen passes.
-    #[inline]
-    pub fn primitive_id(&self) -> u32 {
-        self.view().primitive_id()
-    }
-    #[inline]
-    pub fn instance_id(&self) -> u32 {
-        self.view().instance_id()
-    }
-    #[inline]
-    pub fn front_facing(&self) -> bool {
-        self.view().front_facing()
-    }
-    /// Window depth in \[0, 1\] at the pixel centre (`gl_FragCoord.z`), interpolated on
-    /// demand (kernels that never read it do not pay for it).
-    #[inline]
-    pub fn depth(&self) -> f32 {
-        self.view().depth()
-    }
-    /// Covered samples (bit s = sample s).
-    #[inline]
-    pub fn coverage(&self) -> u8 {
-        self.view().coverage()
-    }
-    /// Position of this invocation in API order within the pass.
-    #[inline]
-    pub fn invocation_id(&self) -> u64 {
-        self.view().invocation_id()
-    }
-    /// Perspective-correct barycentrics of the triangle's three vertices at the pixel
-    /// centre; `[1/3; 3]` in full-screen passes.
-    #[inline]
-    pub fn barycentrics(&self) -> [f32; 3] {
-        self.view().barycentrics()
-    }
-    /// Depth at sample `s` of this pixel (the centre depth in full-screen passes).
-    #[inline]
-    pub fn sample_depth(&self, s: u32) -> f32 {
-        self.view().sample_depth(s)
-    }
+    // The getters (`x`, `depth`, ...) are `Fragment`'s, through `Self::view`.
 
     /// Writes colour output `target` as floats (float and RGBA8 targets).
     #[inline]

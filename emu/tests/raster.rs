@@ -396,20 +396,26 @@ fn check_against_reference(
             }
             idx.push([3 * t, 3 * t + 1, 3 * t + 2]);
         }
-        let b = bin(&pos, &idx, &state(samples), v);
-        let mut got: HashMap<(u32, u32, u32), u8> = HashMap::new();
-        for f in all_frags(&b) {
-            let src = b.tris[f.tri as usize].source;
-            assert!(got.insert((src, f.x, f.y), f.coverage).is_none());
-        }
-        for (t, tri) in idx.iter().enumerate() {
-            let s = tri.map(|i| snap(pos[i as usize], v));
-            for y in 0..v.height {
-                for x in 0..v.width {
-                    let want = reference_mask(s, x, y, samples);
-                    let have = got.get(&(t as u32, x, y)).copied().unwrap_or(0);
-                    assert_eq!(have, want, "{samples:?} triangle {t} pixel ({x},{y})");
-                }
+        assert_matches_reference(&pos, &idx, samples, v);
+    }
+}
+
+/// Bins `pos`/`idx` and checks every triangle's coverage of every pixel against the
+/// brute-force reference (and that no fragment is emitted twice).
+fn assert_matches_reference(pos: &[Vec4], idx: &[[u32; 3]], samples: SampleCount, v: Viewport) {
+    let b = bin(pos, idx, &state(samples), v);
+    let mut got: HashMap<(u32, u32, u32), u8> = HashMap::new();
+    for f in all_frags(&b) {
+        let src = b.tris[f.tri as usize].source;
+        assert!(got.insert((src, f.x, f.y), f.coverage).is_none());
+    }
+    for (t, tri) in idx.iter().enumerate() {
+        let s = tri.map(|i| snap(pos[i as usize], v));
+        for y in 0..v.height {
+            for x in 0..v.width {
+                let want = reference_mask(s, x, y, samples);
+                let have = got.get(&(t as u32, x, y)).copied().unwrap_or(0);
+                assert_eq!(have, want, "{samples:?} triangle {t} {s:?} pixel ({x},{y})");
             }
         }
     }
@@ -1465,20 +1471,5 @@ fn long_offscreen_slivers_match_brute_force_reference() {
         }
         idx.push([3 * t, 3 * t + 1, 3 * t + 2]);
     }
-    let b = bin(&pos, &idx, &state(X1), v);
-    let mut got: HashMap<(u32, u32, u32), u8> = HashMap::new();
-    for f in all_frags(&b) {
-        let src = b.tris[f.tri as usize].source;
-        assert!(got.insert((src, f.x, f.y), f.coverage).is_none());
-    }
-    for (t, tri) in idx.iter().enumerate() {
-        let s = tri.map(|i| snap(pos[i as usize], v));
-        for y in 0..v.height {
-            for x in 0..v.width {
-                let want = reference_mask(s, x, y, X1);
-                let have = got.get(&(t as u32, x, y)).copied().unwrap_or(0);
-                assert_eq!(have, want, "triangle {t} {s:?} pixel ({x},{y})");
-            }
-        }
-    }
+    assert_matches_reference(&pos, &idx, X1, v);
 }
