@@ -656,6 +656,41 @@ fn faults_in_draws_are_reported_under_the_direct_executors() {
     }
 }
 
+/// The same faults in a pass with nothing to write after shading (no targets: the direct
+/// path retires each fragment as soon as it is shaded, and a span's later pixels write only
+/// their position into the slot): each fault names its own invocation, and the others
+/// count as passing samples.
+#[test]
+fn faults_in_capture_passes_name_their_invocation_under_the_direct_executors() {
+    for e in direct_execs() {
+        let mut dev = Device::new();
+        let counter = dev.buffer::<u32>("counter", 1).unwrap();
+        let mesh = two_layers();
+        let mut fb = Framebuffer::new(16, 8, SampleCount::X1, 8, &[]).unwrap();
+        let draw = fragrace_emu::Draw::new(&mesh, glam::Mat4::IDENTITY);
+        let state = fragrace_emu::PassState::default();
+        let r = dev
+            .draw(&mut fb, &draw, &state, &PanicsInDraw { counter }, &e)
+            .unwrap();
+        assert_eq!(r.stats.shaded, 256, "{e:?}");
+        assert_eq!(r.stats.faulted, 16, "{e:?}");
+        let mut seen: Vec<(u32, u32)> = r
+            .faults
+            .iter()
+            .map(|f| {
+                assert!(matches!(&f.kind, FaultKind::Panic { message } if message.contains("x=3")));
+                (f.invocation.x, f.invocation.y)
+            })
+            .collect();
+        seen.sort();
+        seen.dedup();
+        // Both layers of column 3, every row: 8 distinct pixels, all in column 3.
+        assert_eq!(seen, (0..8).map(|y| (3, y)).collect::<Vec<_>>(), "{e:?}");
+        assert_eq!(r.query().samples_passed, 256 - 16, "{e:?}");
+        assert_eq!(dev.memory.read(counter).unwrap()[0], 256, "{e:?}");
+    }
+}
+
 /// A draw whose triangles use a non-finite position or an index out of range fails with a
 /// mesh error naming the culprit, before anything is shaded (the full check runs only when
 /// binning rejected triangles); an unused non-finite vertex is not an error.
