@@ -237,62 +237,49 @@ macro_rules! getters {
     };
 }
 
+/// The one-word accesses, in terms of the context's `$value(buf, index, op)` (a future of
+/// the previous value) and `$unit(buf, index, op)` (a future of `()`, for stores).
+macro_rules! word_accesses {
+    ($value:ident, $unit:ident) => {
+        #[inline(always)]
+        fn load<T: Word>(&self, buf: Buf<T>, index: u32) -> impl Future<Output = T> {
+            self.$value(buf, index, MemOp::Load)
+        }
+        #[inline(always)]
+        fn store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = ()> {
+            self.$unit(buf, index, MemOp::Store(value.to_bits()))
+        }
+        #[inline(always)]
+        fn atomic_load<T: Word>(&self, buf: Buf<T>, index: u32) -> impl Future<Output = T> {
+            self.$value(buf, index, MemOp::AtomicLoad)
+        }
+        #[inline(always)]
+        fn atomic_store<T: Word>(
+            &self,
+            buf: Buf<T>,
+            index: u32,
+            value: T,
+        ) -> impl Future<Output = ()> {
+            self.$unit(buf, index, MemOp::AtomicStore(value.to_bits()))
+        }
+        word_accesses!(@rmw $value: atomic_add Add, atomic_sub Sub, atomic_min Min,
+            atomic_max Max, atomic_and And, atomic_or Or, atomic_xor Xor,
+            atomic_exchange Exchange);
+    };
+    (@rmw $value:ident: $($name:ident $op:ident),*) => {
+        $(
+            #[inline(always)]
+            fn $name<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
+                self.$value(buf, index, MemOp::$op(value.to_bits()))
+            }
+        )*
+    };
+}
+
 impl Fragment for Frag<'_> {
     getters!();
+    word_accesses!(access_value, access_unit);
 
-    #[inline(always)]
-    fn load<T: Word>(&self, buf: Buf<T>, index: u32) -> impl Future<Output = T> {
-        Frag::load(self, buf, index)
-    }
-    #[inline(always)]
-    fn store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = ()> {
-        Frag::store(self, buf, index, value)
-    }
-    #[inline(always)]
-    fn atomic_load<T: Word>(&self, buf: Buf<T>, index: u32) -> impl Future<Output = T> {
-        Frag::atomic_load(self, buf, index)
-    }
-    #[inline(always)]
-    fn atomic_store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = ()> {
-        Frag::atomic_store(self, buf, index, value)
-    }
-    #[inline(always)]
-    fn atomic_add<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        Frag::atomic_add(self, buf, index, value)
-    }
-    #[inline(always)]
-    fn atomic_sub<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        Frag::atomic_sub(self, buf, index, value)
-    }
-    #[inline(always)]
-    fn atomic_min<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        Frag::atomic_min(self, buf, index, value)
-    }
-    #[inline(always)]
-    fn atomic_max<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        Frag::atomic_max(self, buf, index, value)
-    }
-    #[inline(always)]
-    fn atomic_and<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        Frag::atomic_and(self, buf, index, value)
-    }
-    #[inline(always)]
-    fn atomic_or<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        Frag::atomic_or(self, buf, index, value)
-    }
-    #[inline(always)]
-    fn atomic_xor<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        Frag::atomic_xor(self, buf, index, value)
-    }
-    #[inline(always)]
-    fn atomic_exchange<T: Word>(
-        &self,
-        buf: Buf<T>,
-        index: u32,
-        value: T,
-    ) -> impl Future<Output = T> {
-        Frag::atomic_exchange(self, buf, index, value)
-    }
     #[inline(always)]
     fn atomic_compare_exchange<T: Word>(
         &self,
@@ -387,60 +374,8 @@ impl<'a> DirectFrag<'a> {
 
 impl Fragment for DirectFrag<'_> {
     getters!();
+    word_accesses!(op, unit);
 
-    #[inline(always)]
-    fn load<T: Word>(&self, buf: Buf<T>, index: u32) -> impl Future<Output = T> {
-        self.op(buf, index, MemOp::Load)
-    }
-    #[inline(always)]
-    fn store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = ()> {
-        self.unit(buf, index, MemOp::Store(value.to_bits()))
-    }
-    #[inline(always)]
-    fn atomic_load<T: Word>(&self, buf: Buf<T>, index: u32) -> impl Future<Output = T> {
-        self.op(buf, index, MemOp::AtomicLoad)
-    }
-    #[inline(always)]
-    fn atomic_store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = ()> {
-        self.unit(buf, index, MemOp::AtomicStore(value.to_bits()))
-    }
-    #[inline(always)]
-    fn atomic_add<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        self.op(buf, index, MemOp::Add(value.to_bits()))
-    }
-    #[inline(always)]
-    fn atomic_sub<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        self.op(buf, index, MemOp::Sub(value.to_bits()))
-    }
-    #[inline(always)]
-    fn atomic_min<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        self.op(buf, index, MemOp::Min(value.to_bits()))
-    }
-    #[inline(always)]
-    fn atomic_max<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        self.op(buf, index, MemOp::Max(value.to_bits()))
-    }
-    #[inline(always)]
-    fn atomic_and<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        self.op(buf, index, MemOp::And(value.to_bits()))
-    }
-    #[inline(always)]
-    fn atomic_or<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        self.op(buf, index, MemOp::Or(value.to_bits()))
-    }
-    #[inline(always)]
-    fn atomic_xor<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> impl Future<Output = T> {
-        self.op(buf, index, MemOp::Xor(value.to_bits()))
-    }
-    #[inline(always)]
-    fn atomic_exchange<T: Word>(
-        &self,
-        buf: Buf<T>,
-        index: u32,
-        value: T,
-    ) -> impl Future<Output = T> {
-        self.op(buf, index, MemOp::Exchange(value.to_bits()))
-    }
     #[inline(always)]
     fn atomic_compare_exchange<T: Word>(
         &self,

@@ -909,65 +909,20 @@ impl<'a> Frag<'a> {
         Poll::Ready(T::from_bits(bits))
     }
 
-    /// Plain load (no atomicity, no ordering: as a GLSL load from a buffer).
+    /// A one-word access ([`Fragment::load`], [`Fragment::atomic_add`], ...).
     #[inline(always)]
-    pub fn load<T: Word>(&self, buf: Buf<T>, index: u32) -> Access<'a, T> {
-        self.access(buf, index, MemOp::Load, None)
+    pub(crate) fn access_value<T: Word>(
+        &self,
+        buf: Buf<T>,
+        index: u32,
+        op: MemOp,
+    ) -> Access<'a, T> {
+        self.access(buf, index, op, None)
     }
-    /// Plain store.
+    /// A one-word store ([`Fragment::store`], [`Fragment::atomic_store`]).
     #[inline(always)]
-    pub fn store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Store<'a, T> {
-        Store(self.access(buf, index, MemOp::Store(value.to_bits()), None))
-    }
-    /// Atomic load (acquire).
-    #[inline(always)]
-    pub fn atomic_load<T: Word>(&self, buf: Buf<T>, index: u32) -> Access<'a, T> {
-        self.access(buf, index, MemOp::AtomicLoad, None)
-    }
-    /// Atomic store (release).
-    #[inline(always)]
-    pub fn atomic_store<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Store<'a, T> {
-        Store(self.access(buf, index, MemOp::AtomicStore(value.to_bits()), None))
-    }
-    /// Atomic add; returns the previous value (wrapping for integers).
-    #[inline(always)]
-    pub fn atomic_add<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
-        self.access(buf, index, MemOp::Add(value.to_bits()), None)
-    }
-    /// Atomic subtract; returns the previous value.
-    #[inline(always)]
-    pub fn atomic_sub<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
-        self.access(buf, index, MemOp::Sub(value.to_bits()), None)
-    }
-    /// Atomic minimum (as `T`: signed for i32, float order for f32); returns the previous value.
-    #[inline(always)]
-    pub fn atomic_min<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
-        self.access(buf, index, MemOp::Min(value.to_bits()), None)
-    }
-    /// Atomic maximum; returns the previous value.
-    #[inline(always)]
-    pub fn atomic_max<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
-        self.access(buf, index, MemOp::Max(value.to_bits()), None)
-    }
-    /// Atomic bitwise and; returns the previous value.
-    #[inline(always)]
-    pub fn atomic_and<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
-        self.access(buf, index, MemOp::And(value.to_bits()), None)
-    }
-    /// Atomic bitwise or; returns the previous value.
-    #[inline(always)]
-    pub fn atomic_or<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
-        self.access(buf, index, MemOp::Or(value.to_bits()), None)
-    }
-    /// Atomic bitwise xor; returns the previous value.
-    #[inline(always)]
-    pub fn atomic_xor<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
-        self.access(buf, index, MemOp::Xor(value.to_bits()), None)
-    }
-    /// Atomic exchange; returns the previous value.
-    #[inline(always)]
-    pub fn atomic_exchange<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Access<'a, T> {
-        self.access(buf, index, MemOp::Exchange(value.to_bits()), None)
+    pub(crate) fn access_unit<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Store<'a, T> {
+        Store(self.access(buf, index, op, None))
     }
     /// Atomic compare-exchange: `Ok(previous)` if the word held `expected` and now holds
     /// `new`, `Err(current)` otherwise (bitwise comparison, as GLSL's `atomicCompSwap`).
