@@ -352,8 +352,7 @@ impl Invocation {
     }
 
     /// Clears the previous fragment's results (its fault has been taken already) but not
-    /// its input: the fused path without lockstep passes the input in `DirectFrag` and
-    /// writes it into the slot only when a fault report needs it.
+    /// its input (see [`Self::reset_direct_next`]).
     #[inline(always)]
     pub(crate) fn reset_results(&self) {
         debug_assert!(!self.has_fault.get());
@@ -679,7 +678,7 @@ impl Future for Halt {
 }
 
 /// A fragment's input with the pass it belongs to: what the getters of both kernel
-/// contexts read (`Frag` keeps the input in its slot, `DirectFrag` in registers).
+/// contexts read (both keep the input in the invocation's slot), written once here.
 #[derive(Clone, Copy)]
 pub(crate) struct FragView<'a> {
     pub input: FragInput,
@@ -970,17 +969,11 @@ impl<'a> Frag<'a> {
     /// its step count, so that a schedule replays exactly.
     #[inline]
     pub(crate) fn spurious_cas_failure(&self) -> bool {
-        self.spurious_cas_failure_of(self.input().seq)
-    }
-
-    /// [`Self::spurious_cas_failure`] of the invocation `seq`.
-    #[inline]
-    pub(crate) fn spurious_cas_failure_of(&self, seq: u64) -> bool {
         let p = self.env.spurious_cas;
         if p == 0 {
             return false;
         }
-        let mut h = seq ^ (self.inv.steps.get() << 40) ^ 0x9E37_79B9_7F4A_7C15;
+        let mut h = self.input().seq ^ (self.inv.steps.get() << 40) ^ 0x9E37_79B9_7F4A_7C15;
         h ^= h >> 33;
         h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
         h ^= h >> 33;

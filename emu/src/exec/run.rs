@@ -155,7 +155,6 @@ pub(crate) fn pass_deferred(
     deferred.is_empty()
 }
 
-/// Per-worker accumulation.
 /// Counts of invocations that finished without a fault (see [`Acc::tally_one`]).
 #[derive(Clone, Copy, Default)]
 pub(crate) struct Tally {
@@ -167,6 +166,7 @@ pub(crate) struct Tally {
     pub samples_passed: u64,
 }
 
+/// Per-worker accumulation.
 #[derive(Default)]
 pub(crate) struct Acc {
     stats: Stats,
@@ -247,7 +247,7 @@ impl Acc {
     }
 
     /// [`Self::count_passing`] for one invocation (the fused path without lockstep retires
-    /// each fragment as soon as it is shaded), into a `tally` kept in registers for a span
+    /// each fragment as soon as it is shaded), into a `tally` kept in registers for a segment
     /// (added by [`Self::add_tally`]). `samples`: its covered samples, which pass unless it
     /// discarded or faulted.
     #[inline(always)]

@@ -29,7 +29,6 @@ use crate::exec::{record_panic, Acc, ShadeOutcome, Tally};
 use crate::fragment::DirectFrag;
 use crate::framebuffer::TileMemory;
 use crate::kernel::{Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv};
-
 use crate::raster::{Binned, SampleCount, Segment, Span};
 use crate::state::FragmentState;
 use crate::sync::pool;
@@ -224,26 +223,19 @@ struct Row<'p> {
 }
 
 impl<'p> RowSetup<'p> {
-    fn new(
-        pass: &'p FusedPass<'p>,
-        env: &PassEnv<'_>,
-        all_samples: u8,
-        pixels: u64,
-        tile: &TileAccess<'_>,
-    ) -> Self {
+    fn new<K>(worker: &Worker<'p, K>, tile: &TileAccess<'_>) -> Self {
+        let (pass, env) = (worker.pass, worker.env);
         let state = pass.state;
         RowSetup {
             pass,
             tests: pass.early && (state.depth.test || state.stencil.enabled),
-            sample_mask: state.sample_mask & all_samples,
-            all_samples,
+            sample_mask: state.sample_mask & worker.all_samples,
+            all_samples: worker.all_samples,
             per_sample_depth: env.samples > 1 && !pass.single,
-            positions: SampleCount::from_count(env.samples)
-                .map(|c| c.positions())
-                .unwrap_or(&[(0.5, 0.5)]),
+            positions: worker.positions,
             origin: (tile.tile().x0, tile.tile().y0),
             width: env.width,
-            pixels,
+            pixels: worker.pixels,
         }
     }
 
@@ -408,6 +400,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         seg: &Segment,
         mut tile: TileAccess<'t>,
     ) -> TileAccess<'t> {
+        let rows = RowSetup::new(self, &tile);
         let Worker {
             kernel,
             env,
@@ -424,7 +417,6 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         // Nothing to test or write after shading (capture and counting passes).
         let count_only = !late_tests && pass.targets == 0;
         let slot = &slots[0];
-        let rows = RowSetup::new(pass, env, self.all_samples, self.pixels, &tile);
         // Counts of the segment's invocations, added to the worker's once at the end.
         let mut tally = Tally::default();
         pass.binned.raster_segment_spans(seg, |span| {
@@ -467,7 +459,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
     ) -> TileAccess<'t> {
         let pass = self.pass;
         let lanes = self.slots.len();
-        let rows = RowSetup::new(pass, self.env, self.all_samples, self.pixels, &tile);
+        let rows = RowSetup::new(self, &tile);
         pass.binned.raster_segment_spans(seg, |span| {
             let Some(row) = rows.row(&span, &mut self.counts) else {
                 return;
