@@ -13,22 +13,27 @@ M=../shared/models
 PEER=../shared/peers/llvmpipe/oit.py
 have_peer=0
 python3 -c "import moderngl" 2>/dev/null && have_peer=1
-echo "| mesh | size | threads | fragrace frame ms (median, lockstep warps) | passes alone | --no-lockstep frame | llvmpipe ms (median) | ratio (lockstep) | ratio (--no-lockstep) |"
-echo "|---|---|---|---|---|---|---|---|---|"
+# The floor columns (`bench --floor`): the frame's own atomic adds replayed with nothing
+# around them on the same threads, alone and with the fresh buffer and read-back: no
+# implementation of the `count` frame on this machine can be faster than the first.
+echo "| mesh | size | threads | fragrace frame ms (median, lockstep warps) | passes alone | --no-lockstep frame | floor: adds alone / with buffer | llvmpipe ms (median) | ratio (lockstep) | ratio (--no-lockstep) | floor / llvmpipe |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|"
 for case in "dragon.obj.gz 512" "dragon.obj.gz 2048" "bunny.obj.gz 2048" "dragon_res2.obj.gz 512"; do
     set -- $case
     for threads in 1 2; do
         read -r ours passes < <($F bench --obj "$M/$1" --algo count --threads "$threads" --width "$2" --height "$2" --frames 15 --warmup 3 --json | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), round(d['passes_median_ms'], 2))")
-        free=$($F bench --obj "$M/$1" --algo count --threads "$threads" --width "$2" --height "$2" --frames 15 --warmup 3 --no-lockstep --json | python3 -c "import json,sys; print(round(json.load(sys.stdin)['median_ms'], 2))")
+        read -r free floor floor_frame < <($F bench --obj "$M/$1" --algo count --threads "$threads" --width "$2" --height "$2" --frames 15 --warmup 3 --no-lockstep --floor --json | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), round(d['floor_atomics_ms'], 2), round(d['floor_frame_ms'], 2))")
         theirs="-"
         ratio="-"
         ratio_free="-"
+        ratio_floor="-"
         if [ "$have_peer" = 1 ] && [ "$threads" = 2 ]; then
             theirs=$(LP_NUM_THREADS=$threads python3 "$PEER" "$M/$1" --algo count --width "$2" --height "$2" --frames 15 --warmup 3 2>/dev/null | tail -1 | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d.get('median_ms', d.get('frame_ms_median', 0)), 2))")
             ratio=$(python3 -c "print(f'{$ours / $theirs:.2f}' if $theirs else '-')")
             ratio_free=$(python3 -c "print(f'{$free / $theirs:.2f}' if $theirs else '-')")
+            ratio_floor=$(python3 -c "print(f'{$floor / $theirs:.2f} / {$floor_frame / $theirs:.2f}' if $theirs else '-')")
         fi
-        echo "| $1 | $2 | $threads | $ours | $passes | $free | $theirs | $ratio | $ratio_free |"
+        echo "| $1 | $2 | $threads | $ours | $passes | $free | $floor / $floor_frame | $theirs | $ratio | $ratio_free | $ratio_floor |"
     done
 done
 echo

@@ -210,6 +210,10 @@ struct BenchArgs {
     frames: usize,
     #[arg(long, default_value_t = 2)]
     warmup: usize,
+    /// Also measure the machine's floor under the frame (`count` only): its atomic adds
+    /// alone on the same threads, and with the buffer allocation and read-back.
+    #[arg(long)]
+    floor: bool,
 }
 
 fn spec_of(a: &RunArgs) -> Result<RunSpec> {
@@ -558,7 +562,28 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
     let pass_ms = median(&mut pass_times);
     let stats = &r.result.report.stats;
     let tris = loaded.scene.mesh.triangle_count() as f64 * stats.geometry_passes.max(1) as f64;
-    let v = serde_json::json!({
+    let floor = if a.floor {
+        let counts = r.result.counts.as_deref().with_context(|| {
+            format!(
+                "--floor replays the per-pixel counts of `count`; `{}` has none",
+                spec.algo
+            )
+        })?;
+        let cfg = fragrace::floor::FloorConfig {
+            counts,
+            width: spec.width,
+            height: spec.height,
+            tile: fragrace::emu::raster::effective_tile_size(
+                fragrace::emu::raster::RasterState::default().tile_size,
+            ),
+            threads: spec.exec.threads,
+            frames: a.frames.max(1),
+        };
+        Some(fragrace::floor::count_floor(&cfg).context("the floor's replay did not add up")?)
+    } else {
+        None
+    };
+    let mut v = serde_json::json!({
         "algo": spec.algo,
         "scene": spec.scene.name(),
         "triangles": loaded.scene.mesh.triangle_count(),
@@ -576,6 +601,10 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         "steps": stats.steps,
         "steps_per_s": stats.steps as f64 / (ms / 1e3),
     });
+    if let Some(f) = floor {
+        v["floor_atomics_ms"] = f.atomics_ms.into();
+        v["floor_frame_ms"] = f.frame_ms.into();
+    }
     if a.run.json {
         println!("{v}");
     } else {
@@ -585,6 +614,12 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
             ms, times.len(), times[0], times[times.len() - 1], pass_ms,
             stats.fragments_generated as f64 / (ms / 1e3) / 1e6, tris / (ms / 1e3) / 1e6, stats.steps as f64 / (ms / 1e3) / 1e6
         );
+        if let Some(f) = floor {
+            println!(
+                "  floor: the frame's {} atomic adds alone {:.2} ms; with a fresh buffer and the read-back {:.2} ms",
+                stats.fragments_generated, f.atomics_ms, f.frame_ms
+            );
+        }
     }
     Ok(())
 }

@@ -1,0 +1,156 @@
+//! The machine's floor under a frame of `count`: what its atomic adds cost with nothing
+//! around them (no rasterizer, no kernel, no executor), on the same threads.
+//!
+//! `fragrace bench` measures a frame; this measures the part no implementation of the frame
+//! can avoid, so that the frame's time splits into what the machine charges for the
+//! kernel's atomics and what fragrace adds. The adds are the frame's own: every pixel gets
+//! as many `fetch_add(1, AcqRel)` as its count (the fragments that covered it), pixels
+//! visited tile by tile (row-major inside a tile, the tiles handed out to the threads as the
+//! executor does), into one word per pixel.
+
+use std::time::Instant;
+
+use fragrace_emu::sync::pool::scope;
+use fragrace_emu::sync::{AtomicU32, AtomicUsize, Ordering};
+
+/// The floor of one frame, in milliseconds (medians over the frames timed).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Floor {
+    /// The atomic adds alone, into a buffer already allocated and zeroed.
+    pub atomics_ms: f64,
+    /// A fresh zeroed buffer of one word per pixel, the adds, and the sum read back: the
+    /// part of the `count` frame that is memory and atomics.
+    pub frame_ms: f64,
+}
+
+/// What to replay.
+pub struct FloorConfig<'a> {
+    /// Per-pixel counts of a frame (row-major, `width * height`).
+    pub counts: &'a [u32],
+    pub width: u32,
+    pub height: u32,
+    /// Square tile size in pixels (the rasterizer's).
+    pub tile: u32,
+    pub threads: usize,
+    /// Frames timed (the median is reported).
+    pub frames: usize,
+}
+
+/// Measures the floor of the frame whose counts are `cfg.counts`. Returns `None` when the
+/// counts do not match the size (or, which would be a bug, when the sum read back is not
+/// the sum of the counts).
+pub fn count_floor(cfg: &FloorConfig<'_>) -> Option<Floor> {
+    let pixels = cfg.width as usize * cfg.height as usize;
+    if cfg.counts.len() != pixels || cfg.tile == 0 {
+        return None;
+    }
+    let frames = cfg.frames.max(1);
+    let expected: u64 = cfg.counts.iter().map(|&c| u64::from(c)).sum();
+    let warm = zeroed(pixels);
+    let mut atomics = Vec::with_capacity(frames);
+    let mut frame = Vec::with_capacity(frames);
+    for _ in 0..frames {
+        for w in warm.iter() {
+            w.store(0, Ordering::Relaxed);
+        }
+        let t = Instant::now();
+        replay(cfg, &warm);
+        atomics.push(t.elapsed().as_secs_f64() * 1e3);
+
+        let t = Instant::now();
+        let fresh = zeroed(pixels);
+        replay(cfg, &fresh);
+        let sum: u64 = fresh
+            .iter()
+            .map(|w| u64::from(w.load(Ordering::Relaxed)))
+            .sum();
+        frame.push(t.elapsed().as_secs_f64() * 1e3);
+        drop(fresh);
+        // The replay is exact: a floor that dropped adds would be no floor.
+        if sum != expected {
+            return None;
+        }
+    }
+    Some(Floor {
+        atomics_ms: median(&mut atomics),
+        frame_ms: median(&mut frame),
+    })
+}
+
+fn zeroed(n: usize) -> Box<[AtomicU32]> {
+    std::iter::repeat_with(|| AtomicU32::new(0))
+        .take(n)
+        .collect()
+}
+
+/// The frame's adds, tile by tile, on `cfg.threads` threads.
+fn replay(cfg: &FloorConfig<'_>, words: &[AtomicU32]) {
+    let (w, h, ts) = (cfg.width, cfg.height, cfg.tile);
+    let tiles_x = w.div_ceil(ts);
+    let tiles = tiles_x as usize * h.div_ceil(ts) as usize;
+    let next = AtomicUsize::new(0);
+    let work = || loop {
+        let t = next.fetch_add(1, Ordering::Relaxed);
+        if t >= tiles {
+            break;
+        }
+        let (tx, ty) = ((t as u32 % tiles_x) * ts, (t as u32 / tiles_x) * ts);
+        for y in ty..(ty + ts).min(h) {
+            for x in tx..(tx + ts).min(w) {
+                let p = (y * w + x) as usize;
+                for _ in 0..cfg.counts[p] {
+                    words[p].fetch_add(1, Ordering::AcqRel);
+                }
+            }
+        }
+    };
+    scope(|s| {
+        for _ in 1..cfg.threads.max(1) {
+            s.spawn(work);
+        }
+        work();
+    });
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn floor_replays_every_add_on_any_thread_count() {
+        let (w, h) = (37, 23);
+        let counts: Vec<u32> = (0..w * h).map(|i| i * 7 % 5).collect();
+        for threads in [1, 3] {
+            let cfg = FloorConfig {
+                counts: &counts,
+                width: w,
+                height: h,
+                tile: 8,
+                threads,
+                frames: 2,
+            };
+            // `None` if the sum read back differs from the counts' (or the sizes differ).
+            let f = count_floor(&cfg).expect("every add replayed");
+            assert!(f.atomics_ms >= 0.0 && f.frame_ms >= 0.0);
+        }
+    }
+
+    #[test]
+    fn floor_refuses_counts_of_another_size() {
+        let counts = vec![1u32; 10];
+        let cfg = FloorConfig {
+            counts: &counts,
+            width: 4,
+            height: 4,
+            tile: 8,
+            threads: 1,
+            frames: 1,
+        };
+        assert!(count_floor(&cfg).is_none());
+    }
+}
