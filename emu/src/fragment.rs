@@ -188,6 +188,7 @@ macro_rules! getters {
         }
         #[inline(always)]
         fn depth(&self) -> f32 {
+            self.as_frag().check_interpolants();
             self.view().depth()
         }
         #[inline(always)]
@@ -200,10 +201,12 @@ macro_rules! getters {
         }
         #[inline(always)]
         fn barycentrics(&self) -> [f32; 3] {
+            self.as_frag().check_interpolants();
             self.view().barycentrics()
         }
         #[inline(always)]
         fn sample_depth(&self, s: u32) -> f32 {
+            self.as_frag().check_interpolants();
             self.view().sample_depth(s)
         }
         #[inline(always)]

@@ -42,6 +42,14 @@ pub struct KernelInfo {
     pub writes_depth: bool,
     /// The kernel uses [`Frag::interlock_begin`] with this mode.
     pub interlock: Option<InterlockMode>,
+    /// The kernel may read the interpolated values of its fragment: [`Fragment::depth`],
+    /// [`Fragment::sample_depth`], [`Fragment::barycentrics`] (true unless declared
+    /// otherwise with [`KernelInfo::without_interpolants`]).
+    ///
+    /// [`Fragment::depth`]: crate::Fragment::depth
+    /// [`Fragment::sample_depth`]: crate::Fragment::sample_depth
+    /// [`Fragment::barycentrics`]: crate::Fragment::barycentrics
+    pub interpolants: bool,
 }
 
 impl KernelInfo {
@@ -51,6 +59,7 @@ impl KernelInfo {
             may_discard: false,
             writes_depth: false,
             interlock: None,
+            interpolants: true,
         }
     }
     pub const fn with_discard(mut self) -> KernelInfo {
@@ -63,6 +72,15 @@ impl KernelInfo {
     }
     pub const fn with_interlock(mut self, mode: InterlockMode) -> KernelInfo {
         self.interlock = Some(mode);
+        self
+    }
+    /// Declares that the kernel reads no interpolated value (no depth, sample depth or
+    /// barycentrics), as a GLSL shader without inputs: in a draw without a depth or stencil
+    /// test, triangle setup then skips the depth and barycentric planes, as a GPU skips
+    /// the interpolation of varyings nobody reads (a fifth of the setup of a dense mesh;
+    /// docs/performance.md). Reading one anyway is a [`FaultKind::Misuse`].
+    pub const fn without_interpolants(mut self) -> KernelInfo {
+        self.interpolants = false;
         self
     }
 }
@@ -227,6 +245,9 @@ pub(crate) struct PassEnv<'a> {
     pub spurious_cas: u32,
     /// Collect per-address contention (costs three atomics per access).
     pub contention: Option<&'a crate::stats::ContentionTable>,
+    /// The kernel declared [`KernelInfo::without_interpolants`]: reading one is a misuse
+    /// (whether or not the draw set up planes, so the declaration is checked everywhere).
+    pub no_interpolants: bool,
 }
 
 /// Per-invocation mutable state, owned by the executor (one per in-flight slot) and shared
@@ -774,6 +795,24 @@ impl<'a> Frag<'a> {
         }
     }
     // The getters (`x`, `depth`, ...) are `Fragment`'s, through `Self::view`.
+
+    /// Before an interpolated value is read: a misuse if the kernel declared it reads none
+    /// (a draw may then have set up no planes).
+    #[inline(always)]
+    pub(crate) fn check_interpolants(&self) {
+        if self.env.no_interpolants {
+            self.interpolants_skipped();
+        }
+    }
+    #[cold]
+    #[inline(never)]
+    fn interpolants_skipped(&self) {
+        self.inv.set_fault(FaultKind::Misuse {
+            message: "the kernel read an interpolated value (depth, sample depth or \
+                      barycentrics) but declared `without_interpolants`"
+                .into(),
+        });
+    }
 
     /// Writes colour output `target` as floats (float and RGBA8 targets).
     #[inline]

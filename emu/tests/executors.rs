@@ -745,3 +745,62 @@ fn bad_meshes_fail_the_draw_before_shading() {
         assert_eq!(shaded, 2 * 16 * 8, "{e:?}");
     }
 }
+
+/// Reads an interpolated value in column 3 after declaring that it reads none.
+struct ReadsUndeclaredInterpolants {
+    counter: Buf<u32>,
+}
+impl FragmentKernel for ReadsUndeclaredInterpolants {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("reads-undeclared-interpolants").without_interpolants()
+    }
+    async fn shade(&self, f: impl Fragment) {
+        if f.x() == 3 {
+            let v = match f.primitive_id() % 3 {
+                0 => f.depth(),
+                1 => f.barycentrics()[0],
+                _ => f.sample_depth(0),
+            };
+            std::hint::black_box(v);
+        }
+        f.atomic_add(self.counter, 0, 1).await;
+    }
+}
+
+/// A kernel declared `without_interpolants` gets a misuse fault for reading one, under every
+/// executor, with or without a depth test (so with and without the planes set up), and the
+/// fragments that read none run as usual; without the declaration nothing faults.
+#[test]
+fn reading_undeclared_interpolants_is_misuse_under_every_executor() {
+    use fragrace_emu::{CompareFunc, PassState};
+    for e in direct_execs().iter().chain(&all_execs()) {
+        for depth_test in [false, true] {
+            let mut dev = Device::new();
+            let counter = dev.buffer::<u32>("counter", 1).unwrap();
+            let mesh = two_layers();
+            let mut fb = Framebuffer::new(16, 8, SampleCount::X1, 8, &[]).unwrap();
+            let draw = fragrace_emu::Draw::new(&mesh, glam::Mat4::IDENTITY);
+            let mut state = PassState::default();
+            if depth_test {
+                state.fragment.depth.test = true;
+                state.fragment.depth.func = CompareFunc::Always;
+            }
+            let kernel = ReadsUndeclaredInterpolants { counter };
+            let r = dev.draw(&mut fb, &draw, &state, &kernel, e).unwrap();
+            let what = format!("{e:?}, depth test {depth_test}");
+            assert_eq!(r.stats.shaded, 256, "{what}");
+            assert_eq!(r.stats.faulted, 16, "{what}");
+            for f in &r.faults {
+                assert_eq!(f.invocation.x, 3, "{what}");
+                assert!(
+                    matches!(&f.kind, FaultKind::Misuse { message }
+                        if message.contains("without_interpolants")),
+                    "{what}: {:?}",
+                    f.kind
+                );
+            }
+            // A faulted invocation ends at its next access.
+            assert_eq!(dev.memory.read(counter).unwrap()[0], 240, "{what}");
+        }
+    }
+}

@@ -1185,6 +1185,11 @@ fn tile_sizes_and_threads_give_identical_output() {
                     let extra: Vec<_> = got.iter().filter(|f| !want.contains(f)).take(5).collect();
                     panic!("ts {ts} threads {threads}: {} vs {} fragments, missing {missing:?}, extra {extra:?}", got.len(), want.len());
                 }
+                // Without planes: the same fragments in the same order, no setup records.
+                let bare = bin_triangles_with(&pos, &faces, &st, v, threads, PlaneSetup::Skip);
+                assert!(bare.tris.is_empty());
+                assert_eq!(bare.setup_count() as usize, b.tris.len());
+                assert_eq!(all_frags(&bare), all_frags(&b), "ts {ts} threads {threads}");
                 if ts == 64 {
                     // Same tiles: same fragment sequence per tile.
                     for t in 0..b.tile_count() {

@@ -23,7 +23,8 @@ pub struct CountKernel {
 
 impl FragmentKernel for CountKernel {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("count")
+        // Reads no depth or barycentrics: the draw skips their planes.
+        KernelInfo::new("count").without_interpolants()
     }
     async fn shade(&self, f: impl Fragment) {
         f.atomic_add(self.counts, f.pixel_index(), 1).await;
@@ -38,7 +39,7 @@ struct CountPlainKernel {
 
 impl FragmentKernel for CountPlainKernel {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("count-plain")
+        KernelInfo::new("count-plain").without_interpolants()
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();

@@ -55,6 +55,7 @@ pub fn run_on_threads<K: FragmentKernel + Send + 'static>(
                     max_waits: max_steps,
                     spurious_cas: 0,
                     contention: None,
+                    no_interpolants: false,
                 };
                 let inv = Invocation::new();
                 inv.reset(input);

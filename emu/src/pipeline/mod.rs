@@ -21,7 +21,7 @@ use crate::hazard::{Hazard, HazardCounts};
 use crate::interlock::Interlock;
 use crate::kernel::{FragInput, FragmentKernel, Mode, PassEnv};
 use crate::memory::{Buf, Memory, MemoryError, Word};
-use crate::raster::{bin_triangles, Binned, RasterState, Viewport};
+use crate::raster::{bin_triangles_with, Binned, PlaneSetup, RasterState, Viewport};
 use crate::state::{EarlyTests, FragmentState};
 use crate::stats::{ContentionTable, Hotspot, Stats};
 use crate::sync::pool;
@@ -176,6 +176,15 @@ impl Device {
             height: fb.height,
         };
         let threads = exec.threads.max(1);
+        // Planes only for someone who reads them: the kernel's interpolants, or the depth
+        // test. Any test keeps them (the tested paths take a depth per fragment).
+        let fixed = &state.fragment;
+        let plane_setup = if kernel.info().interpolants || fixed.depth.test || fixed.stencil.enabled
+        {
+            PlaneSetup::Compute
+        } else {
+            PlaneSetup::Skip
+        };
         let mut clip = Vec::new();
         let mut seq_base = 0u64;
         for (instance, model) in draw.instances.iter().enumerate() {
@@ -196,7 +205,14 @@ impl Device {
             } else {
                 raster
             };
-            let binned = bin_triangles(&clip, &draw.mesh.indices, &bin_state, viewport, threads);
+            let binned = bin_triangles_with(
+                &clip,
+                &draw.mesh.indices,
+                &bin_state,
+                viewport,
+                threads,
+                plane_setup,
+            );
             if binned.rejected > 0 {
                 // Bad input, or positions that the model matrix took out of range (those
                 // are only counted).
@@ -243,7 +259,7 @@ impl Device {
             max_steps: exec.max_steps,
             max_waits: exec.max_waits,
             spurious_cas: exec.spurious_cas_per_mille,
-            ..self.explicit_env(width, height, interlock.as_ref(), info.interlock)
+            ..self.explicit_env(width, height, interlock.as_ref(), &info)
         };
         let inputs = explicit_inputs(inputs, width, height);
         let mut outs = vec![FragOut::default(); inputs.len()];
@@ -280,7 +296,7 @@ impl Device {
             mode: Mode::Scheduled,
             max_steps,
             max_waits: max_steps,
-            ..self.explicit_env(width, height, interlock.as_ref(), info.interlock)
+            ..self.explicit_env(width, height, interlock.as_ref(), &info)
         };
         let inputs = explicit_inputs(inputs, width, height);
         crate::exec::explore(kernel, &env, schedule, max_steps, &inputs, seeds, each)
@@ -292,7 +308,7 @@ impl Device {
         width: u32,
         height: u32,
         interlock: Option<&'a Interlock>,
-        interlock_mode: Option<crate::interlock::InterlockMode>,
+        info: &crate::kernel::KernelInfo,
     ) -> PassEnv<'a> {
         PassEnv {
             memory: &self.memory,
@@ -301,13 +317,14 @@ impl Device {
             height,
             samples: 1,
             interlock,
-            interlock_mode,
+            interlock_mode: info.interlock,
             sample_tickets: &[],
             mode: Mode::Direct { yield_every: 0 },
             max_steps: u64::MAX,
             max_waits: u64::MAX,
             spurious_cas: 0,
             contention: None,
+            no_interpolants: !info.interpolants,
         }
     }
 
@@ -405,6 +422,7 @@ impl Device {
             max_waits: exec.max_waits,
             spurious_cas: exec.spurious_cas_per_mille,
             contention: contention.as_ref(),
+            no_interpolants: !info.interpolants,
         };
         // Ordered and parallel draws without interlock or contention counting take the
         // fused path (see `fused`): no fragment lists, one pass over each tile.
@@ -437,7 +455,7 @@ impl Device {
             };
             let (outcome, counts) = fused::run_fused(kernel, &env_base, &pass, fb.tiles_mut());
             let pixels = fb.width as u64 * fb.height as u64;
-            *seq_base = seq_base.wrapping_add((binned.tris.len() as u64).wrapping_mul(pixels));
+            *seq_base = seq_base.wrapping_add((binned.setup_count() as u64).wrapping_mul(pixels));
             report.stats.fragments_generated += counts.generated;
             report.stats.early_culled += counts.early_culled;
             report.stats.late_culled += counts.late_culled;
@@ -851,14 +869,15 @@ impl RasterFront<'_> {
                         return;
                     }
                     generated += 1;
-                    let t = &binned.tris[f.tri as usize];
+                    let t = binned.tris.get(f.tri as usize);
                     let (fx, fy) = (f.x as f32, f.y as f32);
-                    let depth = t.depth_at(fx + 0.5, fy + 0.5);
+                    // No planes: nothing reads a depth (no depth test, no interpolants).
+                    let depth = t.map_or(f32::NAN, |t| t.depth_at(fx + 0.5, fy + 0.5));
                     let (lx, ly) = (f.x - tile.x0, f.y - tile.y0);
                     let mut cov = cov;
                     if tests {
                         let mut depths = [depth; 8];
-                        if per_sample_depth {
+                        if let (true, Some(t)) = (per_sample_depth, t) {
                             for (s, p) in positions.iter().enumerate() {
                                 depths[s] = t.depth_at(fx + p.0, fy + p.1);
                             }
@@ -869,7 +888,7 @@ impl RasterFront<'_> {
                             ly,
                             cov,
                             &depths,
-                            t.front_facing,
+                            f.front_facing,
                             true,
                         );
                         if cov == 0 {
@@ -885,10 +904,10 @@ impl RasterFront<'_> {
                         x: f.x,
                         y: f.y,
                         tri: f.tri,
-                        primitive_id: t.source,
+                        primitive_id: f.source,
                         instance_id: *instance,
                         coverage: cov,
-                        front_facing: t.front_facing,
+                        front_facing: f.front_facing,
                         depth,
                         ticket,
                     });

@@ -36,7 +36,8 @@ mod pool;
 mod setup;
 
 pub use setup::{
-    bin_triangles, effective_tile_size, Binned, Segment, SetupTriangle, MAX_TILE, MIN_TILE,
+    bin_triangles, bin_triangles_with, effective_tile_size, Binned, PlaneSetup, Segment,
+    SetupTriangle, MAX_TILE, MIN_TILE,
 };
 
 /// Sub-pixel precision of snapped vertex positions.
@@ -141,7 +142,7 @@ pub struct Span {
     pub x0: u32,
     /// Exclusive.
     pub x1: u32,
-    /// Index into [`Binned::tris`].
+    /// Setup index: into [`Binned::tris`] when the planes were set up.
     pub tri: u32,
     /// Coverage of every pixel of the run (see [`Fragment::coverage`]).
     pub coverage: u8,
@@ -157,8 +158,11 @@ pub struct Span {
 pub struct Fragment {
     pub x: u32,
     pub y: u32,
-    /// Index into [`Binned::tris`].
+    /// Setup index: into [`Binned::tris`] when the planes were set up.
     pub tri: u32,
     /// Bit `s` set = sample `s` covered (bit 0 only, with one sample: the pixel centre).
     pub coverage: u8,
+    /// As [`Span::source`] and [`Span::front_facing`].
+    pub source: u32,
+    pub front_facing: bool,
 }

@@ -90,7 +90,12 @@ fn eval(p: &[f32; 3], dx: f64, dy: f64) -> f64 {
 
 /// Triangles set up and binned into tiles.
 pub struct Binned {
+    /// The setup records, by setup index; empty when the planes were skipped
+    /// ([`PlaneSetup::Skip`]).
     pub tris: Vec<SetupTriangle>,
+    /// Setup triangles (as many as `tris` holds when the planes were set up).
+    setup_count: u32,
+    planes: PlaneSetup,
     pub tiles_x: u32,
     pub tiles_y: u32,
     pub tile_size: u32,
@@ -191,7 +196,27 @@ const SMALL: u32 = 1 << 29;
 /// The flags of a [`BinEntry`]'s `info`.
 const FLAGS: u32 = SINGLE | PIECE | SMALL;
 
+/// Whether triangle setup computes each triangle's depth and barycentric planes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlaneSetup {
+    /// Planes for every setup triangle ([`Binned::tris`]).
+    Compute,
+    /// Coverage only: nothing downstream reads a depth or an interpolant (no depth test,
+    /// and a kernel that declared `without_interpolants`). `Binned::tris` stays empty.
+    Skip,
+}
+
 impl Binned {
+    /// Setup triangles (fan pieces of clipped triangles count one each).
+    pub fn setup_count(&self) -> u32 {
+        self.setup_count
+    }
+
+    /// Whether the planes were set up.
+    pub fn plane_setup(&self) -> PlaneSetup {
+        self.planes
+    }
+
     pub fn tile_count(&self) -> usize {
         self.tiles_x as usize * self.tiles_y as usize
     }
@@ -288,6 +313,8 @@ impl Binned {
                     y: s.y,
                     tri: s.tri,
                     coverage: s.coverage,
+                    source: s.source,
+                    front_facing: s.front_facing,
                 })
             }
         })
@@ -642,6 +669,7 @@ struct Ctx<'a> {
     cull: CullMode,
     /// `FrontFace::Ccw`: front-facing when counter-clockwise on screen.
     ccw_front: bool,
+    plane_setup: PlaneSetup,
 }
 
 /// Triangles per batch of the reject loop (a power of two).
@@ -965,20 +993,22 @@ impl Ctx<'_> {
         (pv, attrs): (&[[i32; 2]; 3], &[[f32; 4]; 3]),
     ) {
         let sh = self.tile_shift;
-        let [depth, b0, b1, b2] = planes(pv, attrs, r[0], r[1]);
-        let tri = out.tris.len() as u32;
+        let tri = out.meta.len() as u32;
         out.meta.push(TriMeta {
             source,
             front_facing,
         });
-        out.tris.push(SetupTriangle {
-            source,
-            front_facing,
-            rx: r[0],
-            ry: r[1],
-            depth,
-            bary: [b0, b1, b2],
-        });
+        if self.plane_setup == PlaneSetup::Compute {
+            let [depth, b0, b1, b2] = planes(pv, attrs, r[0], r[1]);
+            out.tris.push(SetupTriangle {
+                source,
+                front_facing,
+                rx: r[0],
+                ry: r[1],
+                depth,
+                bary: [b0, b1, b2],
+            });
+        }
         let piece = if piece { PIECE } else { 0 };
         let (tx0, ty0, tx1, ty1) = (r[0] >> sh, r[1] >> sh, r[2] >> sh, r[3] >> sh);
         match cov {
@@ -1174,16 +1204,36 @@ pub const MIN_TILE: u32 = 8;
 /// Largest tile size.
 pub const MAX_TILE: u32 = 256;
 
-/// Clips, culls, snaps and bins triangles. Uses up to `threads` threads.
-/// `positions` are clip-space vertex positions, `indices` the triangles in API order.
-/// Triangles with a NaN or infinite coordinate are dropped (and counted in [`Binned::rejected`]),
-/// so are triangles with an index out of range (the caller should validate meshes first).
+/// Clips, culls, snaps and bins triangles, with their planes ([`bin_triangles_with`] and
+/// [`PlaneSetup::Compute`]). Uses up to `threads` threads.
 pub fn bin_triangles(
     positions: &[Vec4],
     indices: &[[u32; 3]],
     state: &RasterState,
     viewport: Viewport,
     threads: usize,
+) -> Binned {
+    bin_triangles_with(
+        positions,
+        indices,
+        state,
+        viewport,
+        threads,
+        PlaneSetup::Compute,
+    )
+}
+
+/// Clips, culls, snaps and bins triangles. Uses up to `threads` threads.
+/// `positions` are clip-space vertex positions, `indices` the triangles in API order.
+/// Triangles with a NaN or infinite coordinate are dropped (and counted in [`Binned::rejected`]),
+/// so are triangles with an index out of range (the caller should validate meshes first).
+pub fn bin_triangles_with(
+    positions: &[Vec4],
+    indices: &[[u32; 3]],
+    state: &RasterState,
+    viewport: Viewport,
+    threads: usize,
+    plane_setup: PlaneSetup,
 ) -> Binned {
     let threads = threads.max(1);
     let tile_size = effective_tile_size(state.tile_size);
@@ -1240,6 +1290,7 @@ pub fn bin_triangles(
         ntiles,
         cull: state.cull,
         ccw_front: state.front_face == FrontFace::Ccw,
+        plane_setup,
     };
     let n = indices.len();
     // One contiguous chunk per thread: the first chunk's buffer becomes `tris` and only the
@@ -1282,20 +1333,27 @@ pub fn bin_triangles(
     ZW.give_dirty(zw);
 
     // 3. Concatenate in chunk order (the first chunk's buffer is moved, not copied).
+    // Setup indices run on across chunks (`meta` has one entry per setup triangle, `tris`
+    // too unless the planes were skipped).
     let total: usize = parts.iter().map(|p| p.0.len()).sum();
     let mut rejected = 0;
     let mut tris = std::mem::take(&mut parts[0].0);
     tris.reserve(total - tris.len());
+    let mut setup_count = 0u32;
     for (k, (t, bins, r)) in parts.iter_mut().enumerate() {
         rejected += *r;
+        bins.base = setup_count;
+        setup_count += bins.meta.len() as u32;
         if k > 0 {
-            bins.base = tris.len() as u32;
             tris.extend_from_slice(t);
             TRIS.give(std::mem::take(t));
         }
     }
+    debug_assert!(plane_setup == PlaneSetup::Skip || tris.len() == setup_count as usize);
     Binned {
         tris,
+        setup_count,
+        planes: plane_setup,
         tiles_x,
         tiles_y,
         tile_size,
