@@ -210,8 +210,8 @@ struct BenchArgs {
     frames: usize,
     #[arg(long, default_value_t = 2)]
     warmup: usize,
-    /// Also measure the machine's floor under the frame (`count` only): its atomic adds
-    /// alone on the same threads, and with the buffer allocation and read-back.
+    /// Also measure the machine's floor under the frame (`--algo count` only): its atomic
+    /// adds alone on the same threads, and with the buffer allocation and read-back.
     #[arg(long)]
     floor: bool,
 }
@@ -541,6 +541,14 @@ fn median(v: &mut [f64]) -> f64 {
 
 fn cmd_bench(a: &BenchArgs) -> Result<()> {
     let spec = spec_of(&a.run)?;
+    // The floor replays `count`'s operation (one atomic add per fragment); other
+    // algorithms do other things per fragment.
+    if a.floor && spec.algo != "count" {
+        bail!(
+            "--floor measures the floor of `count` (its atomic adds alone), not of `{}`",
+            spec.algo
+        );
+    }
     let loaded = run::load(&spec)?;
     for _ in 0..a.warmup {
         run::render(&spec, &loaded)?;

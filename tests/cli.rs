@@ -171,6 +171,40 @@ fn check_under_lockstep_forward_progress_reports_the_spinlock_deadlock() {
     );
 }
 
+/// `bench --floor` reports the floor of `count` beside the frame, and refuses other
+/// algorithms up front.
+#[test]
+fn bench_floor_reports_the_frame_and_its_floor() {
+    let v = json(&fragrace(&[
+        "bench",
+        "--scene",
+        "cubes",
+        "--algo",
+        "count",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--frames",
+        "2",
+        "--warmup",
+        "0",
+        "--threads",
+        "2",
+        "--floor",
+        "--json",
+    ]));
+    for key in ["median_ms", "floor_atomics_ms", "floor_frame_ms"] {
+        let ms = v[key].as_f64().unwrap_or_else(|| panic!("{key} in {v}"));
+        assert!(ms.is_finite() && ms >= 0.0, "{key}: {ms}");
+    }
+    assert!(v["fragments"].as_u64().unwrap() > 0, "{v}");
+    fails_with(
+        &["bench", "--scene", "cubes", "--algo", "opaque", "--floor"],
+        "--floor measures the floor of `count`",
+    );
+}
+
 fn fails_with(args: &[&str], needle: &str) {
     let o = fragrace(args);
     assert!(!o.status.success(), "{args:?} should fail");
