@@ -77,7 +77,7 @@ impl KernelInfo {
     /// Declares that the kernel reads no interpolated value (no depth, sample depth or
     /// barycentrics), as a GLSL shader without inputs: in a draw without a depth or stencil
     /// test, triangle setup then skips the depth and barycentric planes, as a GPU skips
-    /// the interpolation of varyings nobody reads (a fifth of the setup of a dense mesh;
+    /// the interpolation of varyings nobody reads (a sixth of the setup instructions of a dense mesh;
     /// docs/performance.md). Reading one anyway is a [`FaultKind::Misuse`].
     pub const fn without_interpolants(mut self) -> KernelInfo {
         self.interpolants = false;

@@ -201,8 +201,9 @@ const FLAGS: u32 = SINGLE | PIECE | SMALL;
 pub enum PlaneSetup {
     /// Planes for every setup triangle ([`Binned::tris`]).
     Compute,
-    /// Coverage only: nothing downstream reads a depth or an interpolant (no depth test,
-    /// and a kernel that declared `without_interpolants`). `Binned::tris` stays empty.
+    /// Coverage only: nothing downstream reads a depth or an interpolant (no depth or
+    /// stencil test, and a kernel that declared `without_interpolants`). `Binned::tris`
+    /// stays empty.
     Skip,
 }
 
