@@ -112,7 +112,8 @@ fn replay(cfg: &FloorConfig<'_>, words: &[AtomicU32]) {
     });
 }
 
-fn median(v: &mut [f64]) -> f64 {
+/// The median of timings (the upper one of an even count); sorts `v`.
+pub fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
 }

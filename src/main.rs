@@ -534,11 +534,6 @@ fn cmd_list(json: bool) -> Result<()> {
     Ok(())
 }
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn cmd_bench(a: &BenchArgs) -> Result<()> {
     let spec = spec_of(&a.run)?;
     // The floor replays `count`'s operation (one atomic add per fragment); other
@@ -564,10 +559,10 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         last = Some(r);
     }
     let r = last.expect("one frame");
-    let ms = median(&mut times);
+    let ms = fragrace::floor::median(&mut times);
     // The passes alone (transform, binning, shading, fixed function), without buffer
     // allocation, clears and read-back.
-    let pass_ms = median(&mut pass_times);
+    let pass_ms = fragrace::floor::median(&mut pass_times);
     let stats = &r.result.report.stats;
     let tris = loaded.scene.mesh.triangle_count() as f64 * stats.geometry_passes.max(1) as f64;
     let floor = if a.floor {

@@ -1240,6 +1240,16 @@ fn dense_subpixel_mesh_is_exact() {
 }
 
 /// Reads a gzipped OBJ with `gzip -dc` (test-only; the product has its own loader).
+/// Centre and radius of the bounding box's circumscribed sphere (`verts` not empty).
+fn bounding_sphere(verts: &[Vec3]) -> (Vec3, f32) {
+    let (mut lo, mut hi) = (verts[0], verts[0]);
+    for p in verts {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
+    ((lo + hi) * 0.5, (hi - lo).length() * 0.5)
+}
+
 fn load_obj_gz(path: &str) -> Option<(Vec<Vec3>, Vec<[u32; 3]>)> {
     let out = std::process::Command::new("gzip")
         .arg("-dc")
@@ -1320,12 +1330,7 @@ fn time_dragon_512() {
         eprintln!("no mesh at {path}");
         return;
     };
-    let (mut lo, mut hi) = (verts[0], verts[0]);
-    for p in &verts {
-        lo = lo.min(*p);
-        hi = hi.max(*p);
-    }
-    let (c, r) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
+    let (c, r) = bounding_sphere(&verts);
     let m = camera(c + Vec3::new(0.0, 0.0, 2.2 * r), c, 1.0, 0.1 * r, 10.0 * r);
     let pos: Vec<Vec4> = verts.iter().map(|p| m * p.extend(1.0)).collect();
     for threads in [1, 2] {
@@ -1381,12 +1386,7 @@ fn setup_fingerprints() {
             eprintln!("no mesh at {path}");
             continue;
         };
-        let (mut lo, mut hi) = (verts[0], verts[0]);
-        for p in &verts {
-            lo = lo.min(*p);
-            hi = hi.max(*p);
-        }
-        let (c, r) = ((lo + hi) * 0.5, (hi - lo).length() * 0.5);
+        let (c, r) = bounding_sphere(&verts);
         // Far, near, and an eye inside the bounding box (near-plane and guard-band clipping).
         let views = [
             camera(c + Vec3::new(0.0, 0.0, 2.2 * r), c, 1.0, 0.1 * r, 10.0 * r),

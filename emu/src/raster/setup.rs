@@ -95,7 +95,6 @@ pub struct Binned {
     pub tris: Vec<SetupTriangle>,
     /// Setup triangles (as many as `tris` holds when the planes were set up).
     setup_count: u32,
-    planes: PlaneSetup,
     pub tiles_x: u32,
     pub tiles_y: u32,
     pub tile_size: u32,
@@ -211,11 +210,6 @@ impl Binned {
     /// Setup triangles (fan pieces of clipped triangles count one each).
     pub fn setup_count(&self) -> u32 {
         self.setup_count
-    }
-
-    /// Whether the planes were set up.
-    pub fn plane_setup(&self) -> PlaneSetup {
-        self.planes
     }
 
     pub fn tile_count(&self) -> usize {
@@ -1395,7 +1389,6 @@ pub fn bin_triangles_with(
     Binned {
         tris,
         setup_count,
-        planes: plane_setup,
         tiles_x,
         tiles_y,
         tile_size,
