@@ -118,6 +118,35 @@ pub struct ExecConfig {
     /// See `docs/verification.md` for the rule and what it cannot see.
     #[serde(default)]
     pub simt: u32,
+    /// Parallel executor: whether triangles are binned into tiles for every pass, or only
+    /// where a pass needs the framebuffer (see [`Binning`]).
+    #[serde(default)]
+    pub binning: Binning,
+}
+
+/// How the parallel executor hands geometry to its workers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Binning {
+    /// Passes that need nothing of the framebuffer (no depth or stencil test, no colour
+    /// target: counting and capture passes) run unbinned: workers take chunks of triangles
+    /// in turn and set up, rasterize and shade each chunk at once, so no bin lists are
+    /// written or read. Fragments of one pixel from different chunks race across threads.
+    /// Other passes are binned into tiles.
+    #[default]
+    Auto,
+    /// Every pass is binned into tiles (the only way before unbinned passes existed; kept
+    /// to compare the two).
+    Always,
+}
+
+impl Binning {
+    pub fn name(self) -> &'static str {
+        match self {
+            Binning::Auto => "auto",
+            Binning::Always => "always",
+        }
+    }
 }
 
 fn default_segment() -> u32 {
@@ -143,6 +172,7 @@ impl Default for ExecConfig {
             spurious_cas_per_mille: 0,
             segment: default_segment(),
             simt: 0,
+            binning: Binning::Auto,
         }
     }
 }

@@ -32,7 +32,7 @@ pub mod state;
 pub mod stats;
 pub mod sync;
 
-pub use exec::{ExecConfig, ExecMode, Policy, ScheduleConfig};
+pub use exec::{Binning, ExecConfig, ExecMode, Policy, ScheduleConfig};
 pub use fragment::{DirectFrag, Fragment, Performed};
 pub use framebuffer::{Framebuffer, Image};
 pub use geometry::{Draw, Mesh, MeshError};

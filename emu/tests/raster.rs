@@ -1121,12 +1121,9 @@ fn frag_set(b: &Binned) -> Vec<(u32, u32, u32, u8)> {
     v
 }
 
-/// Tile size and thread count change nothing but the tile a fragment comes from.
-#[test]
-fn tile_sizes_and_threads_give_identical_output() {
-    let v = vp(300, 200);
-    // A sphere, a floor through the near plane (clipped pieces) and a dense jittered grid:
-    // about 30K triangles, so that up to 7 threads get a chunk each.
+/// A sphere, a floor through the near plane (clipped pieces) and a dense jittered grid:
+/// about 30K triangles, so that up to 7 threads get a chunk each.
+fn mixed_scene(v: Viewport) -> (Vec<Vec4>, Vec<[u32; 3]>) {
     let (verts, mut faces) = icosphere(4);
     let m = camera(Vec3::new(0.4, 0.3, 1.6), Vec3::ZERO, 1.5, 0.5, 10.0);
     let mut pos: Vec<Vec4> = verts.iter().map(|p| m * p.extend(1.0)).collect();
@@ -1154,6 +1151,14 @@ fn tile_sizes_and_threads_give_identical_output() {
     let base = pos.len() as u32;
     pos.extend(gp);
     faces.extend(gi.iter().map(|t| t.map(|i| i + base)));
+    (pos, faces)
+}
+
+/// Tile size and thread count change nothing but the tile a fragment comes from.
+#[test]
+fn tile_sizes_and_threads_give_identical_output() {
+    let v = vp(300, 200);
+    let (pos, faces) = mixed_scene(v);
     for samples in [SampleCount::X1, SampleCount::X4] {
         let reference = bin_triangles(
             &pos,
@@ -1477,4 +1482,92 @@ fn long_offscreen_slivers_match_brute_force_reference() {
         idx.push([3 * t, 3 * t + 1, 3 * t + 2]);
     }
     assert_matches_reference(&pos, &idx, X1, v);
+}
+
+/// Unbinned setup ([`Prepared::setup_flat`], chunk by chunk over the whole viewport) gives
+/// the binned fragments, with the same setup records, in API order within a chunk and
+/// row-major within a triangle, whatever the chunk size.
+#[test]
+fn unbinned_chunks_give_the_binned_fragments() {
+    let v = vp(300, 200);
+    let (pos, faces) = mixed_scene(v);
+    for (samples, cull) in [
+        (SampleCount::X1, CullMode::None),
+        (SampleCount::X1, CullMode::Back),
+        (SampleCount::X4, CullMode::None),
+        (SampleCount::X8, CullMode::Front),
+    ] {
+        let st = RasterState {
+            samples,
+            cull,
+            tile_size: 16,
+            ..RasterState::default()
+        };
+        let binned = bin_triangles(&pos, &faces, &st, v, 2);
+        // (source, y, x, coverage, facing, setup record)
+        let mut want: Vec<_> = all_frags(&binned)
+            .iter()
+            .map(|f| {
+                let t = binned.tris[f.tri as usize];
+                (f.source, f.y, f.x, f.coverage, f.front_facing, t)
+            })
+            .collect();
+        want.sort_by_key(|w| (w.0, w.1, w.2));
+        assert!(want.len() > 10_000);
+        let prepared = prepare(&pos, &faces, &st, v, 2, PlaneSetup::Compute);
+        assert!(prepared.well_formed());
+        assert_eq!(prepared.triangle_count(), faces.len());
+        for chunk_size in [1, 7, 512, faces.len()] {
+            let mut got = Vec::new();
+            let mut chunk = FlatChunk::default();
+            for start in (0..faces.len()).step_by(chunk_size) {
+                prepared.setup_flat(start..start + chunk_size, &mut chunk);
+                assert_eq!(chunk.rejected, 0);
+                let first = got.len();
+                chunk.spans(|s| {
+                    for x in s.x0..s.x1 {
+                        let t = chunk.tris[s.tri as usize];
+                        assert_eq!(t.source, s.source);
+                        got.push((s.source, s.y, x, s.coverage, s.front_facing, t));
+                    }
+                });
+                // API order within the chunk, row-major within a triangle.
+                assert!(
+                    got[first..]
+                        .windows(2)
+                        .all(|w| (w[0].0, w[0].1, w[0].2) < (w[1].0, w[1].1, w[1].2)),
+                    "{samples:?} {cull:?} chunk {chunk_size}: out of order"
+                );
+            }
+            assert_eq!(
+                got.len(),
+                want.len(),
+                "{samples:?} {cull:?} chunk {chunk_size}"
+            );
+            assert!(
+                got == want,
+                "{samples:?} {cull:?} chunk {chunk_size}: fragments differ"
+            );
+        }
+    }
+}
+
+/// A mesh with a non-finite vertex or an index out of range is not well formed (the
+/// unbinned path leaves it to binning, which counts and drops its triangles).
+#[test]
+fn well_formed_sees_bad_vertices_and_indices() {
+    let v = vp(32, 32);
+    let st = state(X1);
+    let pos = [px(1.0, 1.0, v), px(30.0, 2.0, v), px(3.0, 30.0, v)];
+    let ok = prepare(&pos, &[[0, 1, 2]], &st, v, 1, PlaneSetup::Skip);
+    assert!(ok.well_formed());
+    let bad_index = prepare(&pos, &[[0, 1, 3]], &st, v, 1, PlaneSetup::Skip);
+    assert!(!bad_index.well_formed());
+    let mut nan = pos;
+    nan[1].x = f32::NAN;
+    assert!(!prepare(&nan, &[[0, 1, 2]], &st, v, 1, PlaneSetup::Skip).well_formed());
+    let mut inf = pos;
+    inf[2].w = f32::INFINITY;
+    assert!(!prepare(&inf, &[[0, 1, 2]], &st, v, 1, PlaneSetup::Skip).well_formed());
+    assert!(prepare(&pos, &[], &st, v, 1, PlaneSetup::Skip).well_formed());
 }

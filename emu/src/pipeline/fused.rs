@@ -29,13 +29,12 @@ use crate::exec::{record_panic, Acc, ShadeOutcome, Tally};
 use crate::fragment::DirectFrag;
 use crate::framebuffer::TileMemory;
 use crate::kernel::{Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv};
-use crate::raster::{Binned, SampleCount, Segment, Span};
+use crate::raster::{Binned, FlatChunk, Prepared, SampleCount, Segment, SetupTriangle, Span};
 use crate::state::FragmentState;
 use crate::sync::pool;
 
 /// What a fused pass needs besides the kernel and its environment.
 pub(crate) struct FusedPass<'a> {
-    pub binned: &'a Binned,
     pub state: &'a FragmentState,
     pub instance: u32,
     /// Multisampling off on a multisampled target: one coverage bit covers every sample.
@@ -52,6 +51,31 @@ pub(crate) struct FusedPass<'a> {
     pub segment: Option<u32>,
     /// Invocation ids of this pass start here (see [`FragInput::seq`]).
     pub seq_base: u64,
+}
+
+/// Where a unit of work's covered runs come from: a segment of a tile's bin lists, or a
+/// chunk of triangles set up without binning.
+trait SpanSource {
+    fn spans(&self, emit: impl FnMut(Span));
+}
+
+struct SegmentSpans<'b> {
+    binned: &'b Binned,
+    seg: Segment,
+}
+
+impl SpanSource for SegmentSpans<'_> {
+    #[inline(always)]
+    fn spans(&self, emit: impl FnMut(Span)) {
+        self.binned.raster_segment_spans(&self.seg, emit)
+    }
+}
+
+impl SpanSource for FlatChunk {
+    #[inline(always)]
+    fn spans(&self, emit: impl FnMut(Span)) {
+        FlatChunk::spans(self, emit)
+    }
 }
 
 /// Fixed-function counts of a fused pass.
@@ -117,6 +141,7 @@ pub(crate) fn run_fused<K: FragmentKernel>(
     kernel: &K,
     env: &PassEnv<'_>,
     pass: &FusedPass<'_>,
+    binned: &Binned,
     tiles: &mut [TileMemory],
 ) -> (ShadeOutcome, FusedCounts) {
     let threads = pass.threads.max(1);
@@ -131,7 +156,7 @@ pub(crate) fn run_fused<K: FragmentKernel>(
             debug_assert!(commutes(pass.state, pass.targets));
             let mut segments = Vec::new();
             for t in 0..tiles.len() {
-                pass.binned.tile_segments(t, max, &mut segments);
+                binned.tile_segments(t, max, &mut segments);
             }
             let tiles: &[TileMemory] = tiles;
             let next = crate::sync::AtomicUsize::new(0);
@@ -139,9 +164,9 @@ pub(crate) fn run_fused<K: FragmentKernel>(
                 let mut w = Worker::new(kernel, env, pass);
                 loop {
                     let i = next.fetch_add(1, crate::sync::Ordering::Relaxed);
-                    let Some(seg) = segments.get(i) else { break };
+                    let Some(&seg) = segments.get(i) else { break };
                     let tile = TileAccess::Shared(&tiles[seg.tile as usize]);
-                    w.run_segment(seg, tile);
+                    w.run_unit(&SegmentSpans { binned, seg }, env, Some(tile));
                 }
                 w.finish()
             };
@@ -157,10 +182,12 @@ pub(crate) fn run_fused<K: FragmentKernel>(
                     let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
                     let Some((index, tile)) = next else { break };
                     segs.clear();
-                    pass.binned.tile_segments(index, u32::MAX, &mut segs);
-                    let mut access = TileAccess::Exclusive(tile);
-                    for seg in &segs {
-                        access = w.run_segment(seg, access);
+                    // Several units in turn, in API order: each unit's spans are gathered
+                    // before shading (see `Worker::run_unit`).
+                    binned.tile_segments(index, EXCLUSIVE_UNIT, &mut segs);
+                    let mut access = Some(TileAccess::Exclusive(tile));
+                    for &seg in &segs {
+                        access = w.run_unit(&SegmentSpans { binned, seg }, env, access);
                     }
                 }
                 w.finish()
@@ -175,6 +202,71 @@ pub(crate) fn run_fused<K: FragmentKernel>(
         counts.add(&c);
     }
     (outcome, counts)
+}
+
+/// Most bin entries per unit of work of a tile that one worker holds (units of one tile run
+/// in turn, in API order).
+const EXCLUSIVE_UNIT: u32 = 1024;
+
+/// Input triangles per unit of work of [`run_unbinned`]: its setup records stay in the
+/// worker's cache between setup and shading.
+pub(crate) const UNBINNED_CHUNK: usize = 512;
+
+/// Whether a pass can run unbinned ([`run_unbinned`]): its fixed-function work commutes,
+/// and it has no depth or stencil test and no target, so that a fragment needs nothing
+/// of the framebuffer and the order in which threads visit pixels does not matter.
+pub(crate) fn unbinned(state: &FragmentState, targets: usize) -> bool {
+    commutes(state, targets) && !state.depth.test && !state.stencil.enabled && targets == 0
+}
+
+/// Runs a fused pass without binning: workers take chunks of [`UNBINNED_CHUNK`] input
+/// triangles in turn, set each up ([`Prepared::setup_flat`]) and rasterize and shade it
+/// at once, in API order within the chunk. Fragments of one pixel from different chunks run
+/// concurrently on different threads, as on a GPU. Only for passes that
+/// [`unbinned`] allows (nothing per-pixel is ordered) and well-formed meshes
+/// ([`Prepared::well_formed`]). Returns the outcome, the counts and the triangles rejected.
+#[inline(never)]
+pub(crate) fn run_unbinned<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    pass: &FusedPass<'_>,
+    prepared: &Prepared<'_>,
+) -> (ShadeOutcome, FusedCounts, u64) {
+    debug_assert!(unbinned(pass.state, pass.targets) && !pass.early_tests());
+    let n = prepared.triangle_count();
+    let chunks = n.div_ceil(UNBINNED_CHUNK);
+    let next = crate::sync::AtomicUsize::new(0);
+    let work = || {
+        let mut w = Worker::new(kernel, env, pass);
+        let mut chunk = FlatChunk::default();
+        let mut rejected = 0;
+        loop {
+            let c = next.fetch_add(1, crate::sync::Ordering::Relaxed);
+            if c >= chunks {
+                break;
+            }
+            prepared.setup_flat(c * UNBINNED_CHUNK..(c + 1) * UNBINNED_CHUNK, &mut chunk);
+            rejected += chunk.rejected;
+            // The chunk's setup records are this unit's planes.
+            let chunk_env = PassEnv {
+                tris: &chunk.tris,
+                ..env.clone()
+            };
+            w.run_unit(&chunk, &chunk_env, None);
+        }
+        let (acc, counts) = w.finish();
+        (acc, counts, rejected)
+    };
+    let results = on_threads(pass.threads.max(1).min(chunks.max(1)), work);
+    let mut outcome = ShadeOutcome::default();
+    let mut counts = FusedCounts::default();
+    let mut rejected = 0;
+    for (acc, c, r) in results {
+        acc.finish(&mut outcome);
+        counts.add(&c);
+        rejected += r;
+    }
+    (outcome, counts, rejected)
 }
 
 /// Runs `work` on `threads` scoped threads (inline with one) and collects the results.
@@ -195,17 +287,17 @@ fn on_threads<R: Send>(threads: usize, work: impl Fn() -> R + Sync) -> Vec<R> {
     })
 }
 
-/// What the fragments of a segment share before shading: coverage masking and the early
-/// tests (both paths of [`Worker::run_segment`] rasterize the same way).
+/// What the fragments of a unit of work share before shading: coverage masking and the
+/// early tests (both loops of [`Worker::run_unit`] rasterize the same way).
 struct RowSetup<'p> {
     pass: &'p FusedPass<'p>,
+    /// The unit's setup records (planes), for the tests.
+    tris: &'p [SetupTriangle],
     tests: bool,
     sample_mask: u8,
     all_samples: u8,
     per_sample_depth: bool,
     positions: &'static [(f32, f32)],
-    /// The tile's origin.
-    origin: (u32, u32),
     width: u32,
     pixels: u64,
 }
@@ -215,25 +307,33 @@ struct Row<'p> {
     cov: u8,
     /// The setup record (planes), only for the tests: loading it per span cost a cache
     /// miss per triangle on large meshes.
-    planes: Option<&'p crate::raster::SetupTriangle>,
+    planes: Option<&'p SetupTriangle>,
     fy: f32,
-    /// `seq` of the span's pixel 0: unique and increasing in API order (triangle, then
-    /// pixel).
+    /// `seq` of the span's pixel 0: unique and increasing in API order (source triangle,
+    /// then pixel). By source triangle, not setup index, so that ids do not depend on how
+    /// setup was split among threads; unique because the fan pieces of a clipped
+    /// triangle cover disjoint samples and, with several samples, are merged per pixel.
     row_seq: u64,
 }
 
+impl FusedPass<'_> {
+    /// Depth or stencil tests run before shading.
+    fn early_tests(&self) -> bool {
+        self.early && (self.state.depth.test || self.state.stencil.enabled)
+    }
+}
+
 impl<'p> RowSetup<'p> {
-    fn new<K>(worker: &Worker<'p, K>, tile: &TileAccess<'_>) -> Self {
-        let (pass, env) = (worker.pass, worker.env);
-        let state = pass.state;
+    fn new<K>(worker: &Worker<'p, K>, env: &'p PassEnv<'p>) -> Self {
+        let pass = worker.pass;
         RowSetup {
             pass,
-            tests: pass.early && (state.depth.test || state.stencil.enabled),
-            sample_mask: state.sample_mask & worker.all_samples,
+            tris: env.tris,
+            tests: pass.early_tests(),
+            sample_mask: pass.state.sample_mask & worker.all_samples,
             all_samples: worker.all_samples,
             per_sample_depth: env.samples > 1 && !pass.single,
             positions: worker.positions,
-            origin: (tile.tile().x0, tile.tile().y0),
             width: env.width,
             pixels: worker.pixels,
         }
@@ -255,14 +355,20 @@ impl<'p> RowSetup<'p> {
         counts.generated += u64::from(span.x1 - span.x0);
         Some(Row {
             cov,
-            planes: self.tests.then(|| &pass.binned.tris[span.tri as usize]),
+            planes: self.tests.then(|| &self.tris[span.tri as usize]),
             fy: span.y as f32,
             row_seq: pass
                 .seq_base
-                .wrapping_add(span.tri as u64 * self.pixels)
+                .wrapping_add(span.source as u64 * self.pixels)
                 .wrapping_add(span.y as u64 * self.width as u64),
         })
     }
+}
+
+/// The tile of a unit of work that tests or writes targets (units without either have none).
+fn tile_of<'a, 't>(tile: &'a mut Option<TileAccess<'t>>) -> &'a mut TileAccess<'t> {
+    tile.as_mut()
+        .expect("a pass with tests or targets runs tile by tile")
 }
 
 impl Row<'_> {
@@ -275,7 +381,7 @@ impl Row<'_> {
         rows: &RowSetup<'_>,
         span: &Span,
         x: u32,
-        tile: &mut TileAccess<'_>,
+        tile: &mut Option<TileAccess<'_>>,
         counts: &mut FusedCounts,
     ) -> Option<(u8, f32)> {
         let Some(t) = self.planes else {
@@ -289,7 +395,8 @@ impl Row<'_> {
                 depths[s] = t.depth_at(fx + p.0, self.fy + p.1);
             }
         }
-        let (x0, y0) = rows.origin;
+        let tile = tile_of(tile);
+        let (x0, y0) = (tile.tile().x0, tile.tile().y0);
         let cov = tile.test(
             rows.pass.state,
             (x - x0, span.y - y0),
@@ -338,9 +445,10 @@ impl Row<'_> {
 /// One worker thread's state: its warp of invocation slots and its tallies.
 struct Worker<'a, K> {
     kernel: &'a K,
-    env: &'a PassEnv<'a>,
     pass: &'a FusedPass<'a>,
     slots: Vec<Invocation>,
+    /// The current unit's covered runs, rasterized before any is shaded.
+    spans: Vec<Span>,
     /// Slots `..filled` hold the fragments gathered for the next warp (API order).
     filled: usize,
     acc: Acc,
@@ -352,14 +460,14 @@ struct Worker<'a, K> {
 }
 
 impl<'a, K: FragmentKernel> Worker<'a, K> {
-    fn new(kernel: &'a K, env: &'a PassEnv<'a>, pass: &'a FusedPass<'a>) -> Self {
+    fn new(kernel: &'a K, env: &PassEnv<'_>, pass: &'a FusedPass<'a>) -> Self {
         let lanes = pass.lanes.max(1);
         let samples = env.samples;
         Worker {
             kernel,
-            env,
             pass,
             slots: (0..lanes).map(|_| Invocation::new()).collect(),
+            spans: Vec::new(),
             filled: 0,
             acc: Acc::default(),
             counts: FusedCounts::default(),
@@ -382,28 +490,45 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         (self.acc, self.counts)
     }
 
-    /// Rasterizes, tests, shades and writes one segment; hands the tile access back.
-    fn run_segment<'t>(&mut self, seg: &Segment, tile: TileAccess<'t>) -> TileAccess<'t> {
+    /// Rasterizes, tests, shades and writes one unit of work (a segment of a tile, or a
+    /// chunk of unbinned triangles, whose setup records `env.tris` holds); hands the tile
+    /// access back. `tile` is `None` only for units that neither test nor write targets.
+    ///
+    /// The unit is rasterized into [`Worker::spans`] first, then shaded: so the shading
+    /// loops have one instantiation whatever the source, and the kernel one call site in
+    /// each, which is what lets the compiler inline its state machine into the loop.
+    fn run_unit<'t>(
+        &mut self,
+        src: &impl SpanSource,
+        env: &PassEnv<'_>,
+        tile: Option<TileAccess<'t>>,
+    ) -> Option<TileAccess<'t>> {
+        let mut spans = std::mem::take(&mut self.spans);
+        spans.clear();
+        src.spans(|s| spans.push(s));
         // Without lockstep (or with one lane) nothing interleaves inside a worker.
-        if !self.pass.lockstep || self.slots.len() == 1 {
-            self.run_segment_direct(seg, tile)
+        let tile = if !self.pass.lockstep || self.slots.len() == 1 {
+            self.run_unit_direct(&spans, env, tile)
         } else {
-            self.run_segment_lockstep(seg, tile)
-        }
+            self.run_unit_lockstep(&spans, env, tile)
+        };
+        self.spans = spans;
+        tile
     }
 
-    /// [`Self::run_segment`] without lockstep: each fragment is shaded through
+    /// [`Self::run_unit`] without lockstep: each fragment is shaded through
     /// [`DirectFrag`] as soon as it is rasterized and tested, runs to its end and is retired
     /// at once (API order holds), in one slot, with no warp to gather.
-    fn run_segment_direct<'t>(
+    #[inline(never)]
+    fn run_unit_direct<'t>(
         &mut self,
-        seg: &Segment,
-        mut tile: TileAccess<'t>,
-    ) -> TileAccess<'t> {
-        let rows = RowSetup::new(self, &tile);
+        spans: &[Span],
+        env: &PassEnv<'_>,
+        mut tile: Option<TileAccess<'t>>,
+    ) -> Option<TileAccess<'t>> {
+        let rows = RowSetup::new(self, env);
         let Worker {
             kernel,
-            env,
             pass,
             slots,
             acc,
@@ -411,28 +536,28 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             positions,
             ..
         } = self;
-        let (kernel, env, pass, positions) = (*kernel, *env, *pass, *positions);
+        let (kernel, pass, positions) = (*kernel, *pass, *positions);
         let state = pass.state;
         let late_tests = !pass.early && (state.depth.test || state.stencil.enabled);
         // Nothing to test or write after shading (capture and counting passes).
         let count_only = !late_tests && pass.targets == 0;
         let slot = &slots[0];
-        // Counts of the segment's invocations, added to the worker's once at the end.
+        // Counts of the unit's invocations, added to the worker's once at the end.
         let mut tally = Tally::default();
-        pass.binned.raster_segment_spans(seg, |span| {
-            let Some(row) = rows.row(&span, counts) else {
-                return;
+        for span in spans {
+            let Some(row) = rows.row(span, counts) else {
+                continue;
             };
             // The slot holds the input of the span's previous pixel (`first`: not yet).
             let mut first = true;
             for x in span.x0..span.x1 {
-                let Some((cov, depth)) = row.early(&rows, &span, x, &mut tile, counts) else {
+                let Some((cov, depth)) = row.early(&rows, span, x, &mut tile, counts) else {
                     continue;
                 };
                 if first {
                     // Written straight into the slot: a copy of a built input stalled on
                     // store forwarding.
-                    slot.reset_direct(row.input(&rows, &span, x, cov, depth));
+                    slot.reset_direct(row.input(&rows, span, x, cov, depth));
                     first = false;
                 } else {
                     slot.reset_direct_next(row.seq(x), x, cov, depth);
@@ -441,56 +566,57 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 if count_only {
                     acc.tally_one(&mut tally, slot, samples_of(cov));
                 } else {
-                    late(pass, env, positions, acc, counts, slot, &mut tile);
+                    late(pass, env, positions, acc, counts, slot, tile_of(&mut tile));
                 }
             }
-        });
+        }
         acc.add_tally(&tally);
         counts.samples_passed += tally.samples_passed;
         tile
     }
 
-    /// [`Self::run_segment`] with lockstep warps: fragments gather into a warp of slots,
+    /// [`Self::run_unit`] with lockstep warps: fragments gather into a warp of slots,
     /// whose lanes take turns at every access ([`shade_lockstep`]).
-    fn run_segment_lockstep<'t>(
+    #[inline(never)]
+    fn run_unit_lockstep<'t>(
         &mut self,
-        seg: &Segment,
-        mut tile: TileAccess<'t>,
-    ) -> TileAccess<'t> {
-        let pass = self.pass;
+        spans: &[Span],
+        env: &PassEnv<'_>,
+        mut tile: Option<TileAccess<'t>>,
+    ) -> Option<TileAccess<'t>> {
         let lanes = self.slots.len();
-        let rows = RowSetup::new(self, &tile);
-        pass.binned.raster_segment_spans(seg, |span| {
-            let Some(row) = rows.row(&span, &mut self.counts) else {
-                return;
+        let rows = RowSetup::new(self, env);
+        for span in spans {
+            let Some(row) = rows.row(span, &mut self.counts) else {
+                continue;
             };
             for x in span.x0..span.x1 {
-                let Some((cov, depth)) = row.early(&rows, &span, x, &mut tile, &mut self.counts)
+                let Some((cov, depth)) = row.early(&rows, span, x, &mut tile, &mut self.counts)
                 else {
                     continue;
                 };
-                self.slots[self.filled].reset_direct(row.input(&rows, &span, x, cov, depth));
+                self.slots[self.filled].reset_direct(row.input(&rows, span, x, cov, depth));
                 self.filled += 1;
                 if self.filled == lanes {
-                    self.flush(&mut tile);
+                    self.flush(env, &mut tile);
                 }
             }
-        });
-        self.flush(&mut tile);
+        }
+        self.flush(env, &mut tile);
         tile
     }
 
     /// Shades the gathered warp, then runs the late stage in API order.
-    fn flush(&mut self, tile: &mut TileAccess<'_>) {
+    fn flush(&mut self, env: &PassEnv<'_>, tile: &mut Option<TileAccess<'_>>) {
         let n = self.filled;
         if n == 0 {
             return;
         }
         self.filled = 0;
         let slots = &self.slots[..n];
-        // Only lockstep warps are gathered (see `run_segment`).
+        // Only lockstep warps are gathered (see `run_unit`).
         debug_assert!(self.pass.lockstep);
-        shade_lockstep(self.kernel, slots, self.env);
+        shade_lockstep(self.kernel, slots, env);
         let state = self.pass.state;
         let late_tests = !self.pass.early && (state.depth.test || state.stencil.enabled);
         if !late_tests && self.pass.targets == 0 {
@@ -501,12 +627,12 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         for slot in slots {
             late(
                 self.pass,
-                self.env,
+                env,
                 self.positions,
                 &mut self.acc,
                 &mut self.counts,
                 slot,
-                tile,
+                tile_of(tile),
             );
         }
     }
@@ -618,12 +744,12 @@ fn late(
     let mut mask = f.coverage;
     if late_tests {
         let centre = || {
-            let t = &pass.binned.tris[f.tri as usize];
+            let t = &env.tris[f.tri as usize];
             t.depth_at(f.x as f32 + 0.5, f.y as f32 + 0.5)
         };
         let mut depths = [slot.depth_out.get().unwrap_or_else(centre); 8];
         if slot.depth_out.get().is_none() && env.samples > 1 && !pass.single {
-            let t = &pass.binned.tris[f.tri as usize];
+            let t = &env.tris[f.tri as usize];
             for (s, p) in positions.iter().enumerate() {
                 depths[s] = t.depth_at(f.x as f32 + p.0, f.y as f32 + p.1);
             }

@@ -14,14 +14,14 @@ use std::time::{Duration, Instant};
 
 use glam::Vec4;
 
-use crate::exec::{shade, ExecConfig, ExecMode, FragOut, ShadeOutcome};
+use crate::exec::{shade, Binning, ExecConfig, ExecMode, FragOut, ShadeOutcome};
 use crate::framebuffer::{Framebuffer, TileMemory};
 use crate::geometry::{Draw, MeshError};
 use crate::hazard::{Hazard, HazardCounts};
 use crate::interlock::Interlock;
 use crate::kernel::{FragInput, FragmentKernel, Mode, PassEnv};
 use crate::memory::{Buf, Memory, MemoryError, Word};
-use crate::raster::{bin_triangles_with, Binned, PlaneSetup, RasterState, Viewport};
+use crate::raster::{prepare, Binned, PlaneSetup, Prepared, RasterState, Viewport};
 use crate::state::{EarlyTests, FragmentState};
 use crate::stats::{ContentionTable, Hotspot, Stats};
 use crate::sync::pool;
@@ -187,6 +187,12 @@ impl Device {
         };
         let mut clip = Vec::new();
         let mut seq_base = 0u64;
+        // Passes that need nothing of the framebuffer skip binning (see `Binning::Auto`).
+        let try_unbinned = exec.mode == ExecMode::Parallel
+            && exec.binning == Binning::Auto
+            && !exec.contention
+            && kernel.info().interlock.is_none()
+            && fused::unbinned(&state.fragment, state.fragment.targets.len());
         for (instance, model) in draw.instances.iter().enumerate() {
             transform(
                 &draw.mesh.positions,
@@ -205,7 +211,7 @@ impl Device {
             } else {
                 raster
             };
-            let binned = bin_triangles_with(
+            let prepared = prepare(
                 &clip,
                 &draw.mesh.indices,
                 &bin_state,
@@ -213,16 +219,29 @@ impl Device {
                 threads,
                 plane_setup,
             );
-            if binned.rejected > 0 {
-                // Bad input, or positions that the model matrix took out of range (those
-                // are only counted).
-                draw.mesh.validate()?;
-            }
-            report.stats.rejected_triangles += binned.rejected;
-            let geo = Geometry::Binned {
-                binned: &binned,
-                instance: instance as u32,
-                single,
+            let instance = instance as u32;
+            // A mesh with bad triangles is binned: binning counts and drops them, and the
+            // draw then fails on validation before shading.
+            let binned;
+            let geo = if try_unbinned && prepared.well_formed() {
+                Geometry::Unbinned {
+                    prepared: &prepared,
+                    instance,
+                    single,
+                }
+            } else {
+                binned = prepared.bin(threads);
+                if binned.rejected > 0 {
+                    // Bad input, or positions that the model matrix took out of range
+                    // (those are only counted).
+                    draw.mesh.validate()?;
+                }
+                report.stats.rejected_triangles += binned.rejected;
+                Geometry::Binned {
+                    binned: &binned,
+                    instance,
+                    single,
+                }
             };
             self.run_waves(
                 fb,
@@ -406,7 +425,8 @@ impl Device {
         let mode = mode_of(exec);
         let tris: &[crate::raster::SetupTriangle] = match geo {
             Geometry::Binned { binned, .. } => &binned.tris,
-            Geometry::FullScreen => &[],
+            // Each unit of work brings its own (`fused::run_unbinned`).
+            Geometry::Unbinned { .. } | Geometry::FullScreen => &[],
         };
         let env_base = PassEnv {
             memory: &self.memory,
@@ -427,6 +447,42 @@ impl Device {
         // Ordered and parallel draws without interlock or contention counting take the
         // fused path (see `fused`): no fragment lists, one pass over each tile.
         let direct = matches!(exec.mode, ExecMode::Ordered | ExecMode::Parallel);
+        let parallel = exec.mode == ExecMode::Parallel;
+        let fused_pass = |instance: u32, single: bool| fused::FusedPass {
+            state,
+            instance,
+            single,
+            early,
+            targets,
+            lanes: if parallel { exec.batch.max(1) } else { 1 },
+            lockstep: parallel && exec.lockstep,
+            threads: if parallel { exec.threads.max(1) } else { 1 },
+            segment: (parallel && fused::commutes(state, targets)).then_some(exec.segment.max(1)),
+            seq_base: *seq_base,
+        };
+        let pixels = fb.width as u64 * fb.height as u64;
+        if let Geometry::Unbinned {
+            prepared,
+            instance,
+            single,
+        } = geo
+        {
+            // `Device::draw` makes unbinned geometry only for passes this path runs.
+            debug_assert!(direct && info.interlock.is_none() && contention.is_none());
+            let pass = fused_pass(*instance, *single);
+            let (outcome, counts, rejected) =
+                fused::run_unbinned(kernel, &env_base, &pass, prepared);
+            // Invocation ids are by source triangle (see `fused::Row`).
+            *seq_base =
+                seq_base.wrapping_add((prepared.triangle_count() as u64).wrapping_mul(pixels));
+            report.stats.rejected_triangles += rejected;
+            report.stats.fragments_generated += counts.generated;
+            report.stats.early_culled += counts.early_culled;
+            report.stats.late_culled += counts.late_culled;
+            report.stats.samples_passed += counts.samples_passed;
+            absorb(report, outcome, &self.memory);
+            return;
+        }
         if let (
             true,
             None,
@@ -438,24 +494,12 @@ impl Device {
             },
         ) = (direct, info.interlock, contention.as_ref(), geo)
         {
-            let parallel = exec.mode == ExecMode::Parallel;
-            let pass = fused::FusedPass {
-                binned,
-                state,
-                instance: *instance,
-                single: *single,
-                early,
-                targets,
-                lanes: if parallel { exec.batch.max(1) } else { 1 },
-                lockstep: parallel && exec.lockstep,
-                threads: if parallel { exec.threads.max(1) } else { 1 },
-                segment: (parallel && fused::commutes(state, targets))
-                    .then_some(exec.segment.max(1)),
-                seq_base: *seq_base,
-            };
-            let (outcome, counts) = fused::run_fused(kernel, &env_base, &pass, fb.tiles_mut());
-            let pixels = fb.width as u64 * fb.height as u64;
-            *seq_base = seq_base.wrapping_add((binned.setup_count() as u64).wrapping_mul(pixels));
+            let pass = fused_pass(*instance, *single);
+            let (outcome, counts) =
+                fused::run_fused(kernel, &env_base, &pass, binned, fb.tiles_mut());
+            // Invocation ids are by source triangle (see `fused::Row`).
+            *seq_base =
+                seq_base.wrapping_add((binned.input_triangles() as u64).wrapping_mul(pixels));
             report.stats.fragments_generated += counts.generated;
             report.stats.early_culled += counts.early_culled;
             report.stats.late_culled += counts.late_culled;
@@ -759,6 +803,13 @@ enum Geometry<'a> {
         instance: u32,
         single: bool,
     },
+    /// Set up and rasterized chunk by chunk by the fused path's workers
+    /// (`fused::run_unbinned`); made by `Device::draw` only for passes that path runs.
+    Unbinned {
+        prepared: &'a Prepared<'a>,
+        instance: u32,
+        single: bool,
+    },
     FullScreen,
 }
 
@@ -912,6 +963,9 @@ impl RasterFront<'_> {
                         ticket,
                     });
                 });
+            }
+            Geometry::Unbinned { .. } => {
+                unreachable!("unbinned geometry runs on the fused path only (Device::draw)")
             }
             Geometry::FullScreen => {
                 for ly in 0..tile.h {

@@ -36,8 +36,8 @@ mod pool;
 mod setup;
 
 pub use setup::{
-    bin_triangles, bin_triangles_with, effective_tile_size, Binned, PlaneSetup, Segment,
-    SetupTriangle, MAX_TILE, MIN_TILE,
+    bin_triangles, bin_triangles_with, effective_tile_size, prepare, Binned, FlatChunk, PlaneSetup,
+    Prepared, Segment, SetupTriangle, MAX_TILE, MIN_TILE,
 };
 
 /// Sub-pixel precision of snapped vertex positions.

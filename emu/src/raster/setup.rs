@@ -95,6 +95,8 @@ pub struct Binned {
     pub tris: Vec<SetupTriangle>,
     /// Setup triangles (as many as `tris` holds when the planes were set up).
     setup_count: u32,
+    /// Input triangles.
+    input_triangles: usize,
     pub tiles_x: u32,
     pub tiles_y: u32,
     pub tile_size: u32,
@@ -210,6 +212,11 @@ impl Binned {
     /// Setup triangles (fan pieces of clipped triangles count one each).
     pub fn setup_count(&self) -> u32 {
         self.setup_count
+    }
+
+    /// Input triangles (set up or not).
+    pub fn input_triangles(&self) -> usize {
+        self.input_triangles
     }
 
     pub fn tile_count(&self) -> usize {
@@ -703,6 +710,9 @@ struct Ctx<'a> {
     /// `FrontFace::Ccw`: front-facing when counter-clockwise on screen.
     ccw_front: bool,
     plane_setup: PlaneSetup,
+    /// Set up for [`Prepared::setup_flat`]: one [`FlatEntry`] per setup triangle, in API
+    /// order, instead of per-tile bin entries.
+    flat: bool,
 }
 
 /// Triangles per batch of the reject loop (a power of two).
@@ -724,13 +734,15 @@ struct ChunkOut {
     meta: Vec<TriMeta>,
     /// `(tile, entry)` in triangle order.
     bins: Vec<(u32, BinEntry)>,
+    /// Unbinned ([`Ctx::flat`]): one entry per setup triangle, in triangle order.
+    flat: Vec<FlatEntry>,
     rejected: u64,
 }
 
 /// What setup found of a triangle's coverage.
 enum SetupCoverage {
-    /// One covered pixel: its [`BinEntry`] info and the tile it is in.
-    Single { info: u32, tile: u32 },
+    /// One covered pixel and its sample mask.
+    Single { x: i32, y: i32, mask: u8 },
     /// A small one-sample triangle's covered pixels.
     Small(SmallCoverage),
     /// Rasterized in the tiles from its vertices.
@@ -965,13 +977,7 @@ impl Ctx<'_> {
     // samples in `perf` on the 871K dragon at 2048).
     #[inline(always)]
     fn coverage(&self, v: &[[i32; 2]; 3], r: [i32; 4]) -> Option<SetupCoverage> {
-        let sh = self.tile_shift;
-        let tmask = (1 << sh) - 1;
-        let single = |x: i32, y: i32, m: u8| {
-            let info = SINGLE | (m as u32) << 16 | ((y & tmask) as u32) << 8 | (x & tmask) as u32;
-            let tile = (y >> sh) as u32 * self.tiles_x + (x >> sh) as u32;
-            SetupCoverage::Single { info, tile }
-        };
+        let single = |x: i32, y: i32, mask: u8| SetupCoverage::Single { x, y, mask };
         if r[0] == r[2] && r[1] == r[3] {
             let m = coverage::pixel_mask(v, &self.si, r[0], r[1]);
             return (m != 0).then(|| single(r[0], r[1], m));
@@ -1046,9 +1052,46 @@ impl Ctx<'_> {
             });
         }
         let piece = if piece { PIECE } else { 0 };
+        if self.flat {
+            out.flat.push(match cov {
+                SetupCoverage::Single { x, y, mask } => FlatEntry {
+                    tri,
+                    info: SINGLE | (mask as u32) << 16 | piece,
+                    x,
+                    y,
+                },
+                SetupCoverage::Small(small) => {
+                    out.smalls.push(small);
+                    let index = out.smalls.len() as u32 - 1;
+                    debug_assert!(index & FLAGS == 0, "a chunk of over 2^29 triangles");
+                    FlatEntry {
+                        tri,
+                        info: index | SMALL | piece,
+                        x: 0,
+                        y: 0,
+                    }
+                }
+                SetupCoverage::Vertices => {
+                    out.verts.push(v);
+                    let index = out.verts.len() as u32 - 1;
+                    debug_assert!(index & FLAGS == 0, "a chunk of over 2^29 triangles");
+                    FlatEntry {
+                        tri,
+                        info: index | piece,
+                        x: 0,
+                        y: 0,
+                    }
+                }
+            });
+            return;
+        }
         let (tx0, ty0, tx1, ty1) = (r[0] >> sh, r[1] >> sh, r[2] >> sh, r[3] >> sh);
         match cov {
-            SetupCoverage::Single { info, tile } => {
+            SetupCoverage::Single { x, y, mask } => {
+                let tmask = (1 << sh) - 1;
+                let info =
+                    SINGLE | (mask as u32) << 16 | ((y & tmask) as u32) << 8 | (x & tmask) as u32;
+                let tile = (y >> sh) as u32 * self.tiles_x + (x >> sh) as u32;
                 // Only the tile of the covered pixel (the box may straddle tiles).
                 out.bins.push((
                     tile,
@@ -1126,6 +1169,7 @@ impl Ctx<'_> {
             smalls: SMALLS.take(),
             meta: META.take(),
             bins: PAIRS.take(),
+            flat: Vec::new(),
             rejected: 0,
         };
         self.run(range, &mut out);
@@ -1204,13 +1248,15 @@ fn project_vertices(
     src: &[Vec4],
     xy: &mut [[i32; 2]],
     zw: &mut [[f32; 2]],
-) {
+) -> bool {
+    let mut non_finite = false;
     for ((xy, zw), &p) in xy.iter_mut().zip(zw.iter_mut()).zip(src) {
         // Finite as f32 iff finite as f64: tested on the f32 bits (exponent not all ones),
         // a few instructions for the four instead of a few each.
         let finite = p.to_array().iter().fold(true, |ok, c| {
             ok & (c.to_bits() & 0x7f80_0000 != 0x7f80_0000)
         });
+        non_finite |= !finite;
         let p = vec4_f64(p);
         let oc = if finite {
             planes.outcode_finite(&p)
@@ -1226,6 +1272,7 @@ fn project_vertices(
             *zw = [s.z, s.iw];
         }
     }
+    non_finite
 }
 
 /// The tile size used for a requested one: rounded up to a power of two within
@@ -1271,11 +1318,42 @@ pub fn bin_triangles_with(
     threads: usize,
     plane_setup: PlaneSetup,
 ) -> Binned {
+    prepare(positions, indices, state, viewport, threads, plane_setup).bin(threads)
+}
+
+/// Triangles whose vertices are projected and snapped (step 1 of [`bin_triangles`]), ready
+/// for setup: binned into tiles ([`Prepared::bin`]), or set up chunk by chunk and
+/// rasterized straight away, unbinned ([`Prepared::setup_flat`]), when the order in which
+/// the pixels of different triangles are visited does not matter.
+pub struct Prepared<'a> {
+    positions: &'a [Vec4],
+    indices: &'a [[u32; 3]],
+    /// Per vertex, as [`Ctx::xy`] and [`Ctx::zw`] (recycled buffers, given back on drop).
+    xy: Vec<[i32; 2]>,
+    zw: Vec<[f32; 2]>,
+    planes: Planes,
+    xf: Xform,
+    samples: SampleCount,
+    viewport: Viewport,
+    tile_size: u32,
+    cull: CullMode,
+    ccw_front: bool,
+    plane_setup: PlaneSetup,
+    /// A vertex was NaN or infinite.
+    non_finite: bool,
+}
+
+/// Projects and snaps every vertex (step 1 of [`bin_triangles`]), on up to `threads`
+/// threads.
+pub fn prepare<'a>(
+    positions: &'a [Vec4],
+    indices: &'a [[u32; 3]],
+    state: &RasterState,
+    viewport: Viewport,
+    threads: usize,
+    plane_setup: PlaneSetup,
+) -> Prepared<'a> {
     let threads = threads.max(1);
-    let tile_size = effective_tile_size(state.tile_size);
-    let tiles_x = viewport.width.div_ceil(tile_size);
-    let tiles_y = viewport.height.div_ceil(tile_size);
-    let ntiles = tiles_x as usize * tiles_y as usize;
     let w = viewport.width.min(MAX_VIEWPORT);
     let h = viewport.height.min(MAX_VIEWPORT);
     let planes = Planes::new(w.max(1), h.max(1));
@@ -1283,16 +1361,14 @@ pub fn bin_triangles_with(
         sx: viewport.width as f64 * (ONE / 2) as f64,
         sy: viewport.height as f64 * (ONE / 2) as f64,
     };
-
-    // 1. Vertices, in parallel slices of one array.
     // Recycled with stale contents: every element is overwritten below.
     let mut xy = XY.take();
     let mut zw = ZW.take();
     xy.resize(positions.len(), [0; 2]);
     zw.resize(positions.len(), [0.0; 2]);
     let vthreads = threads.min(positions.len() / 8192).max(1);
-    if vthreads == 1 {
-        project_vertices(&planes, &xf, positions, &mut xy, &mut zw);
+    let non_finite = if vthreads == 1 {
+        project_vertices(&planes, &xf, positions, &mut xy, &mut zw)
     } else {
         let per = positions.len().div_ceil(vthreads);
         std::thread::scope(|s| {
@@ -1301,101 +1377,327 @@ pub fn bin_triangles_with(
                 .zip(zw.chunks_mut(per))
                 .zip(positions.chunks(per));
             let first = parts.next();
-            for ((xy, zw), src) in parts {
-                s.spawn(|| project_vertices(&planes, &xf, src, xy, zw));
+            let handles: Vec<_> = parts
+                .map(|((xy, zw), src)| s.spawn(|| project_vertices(&planes, &xf, src, xy, zw)))
+                .collect();
+            let mut bad = match first {
+                Some(((xy, zw), src)) => project_vertices(&planes, &xf, src, xy, zw),
+                None => false,
+            };
+            for h in handles {
+                bad |= h.join().expect("projection worker panicked");
             }
-            if let Some(((xy, zw), src)) = first {
-                project_vertices(&planes, &xf, src, xy, zw);
-            }
-        });
-    }
-
-    // 2. Triangles, in chunks; each chunk sorts its own bins.
-    let ctx = Ctx {
+            bad
+        })
+    };
+    Prepared {
         positions,
         indices,
-        xy: &xy,
-        zw: &zw,
+        xy,
+        zw,
         planes,
         xf,
-        si: SampleInfo::new(state.samples),
-        w: w as i32,
-        h: h as i32,
-        tile_shift: tile_size.trailing_zeros(),
-        tiles_x,
-        ntiles,
+        samples: state.samples,
+        viewport,
+        tile_size: effective_tile_size(state.tile_size),
         cull: state.cull,
         ccw_front: state.front_face == FrontFace::Ccw,
         plane_setup,
-    };
-    let n = indices.len();
-    // One contiguous chunk per thread: the first chunk's buffer becomes `tris` and only the
-    // others are appended (copying setup records is a large part of the memory traffic).
-    // Rejecting off-screen or sub-pixel triangles is cheap, so equal ranges balance well.
-    // At most 2^25 input triangles a chunk: with clipping's fan pieces (at most
-    // `MAX_POLY - 2` each) a chunk's setup indices stay below the bin entry's flag bits.
-    let chunk = n.div_ceil(threads).clamp(4096, MAX_CHUNK);
-    let nchunks = n.div_ceil(chunk);
-    let empty = |rejected: u64| {
-        let bins = ChunkBins {
-            base: 0,
-            tile_start: vec![0; ntiles + 1],
-            entries: Vec::new(),
-            verts: Vec::new(),
-            smalls: Vec::new(),
-            meta: Vec::new(),
-        };
-        (Vec::new(), bins, rejected)
-    };
-    let mut parts: Vec<(Vec<SetupTriangle>, ChunkBins, u64)> = if nchunks == 0 {
-        vec![empty(0)]
-    } else if ntiles == 0 {
-        // Empty viewport: nothing is drawn, but bad input is still counted.
-        let bad = indices
+        non_finite,
+    }
+}
+
+impl Drop for Prepared<'_> {
+    fn drop(&mut self) {
+        XY.give_dirty(std::mem::take(&mut self.xy));
+        ZW.give_dirty(std::mem::take(&mut self.zw));
+    }
+}
+
+impl<'a> Prepared<'a> {
+    /// Input triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len()
+    }
+
+    /// Whether every triangle is well formed: every vertex finite and every index in
+    /// range. The unbinned path relies on it (a mesh that is not goes through
+    /// [`Prepared::bin`], which counts and drops the bad triangles).
+    pub fn well_formed(&self) -> bool {
+        if self.indices.is_empty() {
+            return true;
+        }
+        // A maximum over all indices: branch-free and vectorised.
+        let max = self
+            .indices
             .iter()
-            .filter(|t| {
-                t.iter()
-                    .any(|&i| !matches!(positions.get(i as usize), Some(p) if p.is_finite()))
-            })
-            .count();
-        vec![empty(bad as u64)]
-    } else {
-        par_map(nchunks, threads, |c| {
-            ctx.chunk(c * chunk..((c + 1) * chunk).min(n))
-        })
-    };
+            .fold(0u32, |m, t| m.max(t[0]).max(t[1]).max(t[2]));
+        !self.non_finite && (max as usize) < self.positions.len()
+    }
 
-    XY.give_dirty(xy);
-    ZW.give_dirty(zw);
-
-    // 3. Concatenate in chunk order (the first chunk's buffer is moved, not copied).
-    // Setup indices run on across chunks (`meta` has one entry per setup triangle, `tris`
-    // too unless the planes were skipped).
-    let total: usize = parts.iter().map(|p| p.0.len()).sum();
-    let mut rejected = 0;
-    let mut tris = std::mem::take(&mut parts[0].0);
-    tris.reserve(total - tris.len());
-    let mut setup_count = 0u32;
-    for (k, (t, bins, r)) in parts.iter_mut().enumerate() {
-        rejected += *r;
-        bins.base = setup_count;
-        setup_count += bins.meta.len() as u32;
-        if k > 0 {
-            tris.extend_from_slice(t);
-            TRIS.give(std::mem::take(t));
+    fn ctx(&self, flat: bool) -> Ctx<'_> {
+        let w = self.viewport.width.min(MAX_VIEWPORT);
+        let h = self.viewport.height.min(MAX_VIEWPORT);
+        let tiles_x = self.viewport.width.div_ceil(self.tile_size);
+        let tiles_y = self.viewport.height.div_ceil(self.tile_size);
+        Ctx {
+            positions: self.positions,
+            indices: self.indices,
+            xy: &self.xy,
+            zw: &self.zw,
+            planes: self.planes,
+            xf: self.xf,
+            si: SampleInfo::new(self.samples),
+            w: w as i32,
+            h: h as i32,
+            tile_shift: self.tile_size.trailing_zeros(),
+            tiles_x,
+            ntiles: tiles_x as usize * tiles_y as usize,
+            cull: self.cull,
+            ccw_front: self.ccw_front,
+            plane_setup: self.plane_setup,
+            flat,
         }
     }
-    debug_assert!(plane_setup == PlaneSetup::Skip || tris.len() == setup_count as usize);
-    Binned {
-        tris,
-        setup_count,
-        tiles_x,
-        tiles_y,
-        tile_size,
-        rejected,
-        viewport,
-        samples: state.samples,
-        chunks: parts.into_iter().map(|p| p.1).collect(),
+
+    /// Sets up input triangles `range` (clipped, culled, with their coverage and, unless
+    /// skipped, planes) into `out`, unbinned: one [`FlatEntry`] per setup triangle, in API
+    /// order. [`FlatChunk::spans`] then rasterizes them. Setup indices (`Span::tri`) are
+    /// relative to the chunk ([`FlatChunk::tris`]).
+    pub fn setup_flat(&self, range: std::ops::Range<usize>, out: &mut FlatChunk) {
+        let range = range.start.min(self.indices.len())..range.end.min(self.indices.len());
+        let mut o = ChunkOut {
+            tris: std::mem::take(&mut out.tris),
+            verts: std::mem::take(&mut out.verts),
+            smalls: std::mem::take(&mut out.smalls),
+            meta: std::mem::take(&mut out.meta),
+            bins: Vec::new(),
+            flat: std::mem::take(&mut out.entries),
+            rejected: 0,
+        };
+        o.tris.clear();
+        o.verts.clear();
+        o.smalls.clear();
+        o.meta.clear();
+        o.flat.clear();
+        let ctx = self.ctx(true);
+        if ctx.ntiles > 0 {
+            ctx.run(range, &mut o);
+        }
+        *out = FlatChunk {
+            tris: o.tris,
+            verts: o.verts,
+            smalls: o.smalls,
+            meta: o.meta,
+            entries: o.flat,
+            rejected: o.rejected,
+            samples: self.samples,
+            rect: [0, 0, ctx.w, ctx.h],
+        };
+    }
+
+    /// Steps 2 and 3 of [`bin_triangles`]: sets up and bins every triangle.
+    pub fn bin(&self, threads: usize) -> Binned {
+        let threads = threads.max(1);
+        let (positions, indices, viewport) = (self.positions, self.indices, self.viewport);
+        let ctx = self.ctx(false);
+        let (tiles_x, ntiles) = (ctx.tiles_x, ctx.ntiles);
+        let tiles_y = viewport.height.div_ceil(self.tile_size);
+        let n = indices.len();
+        // One contiguous chunk per thread: the first chunk's buffer becomes `tris` and only the
+        // others are appended (copying setup records is a large part of the memory traffic).
+        // Rejecting off-screen or sub-pixel triangles is cheap, so equal ranges balance well.
+        // At most 2^25 input triangles a chunk: with clipping's fan pieces (at most
+        // `MAX_POLY - 2` each) a chunk's setup indices stay below the bin entry's flag bits.
+        let chunk = n.div_ceil(threads).clamp(4096, MAX_CHUNK);
+        let nchunks = n.div_ceil(chunk);
+        let empty = |rejected: u64| {
+            let bins = ChunkBins {
+                base: 0,
+                tile_start: vec![0; ntiles + 1],
+                entries: Vec::new(),
+                verts: Vec::new(),
+                smalls: Vec::new(),
+                meta: Vec::new(),
+            };
+            (Vec::new(), bins, rejected)
+        };
+        let mut parts: Vec<(Vec<SetupTriangle>, ChunkBins, u64)> = if nchunks == 0 {
+            vec![empty(0)]
+        } else if ntiles == 0 {
+            // Empty viewport: nothing is drawn, but bad input is still counted.
+            let bad = indices
+                .iter()
+                .filter(|t| {
+                    t.iter()
+                        .any(|&i| !matches!(positions.get(i as usize), Some(p) if p.is_finite()))
+                })
+                .count();
+            vec![empty(bad as u64)]
+        } else {
+            par_map(nchunks, threads, |c| {
+                ctx.chunk(c * chunk..((c + 1) * chunk).min(n))
+            })
+        };
+
+        // 3. Concatenate in chunk order (the first chunk's buffer is moved, not copied).
+        // Setup indices run on across chunks (`meta` has one entry per setup triangle, `tris`
+        // too unless the planes were skipped).
+        let total: usize = parts.iter().map(|p| p.0.len()).sum();
+        let mut rejected = 0;
+        let mut tris = std::mem::take(&mut parts[0].0);
+        tris.reserve(total - tris.len());
+        let mut setup_count = 0u32;
+        for (k, (t, bins, r)) in parts.iter_mut().enumerate() {
+            rejected += *r;
+            bins.base = setup_count;
+            setup_count += bins.meta.len() as u32;
+            if k > 0 {
+                tris.extend_from_slice(t);
+                TRIS.give(std::mem::take(t));
+            }
+        }
+        debug_assert!(self.plane_setup == PlaneSetup::Skip || tris.len() == setup_count as usize);
+        Binned {
+            tris,
+            setup_count,
+            input_triangles: n,
+            tiles_x,
+            tiles_y,
+            tile_size: self.tile_size,
+            rejected,
+            viewport,
+            samples: self.samples,
+            chunks: parts.into_iter().map(|p| p.1).collect(),
+        }
+    }
+}
+
+/// One setup triangle of a [`FlatChunk`]: as a [`BinEntry`], with a single pixel's position
+/// in screen coordinates.
+#[derive(Clone, Copy, Debug, Default)]
+struct FlatEntry {
+    tri: u32,
+    info: u32,
+    x: i32,
+    y: i32,
+}
+
+/// A chunk of triangles set up without binning ([`Prepared::setup_flat`]): a worker's
+/// scratch, reused from chunk to chunk (small enough to stay in its cache).
+#[derive(Default)]
+pub struct FlatChunk {
+    /// The setup records (empty when the planes were skipped), by chunk-relative setup
+    /// index.
+    pub tris: Vec<SetupTriangle>,
+    verts: Vec<[[i32; 2]; 3]>,
+    smalls: Vec<SmallCoverage>,
+    meta: Vec<TriMeta>,
+    entries: Vec<FlatEntry>,
+    /// Input triangles dropped (never, for a [`Prepared::well_formed`] mesh).
+    pub rejected: u64,
+    samples: SampleCount,
+    /// The viewport's pixel rectangle `[0, 0, w, h)`.
+    rect: [i32; 4],
+}
+
+impl FlatChunk {
+    /// Emits the chunk's covered runs in API order (by setup triangle), each triangle's in
+    /// row-major order: what [`Binned::raster_segment_spans`] gives tile by tile, over the
+    /// whole viewport at once.
+    pub fn spans(&self, mut emit: impl FnMut(Span)) {
+        let si = SampleInfo::new(self.samples);
+        let rect = self.rect;
+        let list = &self.entries;
+        let mut merge: Vec<(u32, u32, u8)> = Vec::new();
+        let mut i = 0;
+        while i < list.len() {
+            let e = list[i];
+            let tri = e.tri;
+            let mut j = i + 1;
+            if e.info & PIECE != 0 && si.offs.len() > 1 {
+                let source = self.meta[e.tri as usize].source;
+                while j < list.len()
+                    && list[j].info & PIECE != 0
+                    && self.meta[list[j].tri as usize].source == source
+                {
+                    j += 1;
+                }
+            }
+            let TriMeta {
+                source,
+                front_facing,
+            } = self.meta[e.tri as usize];
+            if j == i + 1 {
+                self.coverage(&e, rect, &si, |y, x0, x1, coverage| {
+                    emit(Span {
+                        y,
+                        x0,
+                        x1,
+                        tri,
+                        coverage,
+                        source,
+                        front_facing,
+                    })
+                });
+            } else {
+                // The fan pieces of a clipped triangle, merged per pixel (as in
+                // `Binned::raster_segment_spans`).
+                merge.clear();
+                for e in &list[i..j] {
+                    self.coverage(e, rect, &si, |y, x0, x1, m| {
+                        merge.extend((x0..x1).map(|x| (y, x, m)))
+                    });
+                }
+                merge.sort_unstable_by_key(|&(y, x, _)| (y, x));
+                let mut k = 0;
+                while k < merge.len() {
+                    let (y, x, mut coverage) = merge[k];
+                    k += 1;
+                    while k < merge.len() && (merge[k].0, merge[k].1) == (y, x) {
+                        coverage |= merge[k].2;
+                        k += 1;
+                    }
+                    emit(Span {
+                        y,
+                        x0: x,
+                        x1: x + 1,
+                        tri,
+                        coverage,
+                        source,
+                        front_facing,
+                    });
+                }
+            }
+            i = j;
+        }
+    }
+
+    /// As [`entry_coverage`], for a flat entry.
+    #[inline(always)]
+    fn coverage(
+        &self,
+        e: &FlatEntry,
+        rect: [i32; 4],
+        si: &SampleInfo,
+        mut f: impl FnMut(u32, u32, u32, u8),
+    ) {
+        if e.info & SINGLE != 0 {
+            let (x, y) = (e.x as u32, e.y as u32);
+            f(y, x, x + 1, (e.info >> 16) as u8);
+            return;
+        }
+        if e.info & SMALL != 0 {
+            self.smalls[(e.info & !FLAGS) as usize].runs(rect, |y, x0, x1| f(y, x0, x1, 1));
+            return;
+        }
+        let v = &self.verts[(e.info & !FLAGS) as usize];
+        let Some(r) = si.pixel_rect(bbox(v), rect[2], rect[3]) else {
+            return;
+        };
+        if r[0] <= r[2] && r[1] <= r[3] {
+            coverage::raster(&Edges::new(v), si, r, f);
+        }
     }
 }
 
