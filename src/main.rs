@@ -163,6 +163,12 @@ struct RunArgs {
     /// threads on one tile at once (when the pass's fixed-function results commute).
     #[arg(long, default_value_t = 128)]
     segment: u32,
+    /// Parallel: `auto` runs passes that need nothing of the framebuffer (no depth or
+    /// stencil test, no colour target: counting, captures) unbinned, chunks of triangles
+    /// set up, rasterized and shaded by whichever thread takes them; `always` bins every
+    /// pass into tiles.
+    #[arg(long, default_value = "auto", value_parser = parse_binning)]
+    binning: fragrace::emu::Binning,
     /// Scheduled: lockstep forward progress in warps of N lanes (no independent thread
     /// scheduling, as on pre-Volta GPUs): lanes spinning in a loop hold back their
     /// warp-mates past it, so a spinlock whose holder shares their warp deadlocks.
@@ -239,6 +245,7 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
     exec.batch = a.lanes.max(1);
     exec.lockstep = !a.no_lockstep;
     exec.segment = a.segment.max(1);
+    exec.binning = a.binning;
     exec.simt = a.simt;
     if fragrace_kernels::algorithm(&a.algo).is_none() {
         bail!(
@@ -625,6 +632,14 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+fn parse_binning(s: &str) -> Result<fragrace::emu::Binning, String> {
+    match s {
+        "auto" => Ok(fragrace::emu::Binning::Auto),
+        "always" => Ok(fragrace::emu::Binning::Always),
+        _ => Err(format!("`{s}`: expected `auto` or `always`")),
+    }
 }
 
 fn parse_duration(s: &str) -> Result<std::time::Duration> {

@@ -181,6 +181,9 @@ impl RunSpec {
             if !self.exec.lockstep {
                 c += " --no-lockstep";
             }
+            if self.exec.binning != fragrace_emu::Binning::Auto {
+                c += &format!(" --binning {}", self.exec.binning.name());
+            }
         }
         c
     }

@@ -7,7 +7,7 @@
 
 use fragrace::run::{self, Loaded, RunSpec, SceneSpec};
 use fragrace::scene::Camera;
-use fragrace_emu::{ExecConfig, ExecMode, Policy, ScheduleConfig};
+use fragrace_emu::{Binning, ExecConfig, ExecMode, Policy, ScheduleConfig};
 use fragrace_kernels::{AlgoResult, Capacity, HazardClass};
 
 fn env_or(name: &str, default: u64) -> u64 {
@@ -40,6 +40,12 @@ fn executors(seeds: u64) -> Vec<ExecConfig> {
         ExecConfig {
             lockstep: false,
             ..ExecConfig::parallel(3)
+        },
+        // Counting and capture passes run unbinned by default: the tile-binned path too.
+        ExecConfig {
+            lockstep: false,
+            binning: Binning::Always,
+            ..ExecConfig::parallel(2)
         },
     ];
     for p in Policy::all() {

@@ -563,6 +563,12 @@ fn direct_execs() -> Vec<ExecConfig> {
         e.batch = 5;
         v.push(e);
     }
+    // The tile-binned path for passes that would otherwise run unbinned.
+    v.push(ExecConfig {
+        lockstep: false,
+        binning: fragrace_emu::Binning::Always,
+        ..ExecConfig::parallel(2)
+    });
     v.push(ExecConfig::ordered());
     for e in &mut v {
         e.max_steps = 10_000;
@@ -801,6 +807,116 @@ fn reading_undeclared_interpolants_is_misuse_under_every_executor() {
             }
             // A faulted invocation ends at its next access.
             assert_eq!(dev.memory.read(counter).unwrap()[0], 240, "{what}");
+        }
+    }
+}
+
+/// Per pixel: the number of fragments, a hash of their invocation ids, their primitive
+/// ids, coverage, facing and interpolated depth and barycentrics: what the kernel saw.
+struct Fingerprint {
+    out: Buf<u32>,
+    width: u32,
+}
+
+impl FragmentKernel for Fingerprint {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("fingerprint")
+    }
+    async fn shade(&self, f: impl Fragment) {
+        let p = (f.y() * self.width + f.x()) * 4;
+        let id = f.invocation_id();
+        let b = f.barycentrics();
+        let seen = f.primitive_id().wrapping_mul(2_654_435_761)
+            ^ u32::from(f.coverage()) << 24
+            ^ u32::from(f.front_facing()) << 31
+            ^ f.depth().to_bits()
+            ^ b[0].to_bits().rotate_left(7)
+            ^ b[1].to_bits().rotate_left(13);
+        f.atomic_add(self.out, p, 1).await;
+        f.atomic_xor(self.out, p + 1, (id ^ (id >> 32)) as u32).await;
+        f.atomic_add(self.out, p + 2, seen).await;
+        f.atomic_xor(self.out, p + 3, seen.rotate_left(5)).await;
+    }
+}
+
+/// Passes that need nothing of the framebuffer run unbinned under the parallel executor:
+/// every fragment reaches the kernel exactly as through the tile-binned path and the
+/// ordered executor (same invocation ids, inputs and interpolants, same statistics), with
+/// near-plane clipping, culling and several samples.
+#[test]
+fn unbinned_draws_match_binned_and_ordered_ones() {
+    use fragrace_emu::{Binning, Draw, Mesh, PassState, RasterState};
+    use glam::{Mat4, Vec3};
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    for t in 0..3000u32 {
+        // Mostly small triangles in front of the camera, some large ones crossing the
+        // near plane (clipped into fan pieces).
+        let c = Vec3::new(
+            rng.gen_range(-2.0..2.0),
+            rng.gen_range(-2.0..2.0),
+            rng.gen_range(-6.0..-0.5),
+        );
+        let size = if t % 50 == 0 { 2.0 } else { 0.08 };
+        for _ in 0..3 {
+            positions.push(c + Vec3::new(
+                rng.gen_range(-size..size),
+                rng.gen_range(-size..size),
+                rng.gen_range(-size..size),
+            ));
+        }
+        indices.push([3 * t, 3 * t + 1, 3 * t + 2]);
+    }
+    let mesh = Mesh {
+        positions,
+        normals: None,
+        indices,
+    };
+    let proj = Mat4::perspective_rh_gl(1.0, 1.0, 0.3, 10.0);
+    let (w, h) = (96, 80);
+    for (samples, cull) in [
+        (SampleCount::X1, fragrace_emu::CullMode::None),
+        (SampleCount::X4, fragrace_emu::CullMode::Back),
+    ] {
+        let run = |e: &ExecConfig| {
+            let mut dev = Device::new();
+            let out = dev.buffer::<u32>("out", (w * h * 4) as u64).unwrap();
+            let mut fb = Framebuffer::new(w, h, samples, 16, &[]).unwrap();
+            let state = PassState {
+                raster: RasterState {
+                    samples,
+                    cull,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            let draw = Draw::new(&mesh, proj);
+            let kernel = Fingerprint { out, width: w };
+            let r = dev.draw(&mut fb, &draw, &state, &kernel, e).unwrap();
+            (dev.memory.read(out).unwrap(), r)
+        };
+        let (want, wr) = run(&ExecConfig::ordered());
+        assert!(wr.stats.fragments_generated > 5000, "{}", wr.stats.fragments_generated);
+        for e in [
+            ExecConfig::parallel(2),
+            ExecConfig {
+                lockstep: false,
+                ..ExecConfig::parallel(3)
+            },
+            ExecConfig {
+                lockstep: false,
+                binning: Binning::Always,
+                ..ExecConfig::parallel(2)
+            },
+        ] {
+            let (got, r) = run(&e);
+            assert!(got == want, "{samples:?} {e:?}: the kernels saw different fragments");
+            let (a, b) = (&r.stats, &wr.stats);
+            assert_eq!(a.fragments_generated, b.fragments_generated, "{e:?}");
+            assert_eq!(a.shaded, b.shaded, "{e:?}");
+            assert_eq!(a.samples_passed, b.samples_passed, "{e:?}");
         }
     }
 }

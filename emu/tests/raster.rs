@@ -1513,6 +1513,9 @@ fn unbinned_chunks_give_the_binned_fragments() {
             })
             .collect();
         want.sort_by_key(|w| (w.0, w.1, w.2));
+        let by_pixel = |v: &mut Vec<(u32, u32, u32, u8, bool, SetupTriangle)>| {
+            v.sort_by_key(|w| (w.0, w.1, w.2));
+        };
         assert!(want.len() > 10_000);
         let prepared = prepare(&pos, &faces, &st, v, 2, PlaneSetup::Compute);
         assert!(prepared.well_formed());
@@ -1523,20 +1526,28 @@ fn unbinned_chunks_give_the_binned_fragments() {
             for start in (0..faces.len()).step_by(chunk_size) {
                 prepared.setup_flat(start..start + chunk_size, &mut chunk);
                 assert_eq!(chunk.rejected, 0);
-                let first = got.len();
-                chunk.spans(|s| {
+                let mut order = Vec::new();
+                for s in &chunk.spans {
                     for x in s.x0..s.x1 {
                         let t = chunk.tris[s.tri as usize];
                         assert_eq!(t.source, s.source);
                         got.push((s.source, s.y, x, s.coverage, s.front_facing, t));
+                        order.push((s.source, s.tri, s.y, x));
                     }
-                });
-                // API order within the chunk, row-major within a triangle.
+                }
+                // API order within the chunk, row-major within a setup triangle (a merged
+                // pixel of a clipped triangle's pieces carries the first piece covering it).
                 assert!(
-                    got[first..]
-                        .windows(2)
-                        .all(|w| (w[0].0, w[0].1, w[0].2) < (w[1].0, w[1].1, w[1].2)),
-                    "{samples:?} {cull:?} chunk {chunk_size}: out of order"
+                    order.windows(2).all(|w| w[0].0 <= w[1].0),
+                    "{samples:?} {cull:?} chunk {chunk_size}: out of API order"
+                );
+                let mut per_tri: HashMap<(u32, u32), Vec<(u32, u32)>> = HashMap::new();
+                for &(source, tri, y, x) in &order {
+                    per_tri.entry((source, tri)).or_default().push((y, x));
+                }
+                assert!(
+                    per_tri.values().all(|v| v.windows(2).all(|w| w[0] < w[1])),
+                    "{samples:?} {cull:?} chunk {chunk_size}: not row-major"
                 );
             }
             assert_eq!(

@@ -53,10 +53,11 @@ pub(crate) struct FusedPass<'a> {
     pub seq_base: u64,
 }
 
-/// Where a unit of work's covered runs come from: a segment of a tile's bin lists, or a
-/// chunk of triangles set up without binning.
+/// Where a unit of work's covered runs come from: a segment of a tile's bin lists
+/// (rasterized into the worker's buffer), or a chunk of triangles set up without binning
+/// (whose setup produced them).
 trait SpanSource {
-    fn spans(&self, emit: impl FnMut(Span));
+    fn spans<'s>(&'s self, buf: &'s mut Vec<Span>) -> &'s [Span];
 }
 
 struct SegmentSpans<'b> {
@@ -65,16 +66,16 @@ struct SegmentSpans<'b> {
 }
 
 impl SpanSource for SegmentSpans<'_> {
-    #[inline(always)]
-    fn spans(&self, emit: impl FnMut(Span)) {
-        self.binned.raster_segment_spans(&self.seg, emit)
+    fn spans<'s>(&'s self, buf: &'s mut Vec<Span>) -> &'s [Span] {
+        buf.clear();
+        self.binned.raster_segment_spans(&self.seg, |s| buf.push(s));
+        buf
     }
 }
 
 impl SpanSource for FlatChunk {
-    #[inline(always)]
-    fn spans(&self, emit: impl FnMut(Span)) {
-        FlatChunk::spans(self, emit)
+    fn spans<'s>(&'s self, _: &'s mut Vec<Span>) -> &'s [Span] {
+        &self.spans
     }
 }
 
@@ -503,16 +504,15 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         env: &PassEnv<'_>,
         tile: Option<TileAccess<'t>>,
     ) -> Option<TileAccess<'t>> {
-        let mut spans = std::mem::take(&mut self.spans);
-        spans.clear();
-        src.spans(|s| spans.push(s));
+        let mut buf = std::mem::take(&mut self.spans);
+        let spans = src.spans(&mut buf);
         // Without lockstep (or with one lane) nothing interleaves inside a worker.
         let tile = if !self.pass.lockstep || self.slots.len() == 1 {
-            self.run_unit_direct(&spans, env, tile)
+            self.run_unit_direct(spans, env, tile)
         } else {
-            self.run_unit_lockstep(&spans, env, tile)
+            self.run_unit_lockstep(spans, env, tile)
         };
-        self.spans = spans;
+        self.spans = buf;
         tile
     }
 

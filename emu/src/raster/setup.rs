@@ -340,7 +340,7 @@ impl Binned {
         let lo = c.tile_start[tile] as usize;
         let hi = c.tile_start[tile + 1] as usize;
         let list = &c.entries[(lo + seg.start as usize).min(hi)..(lo + seg.end as usize).min(hi)];
-        let mut merge: Vec<(u32, u32, u8)> = Vec::new();
+        let mut merge: Vec<(u32, u32, u32, u8)> = Vec::new();
         let mut i = 0;
         while i < list.len() {
             if let Some(ahead) = list.get(i + PREFETCH_AHEAD) {
@@ -378,19 +378,22 @@ impl Binned {
                     })
                 });
             } else {
+                // Each pixel takes the setup record of the first piece that covers it, so
+                // that the result does not depend on which pieces reach the tile.
                 merge.clear();
                 for e in &list[i..j] {
+                    let piece = c.base + e.tri;
                     entry_coverage(c, e, rect, &si, |y, x0, x1, m| {
-                        merge.extend((x0..x1).map(|x| (y, x, m)))
+                        merge.extend((x0..x1).map(|x| (y, x, piece, m)))
                     });
                 }
-                merge.sort_unstable_by_key(|&(y, x, _)| (y, x));
+                merge.sort_unstable_by_key(|&(y, x, piece, _)| (y, x, piece));
                 let mut k = 0;
                 while k < merge.len() {
-                    let (y, x, mut coverage) = merge[k];
+                    let (y, x, tri, mut coverage) = merge[k];
                     k += 1;
                     while k < merge.len() && (merge[k].0, merge[k].1) == (y, x) {
-                        coverage |= merge[k].2;
+                        coverage |= merge[k].3;
                         k += 1;
                     }
                     emit(Span {
@@ -710,8 +713,8 @@ struct Ctx<'a> {
     /// `FrontFace::Ccw`: front-facing when counter-clockwise on screen.
     ccw_front: bool,
     plane_setup: PlaneSetup,
-    /// Set up for [`Prepared::setup_flat`]: one [`FlatEntry`] per setup triangle, in API
-    /// order, instead of per-tile bin entries.
+    /// Set up for [`Prepared::setup_flat`]: each setup triangle's covered runs go straight
+    /// to [`ChunkOut::spans`], in API order, instead of into per-tile bin entries.
     flat: bool,
 }
 
@@ -734,8 +737,10 @@ struct ChunkOut {
     meta: Vec<TriMeta>,
     /// `(tile, entry)` in triangle order.
     bins: Vec<(u32, BinEntry)>,
-    /// Unbinned ([`Ctx::flat`]): one entry per setup triangle, in triangle order.
-    flat: Vec<FlatEntry>,
+    /// Unbinned ([`Ctx::flat`]): the covered runs, in triangle order.
+    spans: Vec<Span>,
+    /// Setup triangles so far (the next one's index).
+    setups: u32,
     rejected: u64,
 }
 
@@ -944,6 +949,7 @@ impl Ctx<'_> {
         };
         let mut hull = [0usize; MAX_POLY + 1];
         let m = clip::convex_hull(&pts[..n], &mut hull);
+        let first_span = out.spans.len();
         for i in 1..m.saturating_sub(1) {
             let h = [hull[0], hull[i], hull[i + 1]];
             let v = h.map(|j| [proj[j].x, proj[j].y]);
@@ -967,6 +973,9 @@ impl Ctx<'_> {
                 ]
             });
             self.finish(out, source, front, m > 3, cov, v, r, (&v, &attrs));
+        }
+        if self.flat && m > 3 && self.si.offs.len() > 1 {
+            merge_piece_spans(&mut out.spans, first_span);
         }
     }
 
@@ -1035,11 +1044,14 @@ impl Ctx<'_> {
         (pv, attrs): (&[[i32; 2]; 3], &[[f32; 4]; 3]),
     ) {
         let sh = self.tile_shift;
-        let tri = out.meta.len() as u32;
-        out.meta.push(TriMeta {
-            source,
-            front_facing,
-        });
+        let tri = out.setups;
+        out.setups += 1;
+        if !self.flat {
+            out.meta.push(TriMeta {
+                source,
+                front_facing,
+            });
+        }
         if self.plane_setup == PlaneSetup::Compute {
             let [depth, b0, b1, b2] = planes(pv, attrs, r[0], r[1]);
             out.tris.push(SetupTriangle {
@@ -1053,36 +1065,26 @@ impl Ctx<'_> {
         }
         let piece = if piece { PIECE } else { 0 };
         if self.flat {
-            out.flat.push(match cov {
-                SetupCoverage::Single { x, y, mask } => FlatEntry {
-                    tri,
-                    info: SINGLE | (mask as u32) << 16 | piece,
-                    x,
+            let spans = &mut out.spans;
+            let mut emit = |y: u32, x0: u32, x1: u32, coverage: u8| {
+                spans.push(Span {
                     y,
-                },
+                    x0,
+                    x1,
+                    tri,
+                    coverage,
+                    source,
+                    front_facing,
+                })
+            };
+            match cov {
+                SetupCoverage::Single { x, y, mask } => emit(y as u32, x as u32, x as u32 + 1, mask),
                 SetupCoverage::Small(small) => {
-                    out.smalls.push(small);
-                    let index = out.smalls.len() as u32 - 1;
-                    debug_assert!(index & FLAGS == 0, "a chunk of over 2^29 triangles");
-                    FlatEntry {
-                        tri,
-                        info: index | SMALL | piece,
-                        x: 0,
-                        y: 0,
-                    }
+                    small.runs([0, 0, self.w, self.h], |y, x0, x1| emit(y, x0, x1, 1))
                 }
-                SetupCoverage::Vertices => {
-                    out.verts.push(v);
-                    let index = out.verts.len() as u32 - 1;
-                    debug_assert!(index & FLAGS == 0, "a chunk of over 2^29 triangles");
-                    FlatEntry {
-                        tri,
-                        info: index | piece,
-                        x: 0,
-                        y: 0,
-                    }
-                }
-            });
+                // `r` is the pixel rectangle inside the viewport (inclusive).
+                SetupCoverage::Vertices => coverage::raster(&Edges::new(&v), &self.si, r, emit),
+            }
             return;
         }
         let (tx0, ty0, tx1, ty1) = (r[0] >> sh, r[1] >> sh, r[2] >> sh, r[3] >> sh);
@@ -1169,7 +1171,8 @@ impl Ctx<'_> {
             smalls: SMALLS.take(),
             meta: META.take(),
             bins: PAIRS.take(),
-            flat: Vec::new(),
+            spans: Vec::new(),
+            setups: 0,
             rejected: 0,
         };
         self.run(range, &mut out);
@@ -1468,32 +1471,23 @@ impl<'a> Prepared<'a> {
         let range = range.start.min(self.indices.len())..range.end.min(self.indices.len());
         let mut o = ChunkOut {
             tris: std::mem::take(&mut out.tris),
-            verts: std::mem::take(&mut out.verts),
-            smalls: std::mem::take(&mut out.smalls),
-            meta: std::mem::take(&mut out.meta),
+            verts: Vec::new(),
+            smalls: Vec::new(),
+            meta: Vec::new(),
             bins: Vec::new(),
-            flat: std::mem::take(&mut out.entries),
+            spans: std::mem::take(&mut out.spans),
+            setups: 0,
             rejected: 0,
         };
         o.tris.clear();
-        o.verts.clear();
-        o.smalls.clear();
-        o.meta.clear();
-        o.flat.clear();
+        o.spans.clear();
         let ctx = self.ctx(true);
         if ctx.ntiles > 0 {
             ctx.run(range, &mut o);
         }
-        *out = FlatChunk {
-            tris: o.tris,
-            verts: o.verts,
-            smalls: o.smalls,
-            meta: o.meta,
-            entries: o.flat,
-            rejected: o.rejected,
-            samples: self.samples,
-            rect: [0, 0, ctx.w, ctx.h],
-        };
+        out.tris = o.tris;
+        out.spans = o.spans;
+        out.rejected = o.rejected;
     }
 
     /// Steps 2 and 3 of [`bin_triangles`]: sets up and bins every triangle.
@@ -1573,131 +1567,54 @@ impl<'a> Prepared<'a> {
     }
 }
 
-/// One setup triangle of a [`FlatChunk`]: as a [`BinEntry`], with a single pixel's position
-/// in screen coordinates.
-#[derive(Clone, Copy, Debug, Default)]
-struct FlatEntry {
-    tri: u32,
-    info: u32,
-    x: i32,
-    y: i32,
-}
-
 /// A chunk of triangles set up without binning ([`Prepared::setup_flat`]): a worker's
 /// scratch, reused from chunk to chunk (small enough to stay in its cache).
 #[derive(Default)]
 pub struct FlatChunk {
     /// The setup records (empty when the planes were skipped), by chunk-relative setup
-    /// index.
+    /// index ([`Span::tri`]).
     pub tris: Vec<SetupTriangle>,
-    verts: Vec<[[i32; 2]; 3]>,
-    smalls: Vec<SmallCoverage>,
-    meta: Vec<TriMeta>,
-    entries: Vec<FlatEntry>,
+    /// The covered runs in API order (by setup triangle), each setup triangle's in
+    /// row-major order: what [`Binned::raster_segment_spans`] gives tile by tile, over
+    /// the whole viewport at once. With several samples, the fan pieces of a clipped
+    /// triangle are merged per pixel (as there).
+    pub spans: Vec<Span>,
     /// Input triangles dropped (never, for a [`Prepared::well_formed`] mesh).
     pub rejected: u64,
-    samples: SampleCount,
-    /// The viewport's pixel rectangle `[0, 0, w, h)`.
-    rect: [i32; 4],
 }
 
-impl FlatChunk {
-    /// Emits the chunk's covered runs in API order (by setup triangle), each triangle's in
-    /// row-major order: what [`Binned::raster_segment_spans`] gives tile by tile, over the
-    /// whole viewport at once.
-    pub fn spans(&self, mut emit: impl FnMut(Span)) {
-        let si = SampleInfo::new(self.samples);
-        let rect = self.rect;
-        let list = &self.entries;
-        let mut merge: Vec<(u32, u32, u8)> = Vec::new();
-        let mut i = 0;
-        while i < list.len() {
-            let e = list[i];
-            let tri = e.tri;
-            let mut j = i + 1;
-            if e.info & PIECE != 0 && si.offs.len() > 1 {
-                let source = self.meta[e.tri as usize].source;
-                while j < list.len()
-                    && list[j].info & PIECE != 0
-                    && self.meta[list[j].tri as usize].source == source
-                {
-                    j += 1;
-                }
-            }
-            let TriMeta {
-                source,
-                front_facing,
-            } = self.meta[e.tri as usize];
-            if j == i + 1 {
-                self.coverage(&e, rect, &si, |y, x0, x1, coverage| {
-                    emit(Span {
-                        y,
-                        x0,
-                        x1,
-                        tri,
-                        coverage,
-                        source,
-                        front_facing,
-                    })
-                });
-            } else {
-                // The fan pieces of a clipped triangle, merged per pixel (as in
-                // `Binned::raster_segment_spans`).
-                merge.clear();
-                for e in &list[i..j] {
-                    self.coverage(e, rect, &si, |y, x0, x1, m| {
-                        merge.extend((x0..x1).map(|x| (y, x, m)))
-                    });
-                }
-                merge.sort_unstable_by_key(|&(y, x, _)| (y, x));
-                let mut k = 0;
-                while k < merge.len() {
-                    let (y, x, mut coverage) = merge[k];
-                    k += 1;
-                    while k < merge.len() && (merge[k].0, merge[k].1) == (y, x) {
-                        coverage |= merge[k].2;
-                        k += 1;
-                    }
-                    emit(Span {
-                        y,
-                        x0: x,
-                        x1: x + 1,
-                        tri,
-                        coverage,
-                        source,
-                        front_facing,
-                    });
-                }
-            }
-            i = j;
+/// Merges the runs of a clipped triangle's fan pieces (`spans[start..]`) into one fragment
+/// per pixel, in row-major order, with the setup index of the first piece that covers the
+/// pixel: with several samples
+/// two pieces can each cover some samples of a pixel on their shared diagonal (as
+/// [`Binned::raster_segment_spans`] does within a tile).
+#[cold]
+fn merge_piece_spans(spans: &mut Vec<Span>, start: usize) {
+    let Some(&first) = spans.get(start) else {
+        return;
+    };
+    let mut pixels: Vec<(u32, u32, u32, u8)> = spans[start..]
+        .iter()
+        .flat_map(|s| (s.x0..s.x1).map(move |x| (s.y, x, s.tri, s.coverage)))
+        .collect();
+    pixels.sort_unstable_by_key(|&(y, x, tri, _)| (y, x, tri));
+    spans.truncate(start);
+    let mut k = 0;
+    while k < pixels.len() {
+        let (y, x, tri, mut coverage) = pixels[k];
+        k += 1;
+        while k < pixels.len() && (pixels[k].0, pixels[k].1) == (y, x) {
+            coverage |= pixels[k].3;
+            k += 1;
         }
-    }
-
-    /// As [`entry_coverage`], for a flat entry.
-    #[inline(always)]
-    fn coverage(
-        &self,
-        e: &FlatEntry,
-        rect: [i32; 4],
-        si: &SampleInfo,
-        mut f: impl FnMut(u32, u32, u32, u8),
-    ) {
-        if e.info & SINGLE != 0 {
-            let (x, y) = (e.x as u32, e.y as u32);
-            f(y, x, x + 1, (e.info >> 16) as u8);
-            return;
-        }
-        if e.info & SMALL != 0 {
-            self.smalls[(e.info & !FLAGS) as usize].runs(rect, |y, x0, x1| f(y, x0, x1, 1));
-            return;
-        }
-        let v = &self.verts[(e.info & !FLAGS) as usize];
-        let Some(r) = si.pixel_rect(bbox(v), rect[2], rect[3]) else {
-            return;
-        };
-        if r[0] <= r[2] && r[1] <= r[3] {
-            coverage::raster(&Edges::new(v), si, r, f);
-        }
+        spans.push(Span {
+            y,
+            x0: x,
+            x1: x + 1,
+            tri,
+            coverage,
+            ..first
+        });
     }
 }
 
