@@ -120,7 +120,8 @@ pub struct ExecConfig {
     pub simt: u32,
     /// Parallel executor: whether triangles are binned into tiles for every pass, or only
     /// where a pass needs the framebuffer (see [`Binning`]).
-    #[serde(default)]
+    // Left out of case files when it is the default: older files stay as they were.
+    #[serde(default, skip_serializing_if = "Binning::is_auto")]
     pub binning: Binning,
 }
 
@@ -141,6 +142,10 @@ pub enum Binning {
 }
 
 impl Binning {
+    fn is_auto(&self) -> bool {
+        *self == Binning::Auto
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Binning::Auto => "auto",

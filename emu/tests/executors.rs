@@ -833,7 +833,8 @@ impl FragmentKernel for Fingerprint {
             ^ b[0].to_bits().rotate_left(7)
             ^ b[1].to_bits().rotate_left(13);
         f.atomic_add(self.out, p, 1).await;
-        f.atomic_xor(self.out, p + 1, (id ^ (id >> 32)) as u32).await;
+        f.atomic_xor(self.out, p + 1, (id ^ (id >> 32)) as u32)
+            .await;
         f.atomic_add(self.out, p + 2, seen).await;
         f.atomic_xor(self.out, p + 3, seen.rotate_left(5)).await;
     }
@@ -861,11 +862,13 @@ fn unbinned_draws_match_binned_and_ordered_ones() {
         );
         let size = if t % 50 == 0 { 2.0 } else { 0.08 };
         for _ in 0..3 {
-            positions.push(c + Vec3::new(
-                rng.gen_range(-size..size),
-                rng.gen_range(-size..size),
-                rng.gen_range(-size..size),
-            ));
+            positions.push(
+                c + Vec3::new(
+                    rng.gen_range(-size..size),
+                    rng.gen_range(-size..size),
+                    rng.gen_range(-size..size),
+                ),
+            );
         }
         indices.push([3 * t, 3 * t + 1, 3 * t + 2]);
     }
@@ -898,7 +901,11 @@ fn unbinned_draws_match_binned_and_ordered_ones() {
             (dev.memory.read(out).unwrap(), r)
         };
         let (want, wr) = run(&ExecConfig::ordered());
-        assert!(wr.stats.fragments_generated > 5000, "{}", wr.stats.fragments_generated);
+        assert!(
+            wr.stats.fragments_generated > 5000,
+            "{}",
+            wr.stats.fragments_generated
+        );
         for e in [
             ExecConfig::parallel(2),
             ExecConfig {
@@ -912,7 +919,10 @@ fn unbinned_draws_match_binned_and_ordered_ones() {
             },
         ] {
             let (got, r) = run(&e);
-            assert!(got == want, "{samples:?} {e:?}: the kernels saw different fragments");
+            assert!(
+                got == want,
+                "{samples:?} {e:?}: the kernels saw different fragments"
+            );
             let (a, b) = (&r.stats, &wr.stats);
             assert_eq!(a.fragments_generated, b.fragments_generated, "{e:?}");
             assert_eq!(a.shaded, b.shaded, "{e:?}");

@@ -1512,10 +1512,10 @@ fn unbinned_chunks_give_the_binned_fragments() {
                 (f.source, f.y, f.x, f.coverage, f.front_facing, t)
             })
             .collect();
-        want.sort_by_key(|w| (w.0, w.1, w.2));
         let by_pixel = |v: &mut Vec<(u32, u32, u32, u8, bool, SetupTriangle)>| {
             v.sort_by_key(|w| (w.0, w.1, w.2));
         };
+        by_pixel(&mut want);
         assert!(want.len() > 10_000);
         let prepared = prepare(&pos, &faces, &st, v, 2, PlaneSetup::Compute);
         assert!(prepared.well_formed());
@@ -1550,6 +1550,7 @@ fn unbinned_chunks_give_the_binned_fragments() {
                     "{samples:?} {cull:?} chunk {chunk_size}: not row-major"
                 );
             }
+            by_pixel(&mut got);
             assert_eq!(
                 got.len(),
                 want.len(),

@@ -896,13 +896,16 @@ impl Ctx<'_> {
         let Some(cov) = self.coverage(&v, r) else {
             return;
         };
-        let [za, zb, zc] = [ia, ib, ic].map(|i| self.zw[i as usize]);
-        let attrs = [
-            [za[0], za[1], 0.0, 0.0],
-            [zb[0], 0.0, zb[1], 0.0],
-            [zc[0], 0.0, 0.0, zc[1]],
-        ];
-        self.finish(out, t as u32, front, false, cov, v, r, (&pv, &attrs));
+        // Loaded only for the planes: three more scattered loads per triangle otherwise.
+        let attrs = || {
+            let [za, zb, zc] = [ia, ib, ic].map(|i| self.zw[i as usize]);
+            [
+                [za[0], za[1], 0.0, 0.0],
+                [zb[0], 0.0, zb[1], 0.0],
+                [zc[0], 0.0, 0.0, zc[1]],
+            ]
+        };
+        self.finish(out, t as u32, front, false, cov, v, r, (&pv, attrs));
     }
 
     /// Slow path: a vertex is outside a clip plane (or not finite).
@@ -962,17 +965,19 @@ impl Ctx<'_> {
             let Some(cov) = self.coverage(&v, r) else {
                 continue;
             };
-            let attrs = h.map(|j| {
-                let b = poly.v[j].b;
-                let iw = proj[j].iw as f64;
-                [
-                    proj[j].z,
-                    (b[0] * iw) as f32,
-                    (b[1] * iw) as f32,
-                    (b[2] * iw) as f32,
-                ]
-            });
-            self.finish(out, source, front, m > 3, cov, v, r, (&v, &attrs));
+            let attrs = || {
+                h.map(|j| {
+                    let b = poly.v[j].b;
+                    let iw = proj[j].iw as f64;
+                    [
+                        proj[j].z,
+                        (b[0] * iw) as f32,
+                        (b[1] * iw) as f32,
+                        (b[2] * iw) as f32,
+                    ]
+                })
+            };
+            self.finish(out, source, front, m > 3, cov, v, r, (&v, attrs));
         }
         if self.flat && m > 3 && self.si.offs.len() > 1 {
             merge_piece_spans(&mut out.spans, first_span);
@@ -1041,7 +1046,7 @@ impl Ctx<'_> {
         cov: SetupCoverage,
         v: [[i32; 2]; 3],
         r: [i32; 4],
-        (pv, attrs): (&[[i32; 2]; 3], &[[f32; 4]; 3]),
+        (pv, attrs): (&[[i32; 2]; 3], impl FnOnce() -> [[f32; 4]; 3]),
     ) {
         let sh = self.tile_shift;
         let tri = out.setups;
@@ -1053,7 +1058,7 @@ impl Ctx<'_> {
             });
         }
         if self.plane_setup == PlaneSetup::Compute {
-            let [depth, b0, b1, b2] = planes(pv, attrs, r[0], r[1]);
+            let [depth, b0, b1, b2] = planes(pv, &attrs(), r[0], r[1]);
             out.tris.push(SetupTriangle {
                 source,
                 front_facing,
@@ -1078,7 +1083,9 @@ impl Ctx<'_> {
                 })
             };
             match cov {
-                SetupCoverage::Single { x, y, mask } => emit(y as u32, x as u32, x as u32 + 1, mask),
+                SetupCoverage::Single { x, y, mask } => {
+                    emit(y as u32, x as u32, x as u32 + 1, mask)
+                }
                 SetupCoverage::Small(small) => {
                     small.runs([0, 0, self.w, self.h], |y, x0, x1| emit(y, x0, x1, 1))
                 }
