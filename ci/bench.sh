@@ -37,5 +37,12 @@ for case in "dragon.obj.gz 512" "dragon.obj.gz 2048" "bunny.obj.gz 2048" "dragon
     done
 done
 echo
+# Unbinned counting passes against the tile-binned path (`--binning always`), same frames.
+for size in 512 2048; do
+    for binning in auto always; do
+        echo "dragon $size, 2 threads, --no-lockstep --binning $binning: $($F bench --obj "$M/dragon.obj.gz" --algo count --threads 2 --width $size --height $size --frames 15 --warmup 3 --no-lockstep --binning $binning --json | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), 'ms')")"
+    done
+done
+echo
 $F bench --scene hairball --algo count-plain --exec scheduled --width 128 --height 128 --frames 5 --warmup 1
 cargo bench --bench explore -- --warm-up-time 1 --measurement-time 5 2>&1 | grep -E "^ll-push|thrpt" | head -4
