@@ -389,3 +389,49 @@ fn a_killed_campaign_loses_nothing_and_resumes() {
         assert!(c.exists(), "{} vanished", c.display());
     }
 }
+
+/// `--binning always` (every pass binned into tiles) and the default (counting passes
+/// unbinned) give the same per-pixel counts; a bad value is refused with a clear message.
+#[test]
+fn binning_flag_changes_no_count() {
+    let d = tmp("binning");
+    let mut outs = Vec::new();
+    for binning in ["auto", "always"] {
+        let raw = d.join(format!("{binning}.u32"));
+        let o = fragrace(&[
+            "render",
+            "--scene",
+            "hairball",
+            "--algo",
+            "count",
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--exec",
+            "parallel",
+            "--threads",
+            "2",
+            "--binning",
+            binning,
+            "--raw-out",
+            raw.to_str().unwrap(),
+            "--json",
+        ]);
+        let v = json(&o);
+        outs.push((v["fragments"].clone(), std::fs::read(&raw).unwrap()));
+    }
+    assert!(outs[0].0.as_u64().unwrap() > 1000);
+    assert_eq!(outs[0], outs[1]);
+    let o = fragrace(&[
+        "render",
+        "--scene",
+        "cubes",
+        "--algo",
+        "count",
+        "--binning",
+        "sometimes",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("expected `auto` or `always`"));
+}
