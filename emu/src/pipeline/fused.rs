@@ -89,6 +89,14 @@ pub(crate) struct FusedCounts {
 }
 
 impl FusedCounts {
+    /// Adds these counts to a pass's statistics.
+    pub fn add_to(&self, stats: &mut crate::stats::Stats) {
+        stats.fragments_generated += self.generated;
+        stats.early_culled += self.early_culled;
+        stats.late_culled += self.late_culled;
+        stats.samples_passed += self.samples_passed;
+    }
+
     fn add(&mut self, o: &FusedCounts) {
         self.generated += o.generated;
         self.early_culled += o.early_culled;

@@ -476,10 +476,7 @@ impl Device {
             *seq_base =
                 seq_base.wrapping_add((prepared.triangle_count() as u64).wrapping_mul(pixels));
             report.stats.rejected_triangles += rejected;
-            report.stats.fragments_generated += counts.generated;
-            report.stats.early_culled += counts.early_culled;
-            report.stats.late_culled += counts.late_culled;
-            report.stats.samples_passed += counts.samples_passed;
+            counts.add_to(&mut report.stats);
             absorb(report, outcome, &self.memory);
             return;
         }
@@ -500,10 +497,7 @@ impl Device {
             // Invocation ids are by source triangle (see `fused::Row`).
             *seq_base =
                 seq_base.wrapping_add((binned.input_triangles() as u64).wrapping_mul(pixels));
-            report.stats.fragments_generated += counts.generated;
-            report.stats.early_culled += counts.early_culled;
-            report.stats.late_culled += counts.late_culled;
-            report.stats.samples_passed += counts.samples_passed;
+            counts.add_to(&mut report.stats);
             absorb(report, outcome, &self.memory);
             return;
         }

@@ -387,15 +387,7 @@ impl Binned {
                         merge.extend((x0..x1).map(|x| (y, x, piece, m)))
                     });
                 }
-                merge.sort_unstable_by_key(|&(y, x, piece, _)| (y, x, piece));
-                let mut k = 0;
-                while k < merge.len() {
-                    let (y, x, tri, mut coverage) = merge[k];
-                    k += 1;
-                    while k < merge.len() && (merge[k].0, merge[k].1) == (y, x) {
-                        coverage |= merge[k].3;
-                        k += 1;
-                    }
+                merge_pixels(&mut merge, |y, x, tri, coverage| {
                     emit(Span {
                         y,
                         x0: x,
@@ -405,7 +397,7 @@ impl Binned {
                         source,
                         front_facing,
                     });
-                }
+                });
             }
             i = j;
         }
@@ -1604,8 +1596,24 @@ fn merge_piece_spans(spans: &mut Vec<Span>, start: usize) {
         .iter()
         .flat_map(|s| (s.x0..s.x1).map(move |x| (s.y, x, s.tri, s.coverage)))
         .collect();
-    pixels.sort_unstable_by_key(|&(y, x, tri, _)| (y, x, tri));
     spans.truncate(start);
+    merge_pixels(&mut pixels, |y, x, tri, coverage| {
+        spans.push(Span {
+            y,
+            x0: x,
+            x1: x + 1,
+            tri,
+            coverage,
+            ..first
+        })
+    });
+}
+
+/// Calls `f(y, x, tri, coverage)` once per pixel of `pixels` (`(y, x, setup index,
+/// coverage)` of fan pieces), in row-major order, with the union of the pixel's coverage
+/// and the lowest setup index among the pieces covering it.
+fn merge_pixels(pixels: &mut [(u32, u32, u32, u8)], mut f: impl FnMut(u32, u32, u32, u8)) {
+    pixels.sort_unstable_by_key(|&(y, x, tri, _)| (y, x, tri));
     let mut k = 0;
     while k < pixels.len() {
         let (y, x, tri, mut coverage) = pixels[k];
@@ -1614,14 +1622,7 @@ fn merge_piece_spans(spans: &mut Vec<Span>, start: usize) {
             coverage |= pixels[k].3;
             k += 1;
         }
-        spans.push(Span {
-            y,
-            x0: x,
-            x1: x + 1,
-            tri,
-            coverage,
-            ..first
-        });
+        f(y, x, tri, coverage);
     }
 }
 
