@@ -217,8 +217,8 @@ pub(crate) fn run_fused<K: FragmentKernel>(
 /// in turn, in API order).
 const EXCLUSIVE_UNIT: u32 = 1024;
 
-/// Input triangles per unit of work of [`run_unbinned`]: its setup records stay in the
-/// worker's cache between setup and shading.
+/// Most input triangles per unit of work of [`run_unbinned`]: its setup records stay in
+/// the worker's cache between setup and shading.
 pub(crate) const UNBINNED_CHUNK: usize = 512;
 
 /// Whether a pass can run unbinned ([`run_unbinned`]): its fixed-function work commutes,
@@ -228,8 +228,8 @@ pub(crate) fn unbinned(state: &FragmentState, targets: usize) -> bool {
     commutes(state, targets) && !state.depth.test && !state.stencil.enabled && targets == 0
 }
 
-/// Runs a fused pass without binning: workers take chunks of [`UNBINNED_CHUNK`] input
-/// triangles in turn, set each up ([`Prepared::setup_flat`]) and rasterize and shade it
+/// Runs a fused pass without binning: workers take chunks of at most [`UNBINNED_CHUNK`]
+/// input triangles in turn, set each up ([`Prepared::setup_flat`]) and rasterize and shade it
 /// at once, in API order within the chunk. Fragments of one pixel from different chunks run
 /// concurrently on different threads, as on a GPU. Only for passes that
 /// [`unbinned`] allows (nothing per-pixel is ordered) and well-formed meshes
@@ -243,7 +243,11 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
 ) -> (ShadeOutcome, FusedCounts, u64) {
     debug_assert!(unbinned(pass.state, pass.targets) && !pass.early_tests());
     let n = prepared.triangle_count();
-    let chunks = n.div_ceil(UNBINNED_CHUNK);
+    let threads = pass.threads.max(1);
+    // At least about eight chunks a thread, so that a mesh of few large triangles still
+    // spreads over the threads.
+    let size = n.div_ceil(threads * 8).clamp(16, UNBINNED_CHUNK);
+    let chunks = n.div_ceil(size);
     let next = crate::sync::AtomicUsize::new(0);
     let work = || {
         let mut w = Worker::new(kernel, env, pass);
@@ -254,7 +258,7 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
             if c >= chunks {
                 break;
             }
-            prepared.setup_flat(c * UNBINNED_CHUNK..(c + 1) * UNBINNED_CHUNK, &mut chunk);
+            prepared.setup_flat(c * size..(c + 1) * size, &mut chunk);
             rejected += chunk.rejected;
             // The chunk's setup records are this unit's planes.
             let chunk_env = PassEnv {
@@ -266,7 +270,7 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
         let (acc, counts) = w.finish();
         (acc, counts, rejected)
     };
-    let results = on_threads(pass.threads.max(1).min(chunks.max(1)), work);
+    let results = on_threads(threads.min(chunks.max(1)), work);
     let mut outcome = ShadeOutcome::default();
     let mut counts = FusedCounts::default();
     let mut rejected = 0;
