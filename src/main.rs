@@ -635,11 +635,8 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
 }
 
 fn parse_binning(s: &str) -> Result<fragrace::emu::Binning, String> {
-    match s {
-        "auto" => Ok(fragrace::emu::Binning::Auto),
-        "always" => Ok(fragrace::emu::Binning::Always),
-        _ => Err(format!("`{s}`: expected `auto` or `always`")),
-    }
+    fragrace::emu::Binning::from_name(s)
+        .ok_or_else(|| format!("`{s}`: expected `auto` or `always`"))
 }
 
 fn parse_duration(s: &str) -> Result<std::time::Duration> {

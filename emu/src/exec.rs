@@ -146,11 +146,18 @@ impl Binning {
         *self == Binning::Auto
     }
 
+    pub const ALL: [Binning; 2] = [Binning::Auto, Binning::Always];
+
     pub fn name(self) -> &'static str {
         match self {
             Binning::Auto => "auto",
             Binning::Always => "always",
         }
+    }
+
+    /// The binning a [`Binning::name`] names.
+    pub fn from_name(name: &str) -> Option<Binning> {
+        Binning::ALL.into_iter().find(|b| b.name() == name)
     }
 }
 

@@ -15,7 +15,10 @@
 //! `ExecConfig::segment` and different threads take segments of the same tile at the same
 //! time: fragments of one pixel then run concurrently on different threads, as on a GPU,
 //! and races on shared memory are real races. Otherwise a tile belongs to one worker at a
-//! time, so depth, stencil and blending happen in API order.
+//! time, so depth, stencil and blending happen in API order. When a pass needs nothing of
+//! the framebuffer at all (no test either), the parallel executor skips the tiles:
+//! [`run_unbinned`] hands out chunks of triangles, set up and shaded by whichever worker
+//! takes them.
 //!
 //! This module knows no algorithm; it does not handle interlock (ordered interlock needs the
 //! per-pixel tickets of the general path) nor the contention table.
@@ -225,7 +228,7 @@ pub(crate) const UNBINNED_CHUNK: usize = 512;
 /// and it has no depth or stencil test and no target, so that a fragment needs nothing
 /// of the framebuffer and the order in which threads visit pixels does not matter.
 pub(crate) fn unbinned(state: &FragmentState, targets: usize) -> bool {
-    commutes(state, targets) && !state.depth.test && !state.stencil.enabled && targets == 0
+    commutes(state, targets) && !state.depth.test
 }
 
 /// Runs a fused pass without binning: workers take chunks of at most [`UNBINNED_CHUNK`]

@@ -176,11 +176,11 @@ impl Device {
             height: fb.height,
         };
         let threads = exec.threads.max(1);
+        let info = kernel.info();
         // Planes only for someone who reads them: the kernel's interpolants, or the depth
         // test. Any test keeps them (the tested paths take a depth per fragment).
         let fixed = &state.fragment;
-        let plane_setup = if kernel.info().interpolants || fixed.depth.test || fixed.stencil.enabled
-        {
+        let plane_setup = if info.interpolants || fixed.depth.test || fixed.stencil.enabled {
             PlaneSetup::Compute
         } else {
             PlaneSetup::Skip
@@ -191,8 +191,8 @@ impl Device {
         let try_unbinned = exec.mode == ExecMode::Parallel
             && exec.binning == Binning::Auto
             && !exec.contention
-            && kernel.info().interlock.is_none()
-            && fused::unbinned(&state.fragment, state.fragment.targets.len());
+            && info.interlock.is_none()
+            && fused::unbinned(fixed, fixed.targets.len());
         for (instance, model) in draw.instances.iter().enumerate() {
             transform(
                 &draw.mesh.positions,

@@ -11,6 +11,10 @@
 //! 3. chunk results are concatenated in chunk order, so setup indices follow API order; each
 //!    chunk keeps its own per-tile lists (a stable counting sort done by its worker), and
 //!    [`Binned::raster_tile`] walks the chunks in order.
+//!
+//! Step 1 is [`prepare`]; steps 2 and 3 are [`Prepared::bin`]. [`Prepared::setup_flat`] runs
+//! step 2's setup code on one chunk without bins, its covered runs coming out of setup
+//! directly (the unbinned passes of the parallel executor).
 use super::clip::{self, ClipVert, Planes, MAX_POLY, NON_FINITE};
 use super::coverage::{self, area2, bbox, Edges, SampleInfo, ONE};
 use super::pool::Pool;
