@@ -23,6 +23,7 @@ pub mod fragment;
 pub mod framebuffer;
 pub mod geometry;
 pub mod hazard;
+mod hint;
 pub mod interlock;
 pub mod kernel;
 pub mod memory;
@@ -39,7 +40,9 @@ pub use geometry::{Draw, Mesh, MeshError};
 pub use hazard::{Hazard, HazardCounts, HazardKind};
 pub use interlock::InterlockMode;
 pub use kernel::FragInput;
-pub use kernel::{Access, CompareExchange, FaultKind, Frag, FragmentKernel, KernelInfo, Store};
+pub use kernel::{
+    Access, CompareExchange, FaultKind, Frag, FragmentKernel, KernelInfo, PixelArray, Store,
+};
 pub use memory::{Buf, Memory, Word};
 pub use pipeline::{Device, Fault, OcclusionQuery, PassError, PassReport, PassState};
 pub use raster::{CullMode, FrontFace, RasterState, SampleCount, Viewport};

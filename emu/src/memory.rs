@@ -9,6 +9,7 @@
 use std::fmt;
 use std::marker::PhantomData;
 
+use crate::kernel::PixelArray;
 use crate::sync::{AtomicU32, AtomicU64, Ordering};
 
 /// Largest buffer, in words (4 GiB of 32-bit words would not be addressable by u32 indices).
@@ -119,6 +120,37 @@ impl<T: Word> Buf<T> {
     }
     pub fn id(&self) -> u32 {
         self.id
+    }
+}
+
+/// Where the slot of pixel (x, y) of a per-pixel array lies, for prefetches
+/// ([`Memory::pixel_prefetcher`]).
+pub(crate) struct PixelPrefetcher<'m> {
+    base: *const u8,
+    words: u64,
+    word_bytes: usize,
+    stride: u64,
+    width: u64,
+    _memory: PhantomData<&'m Memory>,
+}
+
+impl PixelPrefetcher<'_> {
+    /// The address of the first word of pixel (x, y)'s slot; `None` past the buffer's end
+    /// (a hint that does not fit the buffer is ignored, not followed).
+    #[inline(always)]
+    pub(crate) fn slot(&self, x: u32, y: u32) -> Option<*const u8> {
+        // Neither wraps: `y * width + x` < 2^64 for 32-bit operands.
+        let word = (y as u64 * self.width + x as u64).saturating_mul(self.stride);
+        // In range, so the offset is within the allocation.
+        (word < self.words).then(|| self.base.wrapping_add(word as usize * self.word_bytes))
+    }
+
+    /// Prefetches pixel (x, y)'s slot.
+    #[inline(always)]
+    pub(crate) fn pixel(&self, x: u32, y: u32) {
+        if let Some(p) = self.slot(x, y) {
+            crate::hint::prefetch(p);
+        }
     }
 }
 
@@ -464,6 +496,30 @@ impl Memory {
         Ok(())
     }
 
+    /// Prefetches of the slots of a per-pixel array (see [`KernelInfo::with_pixel_array`]);
+    /// `None` when `array` names no buffer.
+    ///
+    /// [`KernelInfo::with_pixel_array`]: crate::KernelInfo::with_pixel_array
+    pub(crate) fn pixel_prefetcher(
+        &self,
+        array: PixelArray,
+        width: u32,
+    ) -> Option<PixelPrefetcher<'_>> {
+        let b = self.buffers.get(array.buffer as usize)?;
+        let (base, words, word_bytes) = match &b.words {
+            Words::W32(w) => (w.as_ptr().cast::<u8>(), w.len(), 4),
+            Words::W64(w) => (w.as_ptr().cast::<u8>(), w.len(), 8),
+        };
+        Some(PixelPrefetcher {
+            base,
+            words: words as u64,
+            word_bytes,
+            stride: array.stride as u64,
+            width: width as u64,
+            _memory: PhantomData,
+        })
+    }
+
     /// The word at (buffer, index); the caller has checked bounds.
     #[inline(always)]
     pub(crate) fn word(&self, buffer: u32, index: u32) -> WordRef<'_> {
@@ -793,6 +849,62 @@ fn apply64(a: &AtomicU64, op: MemOp, ord: Ordering) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A pixel's slot is word `pixel * stride` of the buffer, for both word widths; a slot
+    /// past the end, or a buffer that does not exist, gives no address.
+    #[test]
+    fn pixel_prefetcher_finds_the_slots() {
+        let mut m = Memory::default();
+        let a = m.create::<u32>("a", 4 * 3 * 2).unwrap();
+        let b = m.create::<u64>("b", 4 * 3).unwrap();
+        let width = 4;
+        let words = |id: u32| match &m.buffers[id as usize].words {
+            Words::W32(w) => w.as_ptr().cast::<u8>(),
+            Words::W64(w) => w.as_ptr().cast::<u8>(),
+        };
+        let pa = m
+            .pixel_prefetcher(
+                PixelArray {
+                    buffer: a.id,
+                    stride: 2,
+                },
+                width,
+            )
+            .unwrap();
+        assert_eq!(pa.slot(1, 2), Some(words(a.id).wrapping_add((9 * 2) * 4)));
+        assert_eq!(pa.slot(3, 2), Some(words(a.id).wrapping_add((11 * 2) * 4)));
+        assert_eq!(pa.slot(0, 3), None);
+        let pb = m
+            .pixel_prefetcher(
+                PixelArray {
+                    buffer: b.id,
+                    stride: 1,
+                },
+                width,
+            )
+            .unwrap();
+        assert_eq!(pb.slot(2, 1), Some(words(b.id).wrapping_add(6 * 8)));
+        assert_eq!(pb.slot(0, 3), None);
+        let far = m
+            .pixel_prefetcher(
+                PixelArray {
+                    buffer: b.id,
+                    stride: u32::MAX,
+                },
+                u32::MAX,
+            )
+            .unwrap();
+        assert_eq!(far.slot(u32::MAX, u32::MAX), None);
+        assert!(m
+            .pixel_prefetcher(
+                PixelArray {
+                    buffer: 2,
+                    stride: 1
+                },
+                width
+            )
+            .is_none());
+    }
 
     /// `take` moves out what `read` copies, for both word widths, and leaves the buffer
     /// empty; new buffers start at zero.

@@ -816,11 +816,16 @@ fn reading_undeclared_interpolants_is_misuse_under_every_executor() {
 struct Fingerprint {
     out: Buf<u32>,
     width: u32,
+    /// The kernel's per-pixel array hint, right or wrong: a hint changes no result.
+    hint: Option<fragrace_emu::PixelArray>,
 }
 
 impl FragmentKernel for Fingerprint {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("fingerprint")
+        KernelInfo {
+            pixel_array: self.hint,
+            ..KernelInfo::new("fingerprint")
+        }
     }
     async fn shade(&self, f: impl Fragment) {
         let p = (f.y() * self.width + f.x()) * 4;
@@ -840,10 +845,20 @@ impl FragmentKernel for Fingerprint {
     }
 }
 
+/// A kernel's per-pixel array hint ([`KernelInfo::with_pixel_array`]) in a test.
+#[derive(Clone, Copy, Debug)]
+enum Hint {
+    None,
+    Right,
+    Wrong,
+    PastTheEnd,
+}
+
 /// Passes that need nothing of the framebuffer run unbinned under the parallel executor:
 /// every fragment reaches the kernel exactly as through the tile-binned path and the
 /// ordered executor (same invocation ids, inputs and interpolants, same statistics), with
-/// near-plane clipping, culling and several samples.
+/// near-plane clipping, culling and several samples; with or without a per-pixel array
+/// hint, right or wrong (the executor prefetches by it, and nothing else).
 #[test]
 fn unbinned_draws_match_binned_and_ordered_ones() {
     use fragrace_emu::{Binning, Draw, Mesh, PassState, RasterState};
@@ -883,7 +898,7 @@ fn unbinned_draws_match_binned_and_ordered_ones() {
         (SampleCount::X1, fragrace_emu::CullMode::None),
         (SampleCount::X4, fragrace_emu::CullMode::Back),
     ] {
-        let run = |e: &ExecConfig| {
+        let run = |e: &ExecConfig, hint: Hint| {
             let mut dev = Device::new();
             let out = dev.buffer::<u32>("out", (w * h * 4) as u64).unwrap();
             let mut fb = Framebuffer::new(w, h, samples, 16, &[]).unwrap();
@@ -896,11 +911,32 @@ fn unbinned_draws_match_binned_and_ordered_ones() {
                 ..Default::default()
             };
             let draw = Draw::new(&mesh, proj);
-            let kernel = Fingerprint { out, width: w };
+            let hint = match hint {
+                Hint::None => None,
+                // The slots of `out`: four words a pixel.
+                Hint::Right => Some(fragrace_emu::PixelArray {
+                    buffer: out.id(),
+                    stride: 4,
+                }),
+                // No such buffer, or slots far past the end: ignored.
+                Hint::Wrong => Some(fragrace_emu::PixelArray {
+                    buffer: out.id() + 7,
+                    stride: 1,
+                }),
+                Hint::PastTheEnd => Some(fragrace_emu::PixelArray {
+                    buffer: out.id(),
+                    stride: 1 << 20,
+                }),
+            };
+            let kernel = Fingerprint {
+                out,
+                width: w,
+                hint,
+            };
             let r = dev.draw(&mut fb, &draw, &state, &kernel, e).unwrap();
             (dev.memory.read(out).unwrap(), r)
         };
-        let (want, wr) = run(&ExecConfig::ordered());
+        let (want, wr) = run(&ExecConfig::ordered(), Hint::None);
         assert!(
             wr.stats.fragments_generated > 5000,
             "{}",
@@ -918,11 +954,14 @@ fn unbinned_draws_match_binned_and_ordered_ones() {
                 ..ExecConfig::parallel(2)
             },
         ] {
-            let (got, r) = run(&e);
-            assert!(
-                got == want,
-                "{samples:?} {e:?}: the kernels saw different fragments"
-            );
+            for hint in [Hint::None, Hint::Right, Hint::Wrong, Hint::PastTheEnd] {
+                let (got, _) = run(&e, hint);
+                assert!(
+                    got == want,
+                    "{samples:?} {e:?} {hint:?}: the kernels saw different fragments"
+                );
+            }
+            let (_, r) = run(&e, Hint::Right);
             let (a, b) = (&r.stats, &wr.stats);
             assert_eq!(a.fragments_generated, b.fragments_generated, "{e:?}");
             assert_eq!(a.shaded, b.shaded, "{e:?}");

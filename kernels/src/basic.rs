@@ -24,7 +24,9 @@ pub struct CountKernel {
 impl FragmentKernel for CountKernel {
     fn info(&self) -> KernelInfo {
         // Reads no depth or barycentrics: the draw skips their planes.
-        KernelInfo::new("count").without_interpolants()
+        KernelInfo::new("count")
+            .without_interpolants()
+            .with_pixel_array(self.counts, 1)
     }
     async fn shade(&self, f: impl Fragment) {
         f.atomic_add(self.counts, f.pixel_index(), 1).await;
@@ -39,7 +41,9 @@ struct CountPlainKernel {
 
 impl FragmentKernel for CountPlainKernel {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("count-plain").without_interpolants()
+        KernelInfo::new("count-plain")
+            .without_interpolants()
+            .with_pixel_array(self.counts, 1)
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();

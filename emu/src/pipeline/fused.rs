@@ -31,7 +31,8 @@ use std::task::{Context, Poll, Waker};
 use crate::exec::{record_panic, Acc, ShadeOutcome, Tally};
 use crate::fragment::DirectFrag;
 use crate::framebuffer::TileMemory;
-use crate::kernel::{Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv};
+use crate::kernel::{Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv, PixelArray};
+use crate::memory::PixelPrefetcher;
 use crate::raster::{Binned, FlatChunk, Prepared, SampleCount, Segment, SetupTriangle, Span};
 use crate::state::FragmentState;
 use crate::sync::pool;
@@ -473,7 +474,14 @@ struct Worker<'a, K> {
     positions: &'static [(f32, f32)],
     all_samples: u8,
     pixels: u64,
+    /// The kernel's per-pixel array, prefetched ahead of shading.
+    pixel_array: Option<PixelArray>,
 }
+
+/// Covered runs ahead of the one being shaded whose per-pixel slots are prefetched: far
+/// enough for a miss to the last-level cache to land (about a dozen fragments of a dense
+/// mesh), near enough for the line to still be there.
+const PREFETCH_SPANS: usize = 8;
 
 impl<'a, K: FragmentKernel> Worker<'a, K> {
     fn new(kernel: &'a K, env: &PassEnv<'_>, pass: &'a FusedPass<'a>) -> Self {
@@ -496,7 +504,14 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 (1u8 << samples) - 1
             },
             pixels: env.width as u64 * env.height as u64,
+            pixel_array: kernel.info().pixel_array,
         }
+    }
+
+    /// Prefetches the per-pixel slots of the fragments of `spans[i + PREFETCH_SPANS]`.
+    fn prefetcher<'e>(&self, env: &PassEnv<'e>) -> Option<PixelPrefetcher<'e>> {
+        self.pixel_array
+            .and_then(|a| env.memory.pixel_prefetcher(a, env.width))
     }
 
     fn finish(mut self) -> (Acc, FusedCounts) {
@@ -542,6 +557,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         mut tile: Option<TileAccess<'t>>,
     ) -> Option<TileAccess<'t>> {
         let rows = RowSetup::new(self, env);
+        let ahead = self.prefetcher(env);
         let Worker {
             kernel,
             pass,
@@ -559,7 +575,8 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let slot = &slots[0];
         // Counts of the unit's invocations, added to the worker's once at the end.
         let mut tally = Tally::default();
-        for span in spans {
+        for (i, span) in spans.iter().enumerate() {
+            prefetch_ahead(ahead.as_ref(), spans, i);
             let Some(row) = rows.row(span, counts) else {
                 continue;
             };
@@ -601,7 +618,9 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
     ) -> Option<TileAccess<'t>> {
         let lanes = self.slots.len();
         let rows = RowSetup::new(self, env);
-        for span in spans {
+        let ahead = self.prefetcher(env);
+        for (i, span) in spans.iter().enumerate() {
+            prefetch_ahead(ahead.as_ref(), spans, i);
             let Some(row) = rows.row(span, &mut self.counts) else {
                 continue;
             };
@@ -650,6 +669,16 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 tile_of(tile),
             );
         }
+    }
+}
+
+/// Prefetches the per-pixel slot of the first pixel of the covered run
+/// [`PREFETCH_SPANS`] after run `i` (runs are short on dense meshes, and the hardware
+/// prefetcher follows a long one).
+#[inline(always)]
+fn prefetch_ahead(ahead: Option<&PixelPrefetcher<'_>>, spans: &[Span], i: usize) {
+    if let (Some(p), Some(s)) = (ahead, spans.get(i + PREFETCH_SPANS)) {
+        p.pixel(s.x0, s.y);
     }
 }
 

@@ -21,6 +21,7 @@ use super::pool::Pool;
 use super::{
     CullMode, Fragment, FrontFace, RasterState, SampleCount, Span, Viewport, SUBPIXEL_BITS,
 };
+use crate::hint::prefetch;
 use glam::Vec4;
 
 /// Largest magnitude of a snapped coordinate (sub-pixel units). The guard band keeps real
@@ -428,19 +429,6 @@ impl ChunkBins {
             prefetch(self.verts.as_ptr().wrapping_add(index));
         }
     }
-}
-
-/// A prefetch hint for the cache line of `p` (any address: a prefetch never faults).
-#[inline(always)]
-fn prefetch<T>(p: *const T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: `prefetcht0` is an SSE instruction (x86_64 baseline) that only hints the
-    // cache; it reads nothing architecturally and cannot fault, whatever the address.
-    unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast());
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
 }
 
 /// A unit of rasterization work: entries `start..end` of one chunk's list for one tile.

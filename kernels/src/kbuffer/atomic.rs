@@ -107,7 +107,7 @@ pub struct Depth32 {
 
 impl FragmentKernel for Depth32 {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("kb-atomic32-depth")
+        KernelInfo::new("kb-atomic32-depth").with_pixel_array(self.key, self.k)
     }
     async fn shade(&self, f: impl Fragment) {
         self.census.record(f).await;
@@ -138,7 +138,7 @@ pub struct Claim32 {
 
 impl FragmentKernel for Claim32 {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("kb-atomic32-claim")
+        KernelInfo::new("kb-atomic32-claim").with_pixel_array(self.key, self.k)
     }
     async fn shade(&self, f: impl Fragment) {
         let base = f.pixel_index() * self.k;
@@ -173,7 +173,7 @@ pub struct Store64 {
 
 impl FragmentKernel for Store64 {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("kb-atomic64-store")
+        KernelInfo::new("kb-atomic64-store").with_pixel_array(self.key, self.k)
     }
     async fn shade(&self, f: impl Fragment) {
         self.census.record(f).await;
