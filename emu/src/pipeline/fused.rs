@@ -508,7 +508,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         }
     }
 
-    /// Prefetches the per-pixel slots of the fragments of `spans[i + PREFETCH_SPANS]`.
+    /// The prefetcher of the kernel's per-pixel array (`None`: no hint, or no such buffer).
     fn prefetcher<'e>(&self, env: &PassEnv<'e>) -> Option<PixelPrefetcher<'e>> {
         self.pixel_array
             .and_then(|a| env.memory.pixel_prefetcher(a, env.width))
