@@ -13,9 +13,11 @@
 //!   kernel went from about 84 instructions per fragment through [`Frag`] to a handful
 //!   (docs/performance.md).
 //!
-//! Both perform an access the same way (`Frag::perform`: bounds check, watchdog step,
-//! operation counter, the operation), so a kernel computes the same thing under either; the
-//! differential oracle checks that on every algorithm.
+//! Both perform an access the same way (`Frag::perform_counted`: bounds check, watchdog
+//! step, operation counter, the operation), so a kernel computes the same thing under
+//! either; the differential oracle checks that on every algorithm. They differ in where the
+//! fragment's state lives: [`Frag`] reads and writes the invocation's slot, [`DirectFrag`] a
+//! `DirectState` that the executor keeps in a local, so that it stays in registers.
 //!
 //! The trait is sealed: kernels use it, only this crate implements it.
 
@@ -24,7 +26,7 @@ use std::pin::Pin;
 use std::task::{Context, Poll};
 
 use crate::framebuffer::Image;
-use crate::kernel::{Frag, FragView};
+use crate::kernel::{DirectState, Frag, FragView};
 use crate::memory::{Buf, MemOp, Word};
 
 mod sealed {
@@ -219,11 +221,11 @@ macro_rules! getters {
         }
         #[inline(always)]
         fn discard(&self) {
-            Frag::discard(self.as_frag())
+            self.set_discarded()
         }
         #[inline(always)]
         fn write_depth(&self, z: f32) {
-            Frag::write_depth(self.as_frag(), z)
+            self.set_depth_out(z)
         }
         #[inline(always)]
         fn texel(&self, image: &Image, x: u32, y: u32, sample: u32) -> [u32; 4] {
@@ -333,15 +335,26 @@ impl<'a> Frag<'a> {
     fn as_frag(&self) -> &Frag<'a> {
         self
     }
+    #[inline(always)]
+    fn set_discarded(&self) {
+        Frag::discard(self)
+    }
+    #[inline(always)]
+    fn set_depth_out(&self, z: f32) {
+        Frag::write_depth(self, z)
+    }
 }
 
 /// The context of the fused path of the direct executors: every access is performed when
-/// it is made and never suspends (see the module docs). It reads the fragment's input from
-/// its slot, as [`Frag`] does (lending the executor's input by reference instead made the
-/// kernel's state bigger than two words, and its copy into the state machine stalled on
-/// store forwarding).
+/// it is made and never suspends (see the module docs). The fragment's input, step count,
+/// discard flag, depth output and operation counters are a [`DirectState`] the executor
+/// keeps in a local (in registers, once the kernel is inlined); colour outputs and faults
+/// go to the invocation's slot, as under [`Frag`].
 #[derive(Clone, Copy)]
-pub struct DirectFrag<'a>(pub(crate) Frag<'a>);
+pub struct DirectFrag<'a> {
+    frag: Frag<'a>,
+    state: &'a DirectState,
+}
 
 /// An access already performed: its outcome (`Pending` when the invocation faulted; the
 /// executor then drops it).
@@ -357,21 +370,43 @@ impl<T: Copy> Future for Performed<T> {
 }
 
 impl<'a> DirectFrag<'a> {
+    /// The context of the invocation in `frag`'s slot, whose per-fragment state is `state`.
+    #[inline(always)]
+    pub(crate) fn new(frag: Frag<'a>, state: &'a DirectState) -> Self {
+        DirectFrag { frag, state }
+    }
     #[inline(always)]
     fn as_frag(&self) -> &Frag<'a> {
-        &self.0
+        &self.frag
     }
     #[inline(always)]
     fn view(&self) -> FragView<'a> {
-        self.0.view()
+        FragView {
+            input: self.state.input.get(),
+            env: self.frag.env,
+        }
+    }
+    #[inline(always)]
+    fn set_discarded(&self) {
+        self.state.discarded.set(true);
+    }
+    #[inline(always)]
+    fn set_depth_out(&self, z: f32) {
+        self.state.depth_out.set(Some(z));
+    }
+    #[inline(always)]
+    fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
+        let st = self.state;
+        self.frag
+            .perform_counted::<T>(&st.steps, &st.ops, buf, index, op)
     }
     #[inline(always)]
     fn op<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Performed<T> {
-        Performed(self.0.perform::<T>(buf, index, op))
+        Performed(self.perform::<T>(buf, index, op))
     }
     #[inline(always)]
     fn unit<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Performed<()> {
-        Performed(self.0.perform::<T>(buf, index, op).map(|_| ()))
+        Performed(self.perform::<T>(buf, index, op).map(|_| ()))
     }
 }
 
@@ -388,7 +423,7 @@ impl Fragment for DirectFrag<'_> {
         new: T,
     ) -> impl Future<Output = Result<T, T>> {
         let op = MemOp::CompareExchange(expected.to_bits(), new.to_bits());
-        Performed(self.0.perform::<T>(buf, index, op).map(|prev: T| {
+        Performed(self.perform::<T>(buf, index, op).map(|prev: T| {
             if prev.to_bits() == expected.to_bits() {
                 Ok(prev)
             } else {
@@ -404,12 +439,16 @@ impl Fragment for DirectFrag<'_> {
         expected: T,
         new: T,
     ) -> impl Future<Output = Result<T, T>> {
-        if self.0.spurious_cas_failure() {
+        if crate::kernel::spurious_cas_failure(
+            self.frag.env,
+            self.state.input.get().seq,
+            self.state.steps.get(),
+        ) {
             // A failed attempt reads the word, as a real failed CAS does.
-            return Performed(self.0.perform::<T>(buf, index, MemOp::AtomicLoad).map(Err));
+            return Performed(self.perform::<T>(buf, index, MemOp::AtomicLoad).map(Err));
         }
         let op = MemOp::CompareExchange(expected.to_bits(), new.to_bits());
-        Performed(self.0.perform::<T>(buf, index, op).map(|prev: T| {
+        Performed(self.perform::<T>(buf, index, op).map(|prev: T| {
             if prev.to_bits() == expected.to_bits() {
                 Ok(prev)
             } else {
@@ -426,10 +465,7 @@ impl Fragment for DirectFrag<'_> {
     ) -> impl Future<Output = ()> {
         let mut done = Poll::Ready(());
         for (w, slot) in out.iter_mut().enumerate() {
-            match self
-                .0
-                .perform::<T>(buf, base.wrapping_add(w as u32), MemOp::Load)
-            {
+            match self.perform::<T>(buf, base.wrapping_add(w as u32), MemOp::Load) {
                 Poll::Ready(v) => *slot = v,
                 Poll::Pending => {
                     done = Poll::Pending;
@@ -450,7 +486,6 @@ impl Fragment for DirectFrag<'_> {
         for (w, v) in values.iter().enumerate() {
             let op = MemOp::Store(v.to_bits());
             if self
-                .0
                 .perform::<T>(buf, base.wrapping_add(w as u32), op)
                 .is_pending()
             {
@@ -462,6 +497,6 @@ impl Fragment for DirectFrag<'_> {
     }
     #[inline(always)]
     fn yield_now(&self) -> impl Future<Output = ()> {
-        Performed(self.0.direct_step())
+        Performed(self.frag.direct_step_counted(&self.state.steps))
     }
 }

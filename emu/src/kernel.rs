@@ -302,7 +302,7 @@ pub(crate) struct Invocation {
     pub granted: Cell<bool>,
     pub depth_out: Cell<Option<f32>>,
     // Line 1: the operation counters (52 bytes).
-    pub ops: [Cell<u32>; 13],
+    pub ops: [Cell<u32>; OP_KINDS],
     pub in_interlock: Cell<bool>,
     pub entered_interlock: Cell<bool>,
     // Cold: what only some kernels or executors use.
@@ -319,6 +319,85 @@ const _: () = {
     assert!(std::mem::offset_of!(Invocation, ops) == 64);
     assert!(std::mem::offset_of!(Invocation, depth_out) < 64);
 };
+
+/// Kinds of memory operation ([`OpKind::ALL`]): one counter each.
+pub(crate) const OP_KINDS: usize = OpKind::ALL.len();
+
+/// What every fragment of the fused path without lockstep reads and writes, kept apart from
+/// its slot ([`Invocation`]): the executor holds it in a local that no out-of-line code ever
+/// sees, so the compiler keeps it in registers. In the slot (memory shared with cold paths)
+/// every field was a store per fragment, and each `lock`ed instruction of the kernel waited
+/// for those stores to drain (docs/performance.md). The slot still holds what is rare:
+/// colour outputs and faults; the executor copies this state into it when a fragment needs
+/// the slot's path after shading ([`DirectState::spill`]).
+pub(crate) struct DirectState {
+    pub input: Cell<FragInput>,
+    pub steps: Cell<u64>,
+    pub discarded: Cell<bool>,
+    pub depth_out: Cell<Option<f32>>,
+    /// Operation counters of every fragment shaded with this state (not reset per
+    /// fragment; the executor adds them to the slot's at the end of a unit).
+    pub ops: [Cell<u32>; OP_KINDS],
+}
+
+impl DirectState {
+    #[inline(always)]
+    pub fn new() -> Self {
+        DirectState {
+            input: Cell::new(FragInput::default()),
+            steps: Cell::new(0),
+            discarded: Cell::new(false),
+            depth_out: Cell::new(None),
+            ops: Default::default(),
+        }
+    }
+
+    /// A new fragment: its input, and no results yet.
+    #[inline(always)]
+    pub fn reset(&self, input: FragInput) {
+        self.input.set(input);
+        self.reset_results();
+    }
+
+    /// A new fragment on the same row as the last one: only what differs is written.
+    #[inline(always)]
+    pub fn reset_next(&self, seq: u64, x: u32, coverage: u8, depth: f32) {
+        let mut input = self.input.get();
+        input.seq = seq;
+        input.x = x;
+        input.coverage = coverage;
+        input.depth = depth;
+        self.input.set(input);
+        self.reset_results();
+    }
+
+    #[inline(always)]
+    fn reset_results(&self) {
+        self.steps.set(0);
+        self.discarded.set(false);
+        self.depth_out.set(None);
+    }
+
+    /// Copies the fragment's state into `slot`, for the executor's slot-based path (late
+    /// tests and target writes, faults). The operation counters stay here.
+    // Inlined, as every method here: a call taking `&self` out of line would make the
+    // executor's local escape, and keep it in memory.
+    #[inline(always)]
+    pub fn spill(&self, slot: &Invocation) {
+        slot.input.set(self.input.get());
+        slot.steps.set(self.steps.get());
+        slot.discarded.set(self.discarded.get());
+        slot.depth_out.set(self.depth_out.get());
+    }
+
+    /// Adds the operation counters to `slot`'s and clears them.
+    #[inline(always)]
+    pub fn drain_ops(&self, slot: &Invocation) {
+        for (o, s) in self.ops.iter().zip(&slot.ops) {
+            s.set(s.get().saturating_add(o.replace(0)));
+        }
+    }
+}
 
 impl Invocation {
     pub fn new() -> Invocation {
@@ -375,27 +454,6 @@ impl Invocation {
         self.reset_fragment(input);
     }
 
-    /// [`Self::reset_direct`] for the next pixel of the same span as the slot's last
-    /// fragment (the fused path without lockstep shades a span's pixels one after the
-    /// other in one slot): only what differs between them is written, the position and,
-    /// when early tests ran, the coverage and depth.
-    #[inline(always)]
-    pub(crate) fn reset_direct_next(&self, seq: u64, x: u32, coverage: u8, depth: f32) {
-        debug_assert!(!self.has_fault.get());
-        let p = self.input.as_ptr();
-        // SAFETY: `Cell` never hands out references to its value (`get` copies), the slot
-        // is used by one thread (`Invocation` is `!Sync`), and no `get`/`set` runs during
-        // these writes: writing fields through `as_ptr` is then the same as `set` of the
-        // whole input with these fields changed, without building and copying it.
-        unsafe {
-            (*p).seq = seq;
-            (*p).x = x;
-            (*p).coverage = coverage;
-            (*p).depth = depth;
-        }
-        self.reset_results();
-    }
-
     /// What every reset does: the new input, and the previous fragment's results cleared
     /// (its fault has been taken already).
     #[inline(always)]
@@ -404,8 +462,24 @@ impl Invocation {
         self.reset_results();
     }
 
+    /// Clears the colour outputs the last fragment wrote (the fused path, whose other
+    /// per-fragment state is a [`DirectState`]'s). Most fragments write none: a load.
+    #[inline(always)]
+    pub(crate) fn clear_outputs(&self) {
+        let mut written = self.outputs_written.get();
+        if written == 0 {
+            return;
+        }
+        self.outputs_written.set(0);
+        while written != 0 {
+            let i = written.trailing_zeros() as usize;
+            self.outputs[i].set([0; 4]);
+            written &= written - 1;
+        }
+    }
+
     /// Clears the previous fragment's results (its fault has been taken already) but not
-    /// its input (see [`Self::reset_direct_next`]).
+    /// its input.
     #[inline(always)]
     pub(crate) fn reset_results(&self) {
         debug_assert!(!self.has_fault.get());
@@ -704,21 +778,50 @@ impl<T: Word> Future for CompareExchange<'_, T> {
     }
 }
 
-/// An access counted in the contention table (`ExecConfig::contention`): out of line, so
-/// that kernels that run without the table (the fused path) stay small enough to inline.
+/// Enters an access into the contention table (`ExecConfig::contention`); the guard leaves
+/// it. Out of line, and the operation stays in the caller: an out-of-line function taking
+/// the operation would have it written to memory before every access, table or not.
 #[cold]
 #[inline(never)]
-fn apply_contended<T: Word>(
-    memory: &Memory,
+fn enter_contended(
     table: &crate::stats::ContentionTable,
     addr: Addr,
-    op: MemOp,
-    ordering: crate::sync::Ordering,
-) -> u64 {
-    let guard = table.enter(addr);
-    let bits = memory.apply::<T>(addr, op, ordering);
-    drop(guard);
-    bits
+) -> crate::stats::ContentionGuard<'_> {
+    table.enter(addr)
+}
+
+/// Records an out-of-range access. A free function of plain values: were it a method of
+/// [`Frag`], the hot path would keep a copy of the context in memory for its sake (stores
+/// before every access, which a locked operation then waits for).
+#[cold]
+#[inline(never)]
+fn out_of_bounds(inv: &Invocation, memory: &Memory, buffer: u32, len: u32, index: u32) {
+    inv.set_fault(FaultKind::OutOfBounds {
+        buffer: memory.buffer_name(buffer).to_string(),
+        index: index as u64,
+        len,
+    });
+}
+
+/// Whether a weak compare-exchange fails spuriously: a hash of the invocation and its step
+/// count against `ExecConfig::spurious_cas_per_mille`, so that a schedule replays exactly.
+pub(crate) fn spurious_cas_failure(env: &PassEnv<'_>, seq: u64, steps: u64) -> bool {
+    let p = env.spurious_cas;
+    if p == 0 {
+        return false;
+    }
+    let mut h = seq ^ (steps << 40) ^ 0x9E37_79B9_7F4A_7C15;
+    h ^= h >> 33;
+    h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+    h ^= h >> 33;
+    h % 1000 < p as u64
+}
+
+/// Records a watchdog fault (see [`out_of_bounds`] for why a free function).
+#[cold]
+#[inline(never)]
+fn watchdog(inv: &Invocation, steps: u64) {
+    inv.set_fault(FaultKind::Watchdog { steps });
 }
 
 /// A future that never completes: the invocation has faulted and will be dropped.
@@ -904,14 +1007,9 @@ impl<'a> Frag<'a> {
         }
     }
 
-    #[cold]
-    #[inline(never)]
+    #[inline(always)]
     fn out_of_bounds<T: Word>(&self, buf: Buf<T>, index: u32) {
-        self.inv.set_fault(FaultKind::OutOfBounds {
-            buffer: self.env.memory.buffer_name(buf.id).to_string(),
-            index: index as u64,
-            len: buf.len,
-        });
+        out_of_bounds(self.inv, self.env.memory, buf.id, buf.len, index);
     }
 
     /// The future of one access: bounds are checked when it is first polled (an
@@ -952,20 +1050,34 @@ impl<'a> Frag<'a> {
     /// invocation faults (the executor then drops it).
     #[inline(always)]
     pub(crate) fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
+        self.perform_counted(&self.inv.steps, &self.inv.ops, buf, index, op)
+    }
+
+    /// [`Self::perform`] counting into `steps` and `ops`: the slot's, or a
+    /// [`DirectState`]'s. Both contexts perform an access here, so they compute the same.
+    #[inline(always)]
+    pub(crate) fn perform_counted<T: Word>(
+        &self,
+        steps: &Cell<u64>,
+        ops: &[Cell<u32>; OP_KINDS],
+        buf: Buf<T>,
+        index: u32,
+        op: MemOp,
+    ) -> Poll<T> {
         let (inv, env) = (self.inv, self.env);
         if index >= buf.len {
             self.out_of_bounds(buf, index);
             return Poll::Pending;
         }
-        let steps = inv.steps.get() + 1;
-        if steps > env.max_steps || inv.faulted() {
-            inv.set_fault(FaultKind::Watchdog { steps: steps - 1 });
+        let n = steps.get() + 1;
+        if n > env.max_steps || inv.faulted() {
+            watchdog(inv, n - 1);
             return Poll::Pending;
         }
-        inv.steps.set(steps);
+        steps.set(n);
         let kind = op.kind();
         let k = kind as usize;
-        inv.ops[k].set(inv.ops[k].get() + 1);
+        ops[k].set(ops[k].get() + 1);
         let addr = Addr::new(buf.id, index);
         let ordering = if kind.is_plain() {
             crate::sync::Ordering::Relaxed
@@ -974,7 +1086,12 @@ impl<'a> Frag<'a> {
         };
         let bits = match env.contention {
             None => env.memory.apply::<T>(addr, op, ordering),
-            Some(table) => apply_contended::<T>(env.memory, table, addr, op, ordering),
+            Some(table) => {
+                let guard = enter_contended(table, addr);
+                let bits = env.memory.apply::<T>(addr, op, ordering);
+                drop(guard);
+                bits
+            }
         };
         Poll::Ready(T::from_bits(bits))
     }
@@ -1040,28 +1157,21 @@ impl<'a> Frag<'a> {
     /// its step count, so that a schedule replays exactly.
     #[inline]
     pub(crate) fn spurious_cas_failure(&self) -> bool {
-        let p = self.env.spurious_cas;
-        if p == 0 {
-            return false;
-        }
-        let mut h = self.input().seq ^ (self.inv.steps.get() << 40) ^ 0x9E37_79B9_7F4A_7C15;
-        h ^= h >> 33;
-        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
-        h ^= h >> 33;
-        h % 1000 < p as u64
+        spurious_cas_failure(self.env, self.input().seq, self.inv.steps.get())
     }
 
-    /// A step with no memory access under a direct executor without lockstep (a yield):
-    /// counted for the watchdog. `Pending` when the invocation faults.
+    /// A step with no memory access under a direct executor without lockstep (a yield),
+    /// counted into `steps` for the watchdog (see [`Self::perform_counted`]). `Pending`
+    /// when the invocation faults.
     #[inline(always)]
-    pub(crate) fn direct_step(&self) -> Poll<()> {
+    pub(crate) fn direct_step_counted(&self, steps: &Cell<u64>) -> Poll<()> {
         let inv = self.inv;
-        let steps = inv.steps.get() + 1;
-        if steps > self.env.max_steps || inv.faulted() {
-            inv.set_fault(FaultKind::Watchdog { steps: steps - 1 });
+        let n = steps.get() + 1;
+        if n > self.env.max_steps || inv.faulted() {
+            watchdog(inv, n - 1);
             return Poll::Pending;
         }
-        inv.steps.set(steps);
+        steps.set(n);
         Poll::Ready(())
     }
 

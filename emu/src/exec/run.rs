@@ -9,7 +9,9 @@ use super::policy::{Candidate, Chooser};
 use super::simt::Simt;
 use super::{ExecConfig, ExecMode, ScheduleConfig};
 use crate::hazard::{Detector, Hazard, HazardCounts, InvocationId};
-use crate::kernel::{FaultKind, Frag, FragInput, FragmentKernel, Invocation, PassEnv, StepKind};
+use crate::kernel::{
+    DirectState, FaultKind, Frag, FragInput, FragmentKernel, Invocation, PassEnv, StepKind,
+};
 use crate::stats::Stats;
 use crate::sync::pool;
 
@@ -174,6 +176,24 @@ pub(crate) struct Acc {
     ops: [u32; 13],
 }
 
+impl Tally {
+    /// Counts a fused-path invocation that did not fault, from its [`DirectState`]
+    /// (`samples`: its covered samples, which pass unless it discarded). As
+    /// [`Acc::tally_one`] does from a slot.
+    #[inline(always)]
+    pub(crate) fn add_direct(&mut self, state: &DirectState, samples: u8) {
+        let d = state.discarded.get();
+        let s = state.steps.get();
+        self.shaded += 1;
+        self.discarded += u64::from(d);
+        self.steps += s;
+        self.max_steps = self.max_steps.max(s);
+        if !d {
+            self.samples_passed += u64::from(samples);
+        }
+    }
+}
+
 impl Acc {
     /// Copies a finished invocation's results out and counts it.
     pub(crate) fn harvest(&mut self, inv: &Invocation, out: &mut FragOut, colors: &mut [[u32; 4]]) {
@@ -269,7 +289,7 @@ impl Acc {
 
     /// Adds a tally of invocations that did not fault.
     #[inline]
-    pub(crate) fn add_tally(&mut self, t: &Tally) {
+    pub(crate) fn add_tally(&mut self, t: Tally) {
         let st = &mut self.stats;
         st.shaded += t.shaded;
         st.discarded += t.discarded;

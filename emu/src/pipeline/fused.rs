@@ -31,7 +31,9 @@ use std::task::{Context, Poll, Waker};
 use crate::exec::{record_panic, Acc, ShadeOutcome, Tally};
 use crate::fragment::DirectFrag;
 use crate::framebuffer::TileMemory;
-use crate::kernel::{Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv, PixelArray};
+use crate::kernel::{
+    DirectState, Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv, PixelArray,
+};
 use crate::memory::PixelPrefetcher;
 use crate::raster::{Binned, FlatChunk, Prepared, SampleCount, Segment, SetupTriangle, Span};
 use crate::state::FragmentState;
@@ -573,6 +575,9 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         // Nothing to test or write after shading (capture and counting passes).
         let count_only = !late_tests && pass.targets == 0;
         let slot = &slots[0];
+        // The fragment's state, in registers (see `DirectState`); the slot takes colour
+        // outputs and faults, and the state when the slot's path must see it.
+        let state = DirectState::new();
         // Counts of the unit's invocations, added to the worker's once at the end.
         let mut tally = Tally::default();
         for (i, span) in spans.iter().enumerate() {
@@ -580,29 +585,35 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             let Some(row) = rows.row(span, counts) else {
                 continue;
             };
-            // The slot holds the input of the span's previous pixel (`first`: not yet).
+            // The state holds the input of the span's previous pixel (`first`: not yet).
             let mut first = true;
             for x in span.x0..span.x1 {
                 let Some((cov, depth)) = row.early(&rows, span, x, &mut tile, counts) else {
                     continue;
                 };
                 if first {
-                    // Written straight into the slot: a copy of a built input stalled on
-                    // store forwarding.
-                    slot.reset_direct(row.input(&rows, span, x, cov, depth));
+                    state.reset(row.input(&rows, span, x, cov, depth));
                     first = false;
                 } else {
-                    slot.reset_direct_next(row.seq(x), x, cov, depth);
+                    state.reset_next(row.seq(x), x, cov, depth);
                 }
-                shade_direct(kernel, slot, env);
-                if count_only {
-                    acc.tally_one(&mut tally, slot, samples_of(cov));
+                slot.clear_outputs();
+                shade_direct(kernel, slot, &state, env);
+                if count_only && !slot.faulted() {
+                    tally.add_direct(&state, samples_of(cov));
                 } else {
-                    late(pass, env, positions, acc, counts, slot, tile_of(&mut tile));
+                    // A fault to report, or late tests and target writes: the slot's path.
+                    state.spill(slot);
+                    if count_only {
+                        acc.tally_one(&mut tally, slot, samples_of(cov));
+                    } else {
+                        late(pass, env, positions, acc, counts, slot, tile_of(&mut tile));
+                    }
                 }
             }
         }
-        acc.add_tally(&tally);
+        state.drain_ops(slot);
+        acc.add_tally(tally);
         counts.samples_passed += tally.samples_passed;
         tile
     }
@@ -734,12 +745,17 @@ fn shade_lockstep<K: FragmentKernel>(kernel: &K, slots: &[Invocation], env: &Pas
 /// Shades one invocation to its end through [`DirectFrag`] (no lockstep: an access never
 /// suspends, so the kernel's state machine folds into this loop). A panic ends it.
 #[inline(always)]
-fn shade_direct<K: FragmentKernel>(kernel: &K, inv: &Invocation, env: &PassEnv<'_>) {
+fn shade_direct<K: FragmentKernel>(
+    kernel: &K,
+    inv: &Invocation,
+    state: &DirectState,
+    env: &PassEnv<'_>,
+) {
     debug_assert!(matches!(env.mode, Mode::Direct { .. }));
     let r = catch_unwind(AssertUnwindSafe(|| {
         let mut cx = Context::from_waker(Waker::noop());
         // Interlock is not used on this path, so the kernel is the whole invocation.
-        let frag = DirectFrag(Frag { inv, env });
+        let frag = DirectFrag::new(Frag { inv, env }, state);
         // One poll: under `DirectFrag` nothing suspends, and an invocation is pending
         // only once it has faulted (it is then dropped).
         let pending = std::pin::pin!(kernel.shade(frag))
