@@ -32,7 +32,7 @@
 
 mod clip;
 mod coverage;
-mod pool;
+pub(crate) mod pool;
 mod setup;
 
 pub use setup::{
