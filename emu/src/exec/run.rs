@@ -182,13 +182,18 @@ impl Tally {
     /// [`Acc::tally_one`] does from a slot.
     #[inline(always)]
     pub(crate) fn add_direct(&mut self, state: &DirectState, samples: u8) {
-        let d = state.discarded.get();
-        let s = state.steps.get();
+        self.add(state.discarded.get(), state.steps.get(), samples);
+    }
+
+    /// Counts an invocation that did not fault: whether it discarded, its steps, and its
+    /// covered samples (which pass unless it discarded).
+    #[inline(always)]
+    fn add(&mut self, discarded: bool, steps: u64, samples: u8) {
         self.shaded += 1;
-        self.discarded += u64::from(d);
-        self.steps += s;
-        self.max_steps = self.max_steps.max(s);
-        if !d {
+        self.discarded += u64::from(discarded);
+        self.steps += steps;
+        self.max_steps = self.max_steps.max(steps);
+        if !discarded {
             self.samples_passed += u64::from(samples);
         }
     }
@@ -276,15 +281,7 @@ impl Acc {
             self.count(inv);
             return;
         }
-        let d = inv.discarded.get();
-        let s = inv.steps.get();
-        tally.shaded += 1;
-        tally.discarded += u64::from(d);
-        tally.steps += s;
-        tally.max_steps = tally.max_steps.max(s);
-        if !d {
-            tally.samples_passed += u64::from(samples);
-        }
+        tally.add(inv.discarded.get(), inv.steps.get(), samples);
     }
 
     /// Adds a tally of invocations that did not fault.
