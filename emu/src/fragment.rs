@@ -397,8 +397,9 @@ impl<'a> DirectFrag<'a> {
     #[inline(always)]
     fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
         let st = self.state;
+        // The fused path never keeps the contention table (`shade_direct` checks).
         self.frag
-            .perform_counted::<T>(&st.steps, &st.ops, buf, index, op)
+            .perform_counted::<T>(&st.steps, &st.ops, None, buf, index, op)
     }
     #[inline(always)]
     fn op<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Performed<T> {

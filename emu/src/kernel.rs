@@ -1050,16 +1050,20 @@ impl<'a> Frag<'a> {
     /// invocation faults (the executor then drops it).
     #[inline(always)]
     pub(crate) fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
-        self.perform_counted(&self.inv.steps, &self.inv.ops, buf, index, op)
+        let contention = self.env.contention;
+        self.perform_counted(&self.inv.steps, &self.inv.ops, contention, buf, index, op)
     }
 
-    /// [`Self::perform`] counting into `steps` and `ops`: the slot's, or a
-    /// [`DirectState`]'s. Both contexts perform an access here, so they compute the same.
+    /// [`Self::perform`] counting into `steps` and `ops` (the slot's, or a
+    /// [`DirectState`]'s) and into `contention` when the pass keeps the table (`None` from
+    /// the fused path, which never does: the check then folds away). Both contexts perform
+    /// an access here, so they compute the same.
     #[inline(always)]
     pub(crate) fn perform_counted<T: Word>(
         &self,
         steps: &Cell<u64>,
         ops: &[Cell<u32>; OP_KINDS],
+        contention: Option<&crate::stats::ContentionTable>,
         buf: Buf<T>,
         index: u32,
         op: MemOp,
@@ -1084,7 +1088,7 @@ impl<'a> Frag<'a> {
         } else {
             crate::sync::Ordering::AcqRel
         };
-        let bits = match env.contention {
+        let bits = match contention {
             None => env.memory.apply::<T>(addr, op, ordering),
             Some(table) => {
                 let guard = enter_contended(table, addr);

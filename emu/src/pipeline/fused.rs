@@ -752,6 +752,8 @@ fn shade_direct<K: FragmentKernel>(
     env: &PassEnv<'_>,
 ) {
     debug_assert!(matches!(env.mode, Mode::Direct { .. }));
+    // `DirectFrag` counts no contention: passes that keep the table take the general path.
+    debug_assert!(env.contention.is_none());
     let r = catch_unwind(AssertUnwindSafe(|| {
         let mut cx = Context::from_waker(Waker::noop());
         // Interlock is not used on this path, so the kernel is the whole invocation.
