@@ -294,7 +294,8 @@ impl Acc {
         st.max_steps_per_invocation = st.max_steps_per_invocation.max(t.max_steps);
     }
 
-    /// Adds operation counters kept across invocations (see [`Invocation::reset_keep_ops`]).
+    /// Adds a slot's operation counters, kept across invocations on the fused path (where
+    /// [`DirectState::drain_ops`] adds its own to the slot's), and clears them.
     pub(crate) fn add_ops(&mut self, inv: &Invocation) {
         for (a, o) in self.ops.iter_mut().zip(&inv.ops) {
             *a = a.saturating_add(o.get());
