@@ -462,8 +462,9 @@ impl Invocation {
         self.reset_results();
     }
 
-    /// Clears the colour outputs the last fragment wrote (the fused path, whose other
-    /// per-fragment state is a [`DirectState`]'s). Most fragments write none: a load.
+    /// Clears the colour outputs the last fragment wrote (only those: most write none, and
+    /// then this is a load). The fused path without lockstep calls it alone: the rest of
+    /// its per-fragment state is a [`DirectState`]'s.
     #[inline(always)]
     pub(crate) fn clear_outputs(&self) {
         let mut written = self.outputs_written.get();
@@ -483,13 +484,7 @@ impl Invocation {
     #[inline(always)]
     pub(crate) fn reset_results(&self) {
         debug_assert!(!self.has_fault.get());
-        // Only outputs the previous invocation wrote need clearing (most write none).
-        let mut written = self.outputs_written.replace(0);
-        while written != 0 {
-            let i = written.trailing_zeros() as usize;
-            self.outputs[i].set([0; 4]);
-            written &= written - 1;
-        }
+        self.clear_outputs();
         self.discarded.set(false);
         self.depth_out.set(None);
         self.steps.set(0);

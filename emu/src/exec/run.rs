@@ -11,6 +11,7 @@ use super::{ExecConfig, ExecMode, ScheduleConfig};
 use crate::hazard::{Detector, Hazard, HazardCounts, InvocationId};
 use crate::kernel::{
     DirectState, FaultKind, Frag, FragInput, FragmentKernel, Invocation, PassEnv, StepKind,
+    OP_KINDS,
 };
 use crate::stats::Stats;
 use crate::sync::pool;
@@ -173,7 +174,7 @@ pub(crate) struct Tally {
 pub(crate) struct Acc {
     stats: Stats,
     faults: Vec<Fault>,
-    ops: [u32; 13],
+    ops: [u32; OP_KINDS],
 }
 
 impl Tally {
