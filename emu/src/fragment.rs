@@ -353,7 +353,7 @@ impl<'a> Frag<'a> {
 #[derive(Clone, Copy)]
 pub struct DirectFrag<'a> {
     frag: Frag<'a>,
-    state: &'a DirectState,
+    state: &'a DirectState<'a>,
 }
 
 /// An access already performed: its outcome (`Pending` when the invocation faulted; the
@@ -372,7 +372,7 @@ impl<T: Copy> Future for Performed<T> {
 impl<'a> DirectFrag<'a> {
     /// The context of the invocation in `frag`'s slot, whose per-fragment state is `state`.
     #[inline(always)]
-    pub(crate) fn new(frag: Frag<'a>, state: &'a DirectState) -> Self {
+    pub(crate) fn new(frag: Frag<'a>, state: &'a DirectState<'a>) -> Self {
         DirectFrag { frag, state }
     }
     #[inline(always)]
@@ -399,7 +399,7 @@ impl<'a> DirectFrag<'a> {
         let st = self.state;
         // The fused path never keeps the contention table (`shade_direct` checks).
         self.frag
-            .perform_counted::<T>(&st.steps, &st.ops, None, buf, index, op)
+            .perform_counted::<T>(&st.steps, &st.ops, None, Some(&st.words), buf, index, op)
     }
     #[inline(always)]
     fn op<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Performed<T> {

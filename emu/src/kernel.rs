@@ -28,7 +28,7 @@ use std::task::{Context, Poll};
 use crate::fragment::Fragment;
 use crate::framebuffer::Image;
 use crate::interlock::{Interlock, InterlockMode};
-use crate::memory::{Addr, Buf, MemOp, Memory, OpKind, Word};
+use crate::memory::{Addr, Buf, MemOp, Memory, OpKind, Word, WordCache};
 use crate::raster::SetupTriangle;
 
 /// What a kernel declares about itself; the pipeline uses it to place depth tests and to
@@ -330,7 +330,7 @@ pub(crate) const OP_KINDS: usize = OpKind::ALL.len();
 /// for those stores to drain (docs/performance.md). The slot still holds what is rare:
 /// colour outputs and faults; the executor copies this state into it when a fragment needs
 /// the slot's path after shading ([`DirectState::spill`]).
-pub(crate) struct DirectState {
+pub(crate) struct DirectState<'m> {
     pub input: Cell<FragInput>,
     pub steps: Cell<u64>,
     pub discarded: Cell<bool>,
@@ -338,9 +338,11 @@ pub(crate) struct DirectState {
     /// Operation counters of every fragment shaded with this state (not reset per
     /// fragment; the executor adds them to the slot's at the end of a unit).
     pub ops: [Cell<u32>; OP_KINDS],
+    /// The words of the buffers last accessed (kept across fragments, as the counters).
+    pub words: WordCache<'m>,
 }
 
-impl DirectState {
+impl DirectState<'_> {
     #[inline(always)]
     pub fn new() -> Self {
         DirectState {
@@ -349,6 +351,7 @@ impl DirectState {
             discarded: Cell::new(false),
             depth_out: Cell::new(None),
             ops: Default::default(),
+            words: WordCache::new(),
         }
     }
 
@@ -1046,19 +1049,29 @@ impl<'a> Frag<'a> {
     #[inline(always)]
     pub(crate) fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
         let contention = self.env.contention;
-        self.perform_counted(&self.inv.steps, &self.inv.ops, contention, buf, index, op)
+        self.perform_counted(
+            &self.inv.steps,
+            &self.inv.ops,
+            contention,
+            None,
+            buf,
+            index,
+            op,
+        )
     }
 
     /// [`Self::perform`] counting into `steps` and `ops` (the slot's, or a
     /// [`DirectState`]'s) and into `contention` when the pass keeps the table (`None` from
-    /// the fused path, which never does: the check then folds away). Both contexts perform
-    /// an access here, so they compute the same.
+    /// the fused path, which never does: the check then folds away). `words` finds the word
+    /// through a [`DirectState`]'s cache instead of the buffer table (ignored when the
+    /// table is kept). Both contexts perform an access here, so they compute the same.
     #[inline(always)]
     pub(crate) fn perform_counted<T: Word>(
         &self,
         steps: &Cell<u64>,
         ops: &[Cell<u32>; OP_KINDS],
         contention: Option<&crate::stats::ContentionTable>,
+        words: Option<&WordCache<'a>>,
         buf: Buf<T>,
         index: u32,
         op: MemOp,
@@ -1083,9 +1096,10 @@ impl<'a> Frag<'a> {
         } else {
             crate::sync::Ordering::AcqRel
         };
-        let bits = match contention {
-            None => env.memory.apply::<T>(addr, op, ordering),
-            Some(table) => {
+        let bits = match (contention, words) {
+            (None, Some(words)) => words.apply::<T>(env.memory, addr, op, ordering),
+            (None, None) => env.memory.apply::<T>(addr, op, ordering),
+            (Some(table), _) => {
                 let guard = enter_contended(table, addr);
                 let bits = env.memory.apply::<T>(addr, op, ordering);
                 drop(guard);

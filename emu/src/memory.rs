@@ -6,6 +6,7 @@
 //! are real read-modify-write instructions. This module knows nothing of invocations,
 //! schedules or hazards: it checks bounds and performs operations.
 
+use std::cell::Cell;
 use std::fmt;
 use std::marker::PhantomData;
 
@@ -529,6 +530,25 @@ impl Memory {
         }
     }
 
+    /// The words of a buffer of 32-bit words (for [`WordCache`]); a handle of another width
+    /// is a foreign one.
+    #[inline(always)]
+    fn words32(&self, buffer: u32) -> &[AtomicU32] {
+        match &self.buffers[buffer as usize].words {
+            Words::W32(w) => w,
+            Words::W64(_) => foreign_handle(),
+        }
+    }
+
+    /// [`Self::words32`] for 64-bit words.
+    #[inline(always)]
+    fn words64(&self, buffer: u32) -> &[AtomicU64] {
+        match &self.buffers[buffer as usize].words {
+            Words::W64(w) => w,
+            Words::W32(_) => foreign_handle(),
+        }
+    }
+
     /// The raw bits of the word at a checked address (for the executor: did a step change
     /// memory?).
     pub(crate) fn bits(&self, addr: Addr) -> u64 {
@@ -574,6 +594,62 @@ impl Memory {
             (Words::W32(w), false) => apply32::<T>(&w[i], op, ordering) as u64,
             (Words::W64(w), true) => apply64(&w[i], op, ordering),
             _ => foreign_handle(),
+        }
+    }
+}
+
+/// The words of the last buffer of each width that a fragment context accessed, for the
+/// fused path of the direct executors (kept in [`crate::kernel::DirectState`]).
+///
+/// [`Memory::apply`] finds a word through the buffer table, the buffer's width tag and its
+/// slice: four dependent loads before the operation. On x86 a locked read-modify-write
+/// holds back the loads after it, so with one atomic per fragment those loads sat on the
+/// critical path of every fragment. Kernels touch few buffers, and the executor keeps this
+/// cache in registers across a unit's fragments, so an access is a compare of the buffer id
+/// and the operation. A miss finds the words as `apply` does (inline: a kernel that
+/// alternates between two buffers pays what it paid before, plus the compare). Buffers are
+/// neither added, resized nor replaced during a pass (that takes `&mut Memory`), so a slice
+/// found once stays the buffer's.
+pub(crate) struct WordCache<'m> {
+    w32: Cell<(u32, &'m [AtomicU32])>,
+    w64: Cell<(u32, &'m [AtomicU64])>,
+}
+
+impl<'m> WordCache<'m> {
+    #[inline(always)]
+    pub fn new() -> Self {
+        // Nothing cached: an id no buffer reaches in practice (were one to, its accesses
+        // would index the empty slice and panic, a reported fault, never another buffer).
+        WordCache {
+            w32: Cell::new((u32::MAX, &[])),
+            w64: Cell::new((u32::MAX, &[])),
+        }
+    }
+
+    /// [`Memory::apply`] through the cache: the same operation on the same word.
+    #[inline(always)]
+    pub fn apply<T: Word>(
+        &self,
+        memory: &'m Memory,
+        addr: Addr,
+        op: MemOp,
+        ordering: Ordering,
+    ) -> u64 {
+        let (b, i) = (addr.buffer(), addr.index() as usize);
+        if T::WIDE {
+            let (id, mut words) = self.w64.get();
+            if id != b {
+                words = memory.words64(b);
+                self.w64.set((b, words));
+            }
+            apply64(&words[i], op, ordering)
+        } else {
+            let (id, mut words) = self.w32.get();
+            if id != b {
+                words = memory.words32(b);
+                self.w32.set((b, words));
+            }
+            apply32::<T>(&words[i], op, ordering) as u64
         }
     }
 }
@@ -925,6 +1001,61 @@ mod tests {
         assert_eq!(m.read(a), Err(MemoryError::Taken("a".into())));
         assert_eq!(m.get(a, 0), None);
         assert!(m.take(a).is_err());
+    }
+
+    /// Through a [`WordCache`], accesses that alternate between buffers of both widths reach
+    /// the words they name: the same results and final contents as [`Memory::apply`] on a
+    /// twin memory.
+    #[test]
+    fn word_cache_follows_the_buffer_named() {
+        let build = || {
+            let mut m = Memory::default();
+            let a = m.create::<u32>("a", 5).unwrap();
+            let w = m.create::<u64>("w", 3).unwrap();
+            let b = m.create::<i32>("b", 4).unwrap();
+            let v = m.create::<u64>("v", 2).unwrap();
+            (m, a, w, b, v)
+        };
+        let (cached, a, w, b, v) = build();
+        let (plain, ..) = build();
+        let cache = WordCache::new();
+        let ord = Ordering::AcqRel;
+        // Buffer ids, in an order that misses the cache at every change of buffer.
+        let steps: [(u32, u32, bool); 10] = [
+            (a.id, 1, false),
+            (b.id, 1, false),
+            (a.id, 1, false),
+            (w.id, 2, true),
+            (v.id, 0, true),
+            (w.id, 2, true),
+            (a.id, 4, false),
+            (a.id, 4, false),
+            (b.id, 3, false),
+            (v.id, 1, true),
+        ];
+        for (k, &(id, index, wide)) in steps.iter().enumerate() {
+            let addr = Addr::new(id, index);
+            let op = MemOp::Add(k as u64 + 1);
+            let (got, want) = if wide {
+                (
+                    cache.apply::<u64>(&cached, addr, op, ord),
+                    plain.apply::<u64>(addr, op, ord),
+                )
+            } else {
+                (
+                    cache.apply::<u32>(&cached, addr, op, ord),
+                    plain.apply::<u32>(addr, op, ord),
+                )
+            };
+            assert_eq!(got, want, "step {k}: the value before the add");
+        }
+        assert_eq!(cached.read(a).unwrap(), plain.read(a).unwrap());
+        assert_eq!(cached.read(b).unwrap(), plain.read(b).unwrap());
+        assert_eq!(cached.read(w).unwrap(), plain.read(w).unwrap());
+        assert_eq!(cached.read(v).unwrap(), plain.read(v).unwrap());
+        // The adds landed where they were aimed: a[4] took steps 6 and 7 (7 + 8).
+        assert_eq!(cached.read(a).unwrap()[4], 15);
+        assert_eq!(cached.read(v).unwrap(), vec![5, 10]);
     }
 
     /// Every operation on every word type returns the same value and leaves the same word

@@ -182,7 +182,7 @@ impl Tally {
     /// (`samples`: its covered samples, which pass unless it discarded). As
     /// [`Acc::tally_one`] does from a slot.
     #[inline(always)]
-    pub(crate) fn add_direct(&mut self, state: &DirectState, samples: u8) {
+    pub(crate) fn add_direct(&mut self, state: &DirectState<'_>, samples: u8) {
         self.add(state.discarded.get(), state.steps.get(), samples);
     }
 

@@ -745,11 +745,11 @@ fn shade_lockstep<K: FragmentKernel>(kernel: &K, slots: &[Invocation], env: &Pas
 /// Shades one invocation to its end through [`DirectFrag`] (no lockstep: an access never
 /// suspends, so the kernel's state machine folds into this loop). A panic ends it.
 #[inline(always)]
-fn shade_direct<K: FragmentKernel>(
+fn shade_direct<'a, K: FragmentKernel>(
     kernel: &K,
-    inv: &Invocation,
-    state: &DirectState,
-    env: &PassEnv<'_>,
+    inv: &'a Invocation,
+    state: &'a DirectState<'a>,
+    env: &'a PassEnv<'a>,
 ) {
     debug_assert!(matches!(env.mode, Mode::Direct { .. }));
     // `DirectFrag` counts no contention: passes that keep the table take the general path.
