@@ -26,7 +26,7 @@ use std::pin::Pin;
 use std::task::{Context, Poll};
 
 use crate::framebuffer::Image;
-use crate::kernel::{DirectState, Frag, FragView};
+use crate::kernel::{DirectState, Frag, FragView, Route};
 use crate::memory::{Buf, MemOp, Word};
 
 mod sealed {
@@ -399,7 +399,7 @@ impl<'a> DirectFrag<'a> {
         let st = self.state;
         // The fused path never keeps the contention table (`shade_direct` checks).
         self.frag
-            .perform_counted::<T>(&st.steps, &st.ops, None, Some(&st.words), buf, index, op)
+            .perform_counted::<T>(&st.steps, &st.ops, Route::Cached(&st.words), buf, index, op)
     }
     #[inline(always)]
     fn op<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Performed<T> {

@@ -555,6 +555,20 @@ pub struct Frag<'a> {
     pub(crate) env: &'a PassEnv<'a>,
 }
 
+/// How [`Frag::perform_counted`] reaches an access's word, past the bounds and step checks.
+/// Each context passes a constant variant, so the others fold away.
+#[derive(Clone, Copy)]
+pub(crate) enum Route<'s, 'a> {
+    /// Through the buffer table.
+    Table,
+    /// Through the buffer table, inside the contention table's count of the address (the
+    /// pass keeps the table).
+    Contended(&'s crate::stats::ContentionTable),
+    /// Through a [`DirectState`]'s cache of buffer words (the fused path, which never keeps
+    /// the contention table).
+    Cached(&'s WordCache<'a>),
+}
+
 /// The future of one step: completes at once in direct mode, suspends until granted in
 /// scheduled mode, and never completes once the invocation has faulted (the executor then
 /// drops it, which ends the invocation).
@@ -1048,30 +1062,22 @@ impl<'a> Frag<'a> {
     /// invocation faults (the executor then drops it).
     #[inline(always)]
     pub(crate) fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
-        let contention = self.env.contention;
-        self.perform_counted(
-            &self.inv.steps,
-            &self.inv.ops,
-            contention,
-            None,
-            buf,
-            index,
-            op,
-        )
+        let route = match self.env.contention {
+            Some(table) => Route::Contended(table),
+            None => Route::Table,
+        };
+        self.perform_counted(&self.inv.steps, &self.inv.ops, route, buf, index, op)
     }
 
     /// [`Self::perform`] counting into `steps` and `ops` (the slot's, or a
-    /// [`DirectState`]'s) and into `contention` when the pass keeps the table (`None` from
-    /// the fused path, which never does: the check then folds away). `words` finds the word
-    /// through a [`DirectState`]'s cache instead of the buffer table (ignored when the
-    /// table is kept). Both contexts perform an access here, so they compute the same.
+    /// [`DirectState`]'s), reaching the word by `route`. Both contexts perform an access
+    /// here, so they compute the same.
     #[inline(always)]
     pub(crate) fn perform_counted<T: Word>(
         &self,
         steps: &Cell<u64>,
         ops: &[Cell<u32>; OP_KINDS],
-        contention: Option<&crate::stats::ContentionTable>,
-        words: Option<&WordCache<'a>>,
+        route: Route<'_, 'a>,
         buf: Buf<T>,
         index: u32,
         op: MemOp,
@@ -1096,10 +1102,10 @@ impl<'a> Frag<'a> {
         } else {
             crate::sync::Ordering::AcqRel
         };
-        let bits = match (contention, words) {
-            (None, Some(words)) => words.apply::<T>(env.memory, addr, op, ordering),
-            (None, None) => env.memory.apply::<T>(addr, op, ordering),
-            (Some(table), _) => {
+        let bits = match route {
+            Route::Table => env.memory.apply::<T>(addr, op, ordering),
+            Route::Cached(words) => words.apply::<T>(env.memory, addr, op, ordering),
+            Route::Contended(table) => {
                 let guard = enter_contended(table, addr);
                 let bits = env.memory.apply::<T>(addr, op, ordering);
                 drop(guard);
