@@ -498,6 +498,6 @@ impl Fragment for DirectFrag<'_> {
     }
     #[inline(always)]
     fn yield_now(&self) -> impl Future<Output = ()> {
-        Performed(self.frag.direct_step_counted(&self.state.steps))
+        Performed(self.frag.count_step(&self.state.steps))
     }
 }

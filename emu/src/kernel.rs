@@ -1082,17 +1082,14 @@ impl<'a> Frag<'a> {
         index: u32,
         op: MemOp,
     ) -> Poll<T> {
-        let (inv, env) = (self.inv, self.env);
+        let env = self.env;
         if index >= buf.len {
             self.out_of_bounds(buf, index);
             return Poll::Pending;
         }
-        let n = steps.get() + 1;
-        if n > env.max_steps || inv.faulted() {
-            watchdog(inv, n - 1);
+        if self.count_step(steps).is_pending() {
             return Poll::Pending;
         }
-        steps.set(n);
         let kind = op.kind();
         let k = kind as usize;
         ops[k].set(ops[k].get() + 1);
@@ -1179,11 +1176,11 @@ impl<'a> Frag<'a> {
         spurious_cas_failure(self.env, self.input().seq, self.inv.steps.get())
     }
 
-    /// A step with no memory access under a direct executor without lockstep (a yield),
-    /// counted into `steps` for the watchdog (see [`Self::perform_counted`]). `Pending`
-    /// when the invocation faults.
+    /// One step of the invocation counted into `steps` for the watchdog: an access (see
+    /// [`Self::perform_counted`]) or, under a direct executor without lockstep, a yield.
+    /// `Pending` when the invocation faults (the watchdog's limit, or an earlier fault).
     #[inline(always)]
-    pub(crate) fn direct_step_counted(&self, steps: &Cell<u64>) -> Poll<()> {
+    pub(crate) fn count_step(&self, steps: &Cell<u64>) -> Poll<()> {
         let inv = self.inv;
         let n = steps.get() + 1;
         if n > self.env.max_steps || inv.faulted() {
