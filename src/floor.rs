@@ -10,7 +10,7 @@
 
 use std::time::Instant;
 
-use fragrace_emu::sync::pool::scope;
+use fragrace_emu::sync::pool::broadcast;
 use fragrace_emu::sync::{AtomicU32, AtomicUsize, Ordering};
 
 /// The floor of one frame, in milliseconds (medians over the frames timed).
@@ -104,12 +104,7 @@ fn replay(cfg: &FloorConfig<'_>, words: &[AtomicU32]) {
             }
         }
     };
-    scope(|s| {
-        for _ in 1..cfg.threads.max(1) {
-            s.spawn(work);
-        }
-        work();
-    });
+    broadcast(cfg.threads.max(1), |_| work());
 }
 
 /// The median of timings (the upper one of an even count); sorts `v`.

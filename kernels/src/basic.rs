@@ -58,7 +58,7 @@ pub struct Count;
 pub struct CountPlain;
 
 fn run_count(frame: &Frame<'_>, exec: &ExecConfig, plain: bool) -> Result<AlgoResult, AlgoError> {
-    let mut device = common::fresh();
+    let mut device = common::fresh(exec);
     let counts = device.buffer::<u32>("counts", pixels(frame) as u64)?;
     let mut fb = framebuffer(frame, SampleCount::X1, &[])?;
     let report = if plain {
@@ -190,7 +190,7 @@ impl Algorithm for Opaque {
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
-        let device = common::fresh();
+        let device = common::fresh(exec);
         let mut fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA8, Format::RG32F])?;
         let bg = params.background;
         fb.clear_color(
@@ -284,7 +284,7 @@ impl Truth {
             offsets.push(total);
             total += c;
         }
-        let mut device = common::fresh();
+        let mut device = common::fresh(&exec);
         let off_buf = device.buffer::<u32>("offsets", n as u64)?;
         device.memory.write(off_buf, 0, &offsets)?;
         offsets.push(total);

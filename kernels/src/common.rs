@@ -158,9 +158,9 @@ pub fn pixels(frame: &Frame<'_>) -> usize {
     frame.width as usize * frame.height as usize
 }
 
-/// A fresh device for one run.
-pub fn fresh() -> Device {
-    Device::new()
+/// A fresh device for one run (its buffers zeroed with the run's threads).
+pub fn fresh(exec: &ExecConfig) -> Device {
+    Device::with_threads(exec.threads)
 }
 
 /// The sum of `values`, split over `threads` threads: checks that read every pixel's count
@@ -174,14 +174,8 @@ pub fn parallel_sum(values: &[u32], threads: usize) -> u64 {
         return sum(values);
     }
     let chunk = values.len().div_ceil(threads);
-    fragrace_emu::sync::pool::scope(|s| {
-        let parts: Vec<_> = values
-            .chunks(chunk)
-            .map(|part| s.spawn(move || sum(part)))
-            .collect();
-        parts
-            .into_iter()
-            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-            .sum()
-    })
+    let parts: Vec<&[u32]> = values.chunks(chunk).collect();
+    fragrace_emu::sync::pool::broadcast(parts.len(), |k| sum(parts[k]))
+        .into_iter()
+        .sum()
 }

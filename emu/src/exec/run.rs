@@ -500,34 +500,26 @@ fn run_chunks<K: FragmentKernel>(
     // Batches are handed out in API order, so the predecessors of any fragment on its pixel
     // are in batches already taken: ordered interlock cannot deadlock.
     let queue = pool::Mutex::new(chunks.into_iter());
-    let accs: Vec<Acc> = pool::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|_| {
-                s.spawn(|| {
-                    let mut acc = Acc::default();
-                    loop {
-                        let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
-                        let Some((ins, o, c)) = next else { break };
-                        run_direct(
-                            kernel,
-                            env,
-                            ins,
-                            o,
-                            c,
-                            targets,
-                            batch,
-                            cfg.lockstep,
-                            &mut acc,
-                        );
-                    }
-                    acc
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().unwrap_or_default())
-            .collect()
+    // All threads at once (`broadcast`): with ordered interlock a batch may wait for one
+    // another thread holds.
+    let accs: Vec<Acc> = pool::broadcast(threads, |_| {
+        let mut acc = Acc::default();
+        loop {
+            let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
+            let Some((ins, o, c)) = next else { break };
+            run_direct(
+                kernel,
+                env,
+                ins,
+                o,
+                c,
+                targets,
+                batch,
+                cfg.lockstep,
+                &mut acc,
+            );
+        }
+        acc
     });
     for acc in accs {
         acc.finish(outcome);

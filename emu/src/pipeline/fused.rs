@@ -290,20 +290,8 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
 
 /// Runs `work` on `threads` scoped threads (inline with one) and collects the results.
 fn on_threads<R: Send>(threads: usize, work: impl Fn() -> R + Sync) -> Vec<R> {
-    if threads <= 1 {
-        return vec![work()];
-    }
-    pool::scope(|s| {
-        let handles: Vec<_> = (0..threads).map(|_| s.spawn(&work)).collect();
-        handles
-            .into_iter()
-            .map(|h| match h.join() {
-                Ok(r) => r,
-                // Kernel panics are caught per invocation; a panic here is a bug of ours.
-                Err(p) => std::panic::resume_unwind(p),
-            })
-            .collect()
-    })
+    // Kernel panics are caught per invocation; a panic resumed here is a bug of ours.
+    pool::broadcast(threads.max(1), |_| work())
 }
 
 /// What the fragments of a unit of work share before shading: coverage masking and the

@@ -118,6 +118,14 @@ impl Device {
         Device::default()
     }
 
+    /// A device whose large new buffers are zeroed by `threads` threads (see
+    /// [`Memory::with_threads`]).
+    pub fn with_threads(threads: usize) -> Device {
+        Device {
+            memory: Memory::with_threads(threads),
+        }
+    }
+
     /// Creates a zero-filled storage buffer.
     pub fn buffer<T: Word>(&mut self, name: &str, len: u64) -> Result<Buf<T>, MemoryError> {
         self.memory.create(name, len)
@@ -827,13 +835,10 @@ fn transform(positions: &[glam::Vec3], m: glam::Mat4, threads: usize, out: &mut 
     out.truncate(positions.len());
     out.resize(positions.len(), Vec4::ZERO);
     let chunk = positions.len().div_ceil(threads.max(1)).max(4096);
-    pool::scope(|s| {
-        for (src, dst) in positions.chunks(chunk).zip(out.chunks_mut(chunk)) {
-            s.spawn(move || {
-                for (p, o) in src.iter().zip(dst.iter_mut()) {
-                    *o = m * p.extend(1.0);
-                }
-            });
+    let parts: Vec<_> = positions.chunks(chunk).zip(out.chunks_mut(chunk)).collect();
+    pool::broadcast_each(parts, |(src, dst)| {
+        for (p, o) in src.iter().zip(dst.iter_mut()) {
+            *o = m * p.extend(1.0);
         }
     });
 }
@@ -868,14 +873,10 @@ fn for_each_tile<T: Send, R: Send + Default + Clone>(
         .map(|(i, ((t, it), r))| (i, t, it, r))
         .collect();
     let queue = pool::Mutex::new(work.into_iter());
-    pool::scope(|s| {
-        for _ in 0..threads {
-            s.spawn(|| loop {
-                let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
-                let Some((i, t, it, r)) = next else { break };
-                *r = f(i, t, it);
-            });
-        }
+    pool::broadcast(threads, |_| loop {
+        let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
+        let Some((i, t, it, r)) = next else { break };
+        *r = f(i, t, it);
     });
     results
 }

@@ -1213,16 +1213,7 @@ fn par_map<T: Send>(n: usize, threads: usize, f: impl Fn(usize) -> T + Sync) -> 
             .map(|i| (i, f(i)))
             .collect::<Vec<_>>()
     };
-    let mut parts: Vec<Vec<(usize, T)>> = std::thread::scope(|s| {
-        let handles: Vec<_> = (1..threads).map(|k| s.spawn(move || work(k))).collect();
-        let mut parts = vec![work(0)];
-        parts.extend(
-            handles
-                .into_iter()
-                .map(|h| h.join().expect("raster worker panicked")),
-        );
-        parts
-    });
+    let mut parts: Vec<Vec<(usize, T)>> = crate::sync::pool::broadcast(threads, work);
     let mut slots: Vec<Option<T>> = (0..n).map(|_| None).collect();
     for part in parts.iter_mut() {
         for (i, t) in part.drain(..) {
@@ -1365,24 +1356,15 @@ pub fn prepare<'a>(
         project_vertices(&planes, &xf, positions, &mut xy, &mut zw)
     } else {
         let per = positions.len().div_ceil(vthreads);
-        std::thread::scope(|s| {
-            let mut parts = xy
-                .chunks_mut(per)
-                .zip(zw.chunks_mut(per))
-                .zip(positions.chunks(per));
-            let first = parts.next();
-            let handles: Vec<_> = parts
-                .map(|((xy, zw), src)| s.spawn(|| project_vertices(&planes, &xf, src, xy, zw)))
-                .collect();
-            let mut bad = match first {
-                Some(((xy, zw), src)) => project_vertices(&planes, &xf, src, xy, zw),
-                None => false,
-            };
-            for h in handles {
-                bad |= h.join().expect("projection worker panicked");
-            }
-            bad
+        let parts: Vec<_> = xy
+            .chunks_mut(per)
+            .zip(zw.chunks_mut(per))
+            .zip(positions.chunks(per))
+            .collect();
+        crate::sync::pool::broadcast_each(parts, |((xy, zw), src)| {
+            project_vertices(&planes, &xf, src, xy, zw)
         })
+        .contains(&true)
     };
     Prepared {
         positions,

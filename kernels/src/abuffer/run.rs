@@ -44,7 +44,7 @@ impl<'a> AbRun<'a> {
         exec: &'a ExecConfig,
     ) -> Result<AbRun<'a>, AlgoError> {
         Ok(AbRun {
-            device: common::fresh(),
+            device: common::fresh(exec),
             frame: *frame,
             params,
             exec,

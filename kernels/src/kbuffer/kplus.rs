@@ -338,7 +338,7 @@ fn run(
             "{n} pixels x k = {k} slots exceed the 2^32-word buffer limit"
         )));
     }
-    let mut device = common::fresh();
+    let mut device = common::fresh(exec);
     let slots = device.buffer::<u32>("kplus-slots", words)?;
     device.memory.fill(slots, EMPTY)?;
     let count = device.buffer::<u32>("kplus-count", n as u64)?;

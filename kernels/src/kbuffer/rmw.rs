@@ -246,7 +246,7 @@ impl<'a> KbRun<'a> {
         exec: &'a ExecConfig,
     ) -> Result<KbRun<'a>, AlgoError> {
         Ok(KbRun {
-            device: common::fresh(),
+            device: common::fresh(exec),
             frame: *frame,
             params,
             exec,

@@ -221,7 +221,7 @@ fn run(
 ) -> Result<AlgoResult, AlgoError> {
     let n = pixels(frame);
     let (w, h) = (frame.width, frame.height);
-    let mut device = common::fresh();
+    let mut device = common::fresh(exec);
 
     // 1. Count pass (instrumentation, loss accounting): the truth's fragments per pixel
     //    (single-sample rasterization).

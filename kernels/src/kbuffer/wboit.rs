@@ -130,7 +130,7 @@ impl Algorithm for Wboit {
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
         let n = pixels(frame);
-        let device = common::fresh();
+        let device = common::fresh(exec);
         let mut fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA32F, Format::R32F])?;
         fb.clear_color(0, [0; 4]);
         fb.clear_color(1, [1f32.to_bits(), 0, 0, 0]);

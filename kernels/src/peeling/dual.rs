@@ -124,7 +124,7 @@ impl Algorithm for Dual {
         check_ids_fit_floats(frame)?;
         // Every layer is peeled: no `k` cap on the lists.
         let mut peeled = Peeled::unbounded(frame, params);
-        let mut device = crate::common::fresh();
+        let mut device = crate::common::fresh(exec);
         let at_ends = device.buffer::<u32>("dual-at-ends", 1)?;
         let draw = Draw::new(frame.mesh, frame.view_proj);
         let mut fb = peeled.framebuffer(&[Format::RG32F; 3])?;

@@ -129,7 +129,7 @@ impl Algorithm for DualLl {
         exec: &fragrace_emu::ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
         let mut peeled = Peeled::unbounded(frame, params);
-        let mut device = crate::common::fresh();
+        let mut device = crate::common::fresh(exec);
         let draw = Draw::new(frame.mesh, frame.view_proj);
         let mut fb = peeled.framebuffer(&[Format::RG32F])?;
         let mut range_state = capture_state();

@@ -108,7 +108,7 @@ impl Algorithm for F2b {
         exec: &fragrace_emu::ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
         let mut peeled = Peeled::new(frame, params)?;
-        let mut device = crate::common::fresh();
+        let mut device = crate::common::fresh(exec);
         let coplanar = device.buffer::<u32>("f2b-coplanar", 1)?;
         let draw = Draw::new(frame.mesh, frame.view_proj);
         let mut fb = peeled.framebuffer(&[Format::RG32F])?;

@@ -151,7 +151,7 @@ impl Algorithm for F2b2p {
     ) -> Result<AlgoResult, AlgoError> {
         check_ids_fit_floats(frame)?;
         let mut peeled = Peeled::new(frame, params)?;
-        let device = crate::common::fresh();
+        let device = crate::common::fresh(exec);
         let draw = Draw::new(frame.mesh, frame.view_proj);
         let mut peel_fb = peeled.framebuffer(&[Format::RG32F, Format::R32F])?;
         let mut count_fb = peeled.framebuffer(&[Format::RGBA32F])?;

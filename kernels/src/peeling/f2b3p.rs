@@ -183,7 +183,7 @@ impl Algorithm for F2b3p {
     ) -> Result<AlgoResult, AlgoError> {
         check_ids_fit_floats(frame)?;
         let mut peeled = Peeled::new(frame, params)?;
-        let device = crate::common::fresh();
+        let device = crate::common::fresh(exec);
         let draw = Draw::new(frame.mesh, frame.view_proj);
         let mut fb = peeled.framebuffer(&[Format::R32F, Format::RGBA32F, Format::RG32F])?;
         let mut depth_state = capture_state();

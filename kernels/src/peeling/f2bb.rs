@@ -170,7 +170,7 @@ impl Algorithm for F2bB {
         exec: &fragrace_emu::ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
         let mut peeled = Peeled::new(frame, params)?;
-        let mut device = crate::common::fresh();
+        let mut device = crate::common::fresh(exec);
         let n = peeled.lists.len() as u64;
         let s = Slots {
             depth: device.buffer::<u32>("f2b-b-depth", n * SLOTS as u64)?,

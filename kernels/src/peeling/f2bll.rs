@@ -296,7 +296,7 @@ impl Algorithm for F2bLl {
         exec: &fragrace_emu::ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
         let mut peeled = Peeled::new(frame, params)?;
-        let mut device = crate::common::fresh();
+        let mut device = crate::common::fresh(exec);
         let mut layers = LayerPasses::new(&peeled, frame)?;
         let mut report = PassReport::default();
         let mut lists: Option<Lists> = None;

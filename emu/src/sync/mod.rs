@@ -15,9 +15,4 @@ pub use loom::sync::{Arc, Mutex};
 #[cfg(loom)]
 pub use loom::thread;
 
-/// The executors' worker pool: scoped OS threads and a mutex for handing out batches.
-/// Always `std`: loom model-checks the memory and interlock protocols, not the pool.
-pub mod pool {
-    pub use std::sync::Mutex;
-    pub use std::thread::scope;
-}
+pub mod pool;
