@@ -585,7 +585,11 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 } else {
                     state.reset_next(row.seq(x), x, cov, depth);
                 }
-                slot.clear_outputs();
+                // Colour outputs are read only by the late stage: a counting pass leaves
+                // them (a load behind the previous fragment's lock) until the unit's end.
+                if !count_only {
+                    slot.clear_outputs();
+                }
                 shade_direct(kernel, slot, &state, env);
                 if count_only && !slot.faulted() {
                     tally.add_direct(&state, samples_of(cov));
@@ -600,6 +604,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 }
             }
         }
+        slot.clear_outputs();
         state.drain_ops(slot);
         acc.add_tally(tally);
         counts.samples_passed += tally.samples_passed;
