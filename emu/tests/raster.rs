@@ -1518,7 +1518,7 @@ fn unbinned_chunks_give_the_binned_fragments() {
         by_pixel(&mut want);
         assert!(want.len() > 10_000);
         let prepared = prepare(&pos, &faces, &st, v, 2, PlaneSetup::Compute);
-        assert!(prepared.well_formed());
+        assert!(prepared.well_formed(1));
         assert_eq!(prepared.triangle_count(), faces.len());
         for chunk_size in [1, 7, 512, faces.len()] {
             let mut got = Vec::new();
@@ -1572,14 +1572,25 @@ fn well_formed_sees_bad_vertices_and_indices() {
     let st = state(X1);
     let pos = [px(1.0, 1.0, v), px(30.0, 2.0, v), px(3.0, 30.0, v)];
     let ok = prepare(&pos, &[[0, 1, 2]], &st, v, 1, PlaneSetup::Skip);
-    assert!(ok.well_formed());
+    assert!(ok.well_formed(1));
     let bad_index = prepare(&pos, &[[0, 1, 3]], &st, v, 1, PlaneSetup::Skip);
-    assert!(!bad_index.well_formed());
+    assert!(!bad_index.well_formed(1));
     let mut nan = pos;
     nan[1].x = f32::NAN;
-    assert!(!prepare(&nan, &[[0, 1, 2]], &st, v, 1, PlaneSetup::Skip).well_formed());
+    assert!(!prepare(&nan, &[[0, 1, 2]], &st, v, 1, PlaneSetup::Skip).well_formed(1));
     let mut inf = pos;
     inf[2].w = f32::INFINITY;
-    assert!(!prepare(&inf, &[[0, 1, 2]], &st, v, 1, PlaneSetup::Skip).well_formed());
-    assert!(prepare(&pos, &[], &st, v, 1, PlaneSetup::Skip).well_formed());
+    assert!(!prepare(&inf, &[[0, 1, 2]], &st, v, 1, PlaneSetup::Skip).well_formed(1));
+    assert!(prepare(&pos, &[], &st, v, 1, PlaneSetup::Skip).well_formed(1));
+    // Many triangles, checked on several threads: a bad index in any part is found.
+    let mut many = vec![[0u32, 1, 2]; 300_000];
+    assert!(prepare(&pos, &many, &st, v, 4, PlaneSetup::Skip).well_formed(4));
+    for at in [0, 150_000, 299_999] {
+        many[at] = [0, 3, 2];
+        {
+            let bad = prepare(&pos, &many, &st, v, 4, PlaneSetup::Skip);
+            assert!(!bad.well_formed(1) && !bad.well_formed(2) && !bad.well_formed(4));
+        }
+        many[at] = [0, 1, 2];
+    }
 }

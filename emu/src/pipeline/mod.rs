@@ -233,7 +233,7 @@ impl Device {
             // A mesh with bad triangles is binned: binning counts and drops them, and the
             // draw then fails on validation before shading.
             let binned;
-            let geo = if try_unbinned && prepared.well_formed() {
+            let geo = if try_unbinned && prepared.well_formed(threads) {
                 Geometry::Unbinned {
                     prepared: &prepared,
                     instance,
