@@ -288,7 +288,8 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
     (outcome, counts, rejected)
 }
 
-/// Runs `work` on `threads` scoped threads (inline with one) and collects the results.
+/// Runs `work` on `threads` threads at once (`pool::broadcast`: the caller and kept
+/// threads; inline with one) and collects the results.
 fn on_threads<R: Send>(threads: usize, work: impl Fn() -> R + Sync) -> Vec<R> {
     // Kernel panics are caught per invocation; a panic resumed here is a bug of ours.
     pool::broadcast(threads.max(1), |_| work())

@@ -1,6 +1,7 @@
 //! Triangle setup (snap to fixed point, edge functions, planes) and tile binning.
 //!
-//! Pipeline of [`bin_triangles`], each step parallel over `threads` scoped threads:
+//! Pipeline of [`bin_triangles`], each step parallel over `threads` threads
+//! (`sync::pool::broadcast`):
 //! 1. every vertex is classified against the clip planes once and, when inside all of them,
 //!    snapped to 8-bit sub-pixel fixed point (a vertex shared by many triangles is projected
 //!    once, and shared vertices are bit-identical in all of them: the basis of watertightness);
