@@ -10,6 +10,7 @@
 
 use std::time::Instant;
 
+use fragrace_emu::memory::zeroed_u32;
 use fragrace_emu::sync::pool::broadcast;
 use fragrace_emu::sync::{AtomicU32, AtomicUsize, Ordering};
 
@@ -46,7 +47,7 @@ pub fn count_floor(cfg: &FloorConfig<'_>) -> Option<Floor> {
     }
     let frames = cfg.frames.max(1);
     let expected: u64 = cfg.counts.iter().map(|&c| u64::from(c)).sum();
-    let warm = zeroed(pixels);
+    let warm = zeroed_u32(pixels, cfg.threads);
     let mut atomics = Vec::with_capacity(frames);
     let mut frame = Vec::with_capacity(frames);
     for _ in 0..frames {
@@ -58,12 +59,20 @@ pub fn count_floor(cfg: &FloorConfig<'_>) -> Option<Floor> {
         atomics.push(t.elapsed().as_secs_f64() * 1e3);
 
         let t = Instant::now();
-        let fresh = zeroed(pixels);
+        let fresh = zeroed_u32(pixels, cfg.threads);
         replay(cfg, &fresh);
-        let sum: u64 = fresh
-            .iter()
-            .map(|w| u64::from(w.load(Ordering::Relaxed)))
-            .sum();
+        // Read back on the same threads, as the frame's check does.
+        let parts: Vec<&[AtomicU32]> = fresh
+            .chunks(pixels.div_ceil(cfg.threads.max(1)).max(1))
+            .collect();
+        let sum: u64 = broadcast(parts.len(), |k| {
+            parts[k]
+                .iter()
+                .map(|w| u64::from(w.load(Ordering::Relaxed)))
+                .sum::<u64>()
+        })
+        .into_iter()
+        .sum();
         frame.push(t.elapsed().as_secs_f64() * 1e3);
         drop(fresh);
         // The replay is exact: a floor that dropped adds would be no floor.
@@ -75,12 +84,6 @@ pub fn count_floor(cfg: &FloorConfig<'_>) -> Option<Floor> {
         atomics_ms: median(&mut atomics),
         frame_ms: median(&mut frame),
     })
-}
-
-fn zeroed(n: usize) -> Box<[AtomicU32]> {
-    std::iter::repeat_with(|| AtomicU32::new(0))
-        .take(n)
-        .collect()
 }
 
 /// The frame's adds, tile by tile, on `cfg.threads` threads.

@@ -667,6 +667,13 @@ impl<'m> WordCache<'m> {
     }
 }
 
+/// `len` zero 32-bit words, allocated and zeroed as a new buffer of a
+/// [`Memory::with_threads`]`(threads)` is (for measurements that replay a pass's accesses
+/// outside the emulator, such as the CLI's `bench --floor`).
+pub fn zeroed_u32(len: usize, threads: usize) -> Box<[AtomicU32]> {
+    zeroed_words(len, threads)
+}
+
 /// `len` zero words, zeroed by up to `threads` threads.
 ///
 /// One thread: a zero-filled allocation (`calloc`). `malloc` keeps freed blocks of the size
