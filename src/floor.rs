@@ -11,7 +11,7 @@
 use std::time::Instant;
 
 use fragrace_emu::memory::zeroed_u32;
-use fragrace_emu::sync::pool::broadcast;
+use fragrace_emu::sync::pool::{broadcast, map_parts};
 use fragrace_emu::sync::{AtomicU32, AtomicUsize, Ordering};
 
 /// The floor of one frame, in milliseconds (medians over the frames timed).
@@ -62,12 +62,8 @@ pub fn count_floor(cfg: &FloorConfig<'_>) -> Option<Floor> {
         let fresh = zeroed_u32(pixels, cfg.threads);
         replay(cfg, &fresh);
         // Read back on the same threads, as the frame's check does.
-        let parts: Vec<&[AtomicU32]> = fresh
-            .chunks(pixels.div_ceil(cfg.threads.max(1)).max(1))
-            .collect();
-        let sum: u64 = broadcast(parts.len(), |k| {
-            parts[k]
-                .iter()
+        let sum: u64 = map_parts(&fresh, cfg.threads, 1, |part| {
+            part.iter()
                 .map(|w| u64::from(w.load(Ordering::Relaxed)))
                 .sum::<u64>()
         })

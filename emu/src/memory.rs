@@ -678,7 +678,7 @@ pub fn zeroed_u32(len: usize, threads: usize) -> Box<[AtomicU32]> {
 ///
 /// One thread: a zero-filled allocation (`calloc`). `malloc` keeps freed blocks of the size
 /// of a frame's buffers and hands them back, and `calloc` then zeroes them on the calling
-/// thread (1.3-1.6 ms for the 16 MiB of a 2048x2048 `count`, a tenth of the bunny's frame).
+/// thread (1.3-1.7 ms for the 16 MiB of a 2048x2048 `count`, a tenth of the bunny's frame).
 /// Large buffers with several threads: an uninitialized allocation zeroed in parts, one per
 /// thread, all at once.
 #[cfg(not(loom))]

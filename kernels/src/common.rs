@@ -168,14 +168,9 @@ pub fn fresh(exec: &ExecConfig) -> Device {
 pub fn parallel_sum(values: &[u32], threads: usize) -> u64 {
     // Below this a thread costs more than it saves.
     const MIN_PER_THREAD: usize = 1 << 18;
-    let threads = threads.clamp(1, values.len() / MIN_PER_THREAD + 1);
-    let sum = |part: &[u32]| part.iter().map(|&c| u64::from(c)).sum::<u64>();
-    if threads == 1 {
-        return sum(values);
-    }
-    let chunk = values.len().div_ceil(threads);
-    let parts: Vec<&[u32]> = values.chunks(chunk).collect();
-    fragrace_emu::sync::pool::broadcast(parts.len(), |k| sum(parts[k]))
-        .into_iter()
-        .sum()
+    fragrace_emu::sync::pool::map_parts(values, threads, MIN_PER_THREAD, |part| {
+        part.iter().map(|&c| u64::from(c)).sum::<u64>()
+    })
+    .into_iter()
+    .sum()
 }

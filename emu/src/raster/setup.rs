@@ -1406,23 +1406,13 @@ impl<'a> Prepared<'a> {
         /// Below this a thread costs more than it saves.
         const PER_THREAD: usize = 1 << 16;
         // A maximum over all indices: branch-free and vectorised.
-        let max_of = |part: &[[u32; 3]]| {
+        let max = crate::sync::pool::map_parts(self.indices, threads, PER_THREAD, |part| {
             part.iter()
                 .fold(0u32, |m, t| m.max(t[0]).max(t[1]).max(t[2]))
-        };
-        let threads = threads.min(self.indices.len() / PER_THREAD).max(1);
-        let max = if threads == 1 {
-            max_of(self.indices)
-        } else {
-            let parts: Vec<_> = self
-                .indices
-                .chunks(self.indices.len().div_ceil(threads))
-                .collect();
-            crate::sync::pool::broadcast(parts.len(), |k| max_of(parts[k]))
-                .into_iter()
-                .max()
-                .unwrap_or(0)
-        };
+        })
+        .into_iter()
+        .max()
+        .unwrap_or(0);
         !self.non_finite && (self.indices.is_empty() || (max as usize) < self.positions.len())
     }
 

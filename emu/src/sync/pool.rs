@@ -133,6 +133,24 @@ pub fn broadcast_each<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync
     })
 }
 
+/// Splits `items` into at most `threads` parts of at least `min_part` items (one part when
+/// they are fewer) and runs `f` on each part, all at once (as [`broadcast`]); returns the
+/// results in part order: for reductions over large arrays, which one core reads at less
+/// than the memory's bandwidth.
+pub fn map_parts<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    min_part: usize,
+    f: impl Fn(&[T]) -> R + Sync,
+) -> Vec<R> {
+    let parts = threads.min(items.len() / min_part.max(1)).max(1);
+    if parts == 1 {
+        return vec![f(items)];
+    }
+    let parts: Vec<&[T]> = items.chunks(items.len().div_ceil(parts)).collect();
+    broadcast(parts.len(), |k| f(parts[k]))
+}
+
 /// `n` idle threads, starting new ones when fewer are idle.
 fn take_idle(n: usize) -> Vec<Sender<Job>> {
     let mut workers = {
@@ -202,6 +220,17 @@ mod tests {
             }
         });
         assert_eq!(v, [0, 0, 0, 1, 1, 1, 2, 2, 2, 3]);
+    }
+
+    #[test]
+    fn parts_cover_the_items_in_order() {
+        let items: Vec<u32> = (0..1000).collect();
+        for (threads, min_part, parts) in [(4, 1, 4), (4, 300, 3), (4, 2000, 1), (1, 1, 1)] {
+            let got = map_parts(&items, threads, min_part, |p| p.to_vec());
+            assert_eq!(got.len(), parts);
+            assert_eq!(got.concat(), items);
+        }
+        assert_eq!(map_parts(&[] as &[u32], 4, 1, |p| p.len()), vec![0]);
     }
 
     #[test]
