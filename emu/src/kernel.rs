@@ -374,6 +374,16 @@ impl DirectState<'_> {
         self.reset_results();
     }
 
+    /// The next pixel of the same span (same coverage, no depth): only its id and x change.
+    #[inline(always)]
+    pub fn next_pixel(&self, seq: u64, x: u32) {
+        let mut input = self.input.get();
+        input.seq = seq;
+        input.x = x;
+        self.input.set(input);
+        self.reset_results();
+    }
+
     #[inline(always)]
     fn reset_results(&self) {
         self.steps.set(0);
@@ -388,6 +398,15 @@ impl DirectState<'_> {
     #[inline(always)]
     pub fn spill(&self, slot: &Invocation) {
         slot.input.set(self.input.get());
+        slot.steps.set(self.steps.get());
+        slot.discarded.set(self.discarded.get());
+        slot.depth_out.set(self.depth_out.get());
+    }
+
+    /// [`Self::spill`] with the fragment's input given (it equals this state's).
+    #[inline(always)]
+    pub fn spill_results(&self, slot: &Invocation, input: FragInput) {
+        slot.input.set(input);
         slot.steps.set(self.steps.get());
         slot.discarded.set(self.discarded.get());
         slot.depth_out.set(self.depth_out.get());

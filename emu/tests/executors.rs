@@ -697,6 +697,73 @@ fn faults_in_capture_passes_name_their_invocation_under_the_direct_executors() {
     }
 }
 
+/// A counting pass (no test, no target) whose kernel discards, faults and takes a varying
+/// number of steps: the tallies the counting loop keeps per span (shaded, discarded,
+/// passing samples, steps) are those of every fragment, under every executor, with and
+/// without 4x MSAA.
+#[test]
+fn counting_passes_tally_discards_faults_and_steps_per_fragment() {
+    struct Mixed {
+        counter: Buf<u32>,
+    }
+    impl FragmentKernel for Mixed {
+        fn info(&self) -> KernelInfo {
+            KernelInfo::new("mixed")
+        }
+        async fn shade(&self, f: impl Fragment) {
+            // x + 1 steps: 1 to 16.
+            for _ in 0..=f.x() {
+                f.atomic_add(self.counter, 0, 1).await;
+            }
+            if f.x() == 5 {
+                panic!("kernel bug at x=5");
+            }
+            if f.x() % 3 == 0 {
+                f.discard();
+            }
+        }
+    }
+    // Per row of 16 pixels: x = 5 faults; x in {0, 3, 6, 9, 12, 15} discards. With one
+    // sample the quads cover 8 full rows each; with four, edge rows add partial coverage,
+    // so every executor is compared with the scheduled one (which shades invocation by
+    // invocation through the slots, not the counting loop).
+    for samples in [SampleCount::X1, SampleCount::X4] {
+        let run = |e: &ExecConfig| {
+            let mut dev = Device::new();
+            let counter = dev.buffer::<u32>("counter", 1).unwrap();
+            let mesh = two_layers();
+            let mut fb = Framebuffer::new(16, 8, samples, 8, &[]).unwrap();
+            let draw = fragrace_emu::Draw::new(&mesh, glam::Mat4::IDENTITY);
+            let mut state = fragrace_emu::PassState::default();
+            state.raster.samples = samples;
+            let r = dev
+                .draw(&mut fb, &draw, &state, &Mixed { counter }, e)
+                .unwrap();
+            let s = &r.stats;
+            let counted = u64::from(dev.memory.read(counter).unwrap()[0]);
+            assert_eq!(counted, s.steps, "{e:?}");
+            (
+                s.shaded,
+                s.faulted,
+                s.discarded,
+                s.steps,
+                s.max_steps_per_invocation,
+                r.query().samples_passed,
+            )
+        };
+        let reference = run(&scheduled(Policy::Random, 1));
+        if samples == SampleCount::X1 {
+            let rows = 8u64 * 2;
+            let steps: u64 = (1..=16).sum::<u64>() * rows;
+            let passing = (16 - 1 - 6) * rows;
+            assert_eq!(reference, (16 * rows, rows, 6 * rows, steps, 16, passing));
+        }
+        for e in direct_execs().iter().chain(&all_execs()) {
+            assert_eq!(run(e), reference, "{e:?} {samples:?}");
+        }
+    }
+}
+
 /// A draw whose triangles use a non-finite position or an index out of range fails with a
 /// mesh error naming the culprit, before anything is shaded (the full check runs only when
 /// binning rejected triangles); an unused non-finite vertex is not an error.

@@ -329,6 +329,18 @@ impl FusedPass<'_> {
     fn early_tests(&self) -> bool {
         self.early && (self.state.depth.test || self.state.stencil.enabled)
     }
+
+    /// Depth or stencil tests run after shading.
+    fn late_tests(&self) -> bool {
+        !self.early && (self.state.depth.test || self.state.stencil.enabled)
+    }
+
+    /// Nothing per pixel around the kernel: no test before or after shading and no target
+    /// to write, so a fragment is shaded and counted, nothing else (capture and counting
+    /// passes).
+    fn counting(&self) -> bool {
+        !self.early_tests() && !self.late_tests() && self.targets == 0
+    }
 }
 
 impl<'p> RowSetup<'p> {
@@ -529,7 +541,12 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let spans = src.spans(&mut buf);
         // Without lockstep (or with one lane) nothing interleaves inside a worker.
         let tile = if !self.pass.lockstep || self.slots.len() == 1 {
-            self.run_unit_direct(spans, env, tile)
+            if self.pass.counting() {
+                self.run_unit_counting(spans, env);
+                tile
+            } else {
+                self.run_unit_direct(spans, env, tile)
+            }
         } else {
             self.run_unit_lockstep(spans, env, tile)
         };
@@ -559,8 +576,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             ..
         } = self;
         let (kernel, pass, positions) = (*kernel, *pass, *positions);
-        let state = pass.state;
-        let late_tests = !pass.early && (state.depth.test || state.stencil.enabled);
+        let late_tests = pass.late_tests();
         // Nothing to test or write after shading (capture and counting passes).
         let count_only = !late_tests && pass.targets == 0;
         let slot = &slots[0];
@@ -612,6 +628,68 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         tile
     }
 
+    /// [`Self::run_unit_direct`] for passes with nothing per pixel around the kernel: no
+    /// test before shading, nothing to test or write after it (capture and counting passes,
+    /// [`FusedPass::counting`]). Only what differs from pixel to pixel is set per fragment,
+    /// and the loop holds nothing else, so its state stays in registers (in the general
+    /// loop, the tests' code kept the fragment's state on the stack).
+    #[inline(never)]
+    fn run_unit_counting(&mut self, spans: &[Span], env: &PassEnv<'_>) {
+        let rows = RowSetup::new(self, env);
+        let ahead = self.prefetcher(env);
+        let Worker {
+            kernel,
+            slots,
+            acc,
+            counts,
+            ..
+        } = self;
+        let kernel = *kernel;
+        let slot = &slots[0];
+        let state = DirectState::new();
+        // The unit's tally, kept per span where it can be: per fragment only what the
+        // kernel decides (steps, discard), so that the loop's state fits in registers.
+        let mut tally = Tally::default();
+        for (i, span) in spans.iter().enumerate() {
+            prefetch_ahead(ahead.as_ref(), spans, i);
+            let Some(row) = rows.row(span, counts) else {
+                continue;
+            };
+            let samples = samples_of(row.cov);
+            // Nothing culls: every pixel of the span is shaded, with the span's coverage
+            // and no depth (`Frag::depth` interpolates it on demand).
+            state.reset(row.input(&rows, span, span.x0, row.cov, f32::NAN));
+            let discarded_before = tally.discarded;
+            let mut faulted = 0u64;
+            for x in span.x0..span.x1 {
+                state.next_pixel(row.seq(x), x);
+                shade_direct(kernel, slot, &state, env);
+                if slot.faulted() {
+                    // Counted by the slot's path. The input is rebuilt rather than copied
+                    // from the state, so that what the kernel does not read of it need not
+                    // be kept across the loop.
+                    faulted += 1;
+                    state.spill_results(slot, row.input(&rows, span, x, row.cov, f32::NAN));
+                    acc.count(slot);
+                } else {
+                    let steps = state.steps.get();
+                    tally.steps += steps;
+                    tally.max_steps = tally.max_steps.max(steps);
+                    tally.discarded += u64::from(state.discarded.get());
+                }
+            }
+            let finished = u64::from(span.x1 - span.x0) - faulted;
+            tally.shaded += finished;
+            tally.samples_passed +=
+                u64::from(samples) * (finished - (tally.discarded - discarded_before));
+        }
+        // Colour outputs are read only by the late stage, which these passes lack.
+        slot.clear_outputs();
+        state.drain_ops(slot);
+        acc.add_tally(tally);
+        counts.samples_passed += tally.samples_passed;
+    }
+
     /// [`Self::run_unit`] with lockstep warps: fragments gather into a warp of slots,
     /// whose lanes take turns at every access ([`shade_lockstep`]).
     #[inline(never)]
@@ -656,8 +734,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         // Only lockstep warps are gathered (see `run_unit`).
         debug_assert!(self.pass.lockstep);
         shade_lockstep(self.kernel, slots, env);
-        let state = self.pass.state;
-        let late_tests = !self.pass.early && (state.depth.test || state.stencil.enabled);
+        let late_tests = self.pass.late_tests();
         if !late_tests && self.pass.targets == 0 {
             // Nothing to test or write (capture and counting passes): count them.
             self.counts.samples_passed += self.acc.count_passing(slots);
@@ -794,7 +871,7 @@ fn late(
         return;
     }
     let state = pass.state;
-    let late_tests = !pass.early && (state.depth.test || state.stencil.enabled);
+    let late_tests = pass.late_tests();
     let f = slot.input.get();
     let (lx, ly) = (f.x - tile.tile().x0, f.y - tile.tile().y0);
     let mut mask = f.coverage;
