@@ -718,7 +718,7 @@ fn counting_passes_tally_discards_faults_and_steps_per_fragment() {
             if f.x() == 5 {
                 panic!("kernel bug at x=5");
             }
-            if f.x() % 3 == 0 {
+            if f.x().is_multiple_of(3) {
                 f.discard();
             }
         }
