@@ -743,6 +743,7 @@ fn counting_passes_tally_discards_faults_and_steps_per_fragment() {
             let counted = u64::from(dev.memory.read(counter).unwrap()[0]);
             assert_eq!(counted, s.steps, "{e:?}");
             (
+                s.fragments_generated,
                 s.shaded,
                 s.faulted,
                 s.discarded,
@@ -756,7 +757,8 @@ fn counting_passes_tally_discards_faults_and_steps_per_fragment() {
             let rows = 8u64 * 2;
             let steps: u64 = (1..=16).sum::<u64>() * rows;
             let passing = (16 - 1 - 6) * rows;
-            assert_eq!(reference, (16 * rows, rows, 6 * rows, steps, 16, passing));
+            let n = 16 * rows;
+            assert_eq!(reference, (n, n, rows, 6 * rows, steps, 16, passing));
         }
         for e in direct_execs().iter().chain(&all_execs()) {
             assert_eq!(run(e), reference, "{e:?} {samples:?}");
