@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Side-by-side pairs against llvmpipe, alternated: on these noisy VMs one run of each side
+# (as in ci/bench.sh) can land in different minutes, so this runs ROUNDS pairs per case, the
+# llvmpipe peer just before fragrace each time (same mesh, view, size and thread count), and
+# prints each pair's ratio and, per case, the median of the ratios.
+# fragrace runs its `parallel` executor with `--no-lockstep`; the bar of issue 2 is 0.2.
+# Needs ../shared and the peer's dependencies (see ci/bench.sh).
+# Usage: bash ci/pairs.sh [ROUNDS] [THREADS]   (defaults: 3 rounds, 2 threads)
+# Env: CASES (default "dragon.obj.gz:512 dragon.obj.gz:2048 bunny.obj.gz:2048"; MESH:SIZE).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+rounds=${1:-3}
+threads=${2:-2}
+cargo build --release -q
+F=./target/release/fragrace
+M=../shared/models
+PEER=../shared/peers/llvmpipe/oit.py
+python3 -c "import moderngl" 2>/dev/null || { echo "needs the llvmpipe peer's dependencies (see ci/bench.sh)" >&2; exit 1; }
+median='import sys; v = sorted(float(x) for x in sys.argv[1:]); print(f"{v[len(v) // 2]:.2f}")'
+for c in ${CASES:-dragon.obj.gz:512 dragon.obj.gz:2048 bunny.obj.gz:2048}; do
+    mesh=${c%%:*}
+    size=${c##*:}
+    ratios=()
+    for r in $(seq "$rounds"); do
+        theirs=$(LP_NUM_THREADS=$threads python3 "$PEER" "$M/$mesh" --algo count --width "$size" --height "$size" --frames 15 --warmup 3 2>/dev/null | tail -1 | python3 -c "import json,sys; print(round(json.load(sys.stdin)['median_ms'], 2))")
+        ours=$($F bench --obj "$M/$mesh" --algo count --threads "$threads" --width "$size" --height "$size" --frames 15 --warmup 3 --no-lockstep --json | python3 -c "import json,sys; print(round(json.load(sys.stdin)['median_ms'], 2))")
+        ratio=$(python3 -c "print(f'{$ours / $theirs:.2f}')")
+        ratios+=("$ratio")
+        echo "$mesh @$size, pair $r: fragrace $ours ms / llvmpipe $theirs ms = $ratio"
+    done
+    echo "$mesh @$size: median ratio $(python3 -c "$median" "${ratios[@]}") over $rounds pairs"
+done
