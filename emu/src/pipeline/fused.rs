@@ -18,7 +18,8 @@
 //! time, so depth, stencil and blending happen in API order. When a pass needs nothing of
 //! the framebuffer at all (no test either), the parallel executor skips the tiles:
 //! [`run_unbinned`] hands out chunks of triangles, set up and shaded by whichever worker
-//! takes them.
+//! takes them. Without lockstep such passes also shade through a loop of their own
+//! (`Worker::run_unit_counting`), which carries nothing per pixel but the kernel.
 //!
 //! This module knows no algorithm; it does not handle interlock (ordered interlock needs the
 //! per-pixel tickets of the general path) nor the contention table.
