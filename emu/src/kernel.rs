@@ -397,10 +397,7 @@ impl DirectState<'_> {
     // executor's local escape, and keep it in memory.
     #[inline(always)]
     pub fn spill(&self, slot: &Invocation) {
-        slot.input.set(self.input.get());
-        slot.steps.set(self.steps.get());
-        slot.discarded.set(self.discarded.get());
-        slot.depth_out.set(self.depth_out.get());
+        self.spill_results(slot, self.input.get());
     }
 
     /// [`Self::spill`] with the fragment's input given (it equals this state's).
