@@ -13,6 +13,7 @@ use std::time::Instant;
 use fragrace_emu::memory::zeroed_u32;
 use fragrace_emu::sync::pool::{broadcast, map_parts};
 use fragrace_emu::sync::{AtomicU32, AtomicUsize, Ordering};
+use fragrace_kernels::common::SUM_MIN_PER_THREAD;
 
 /// The floor of one frame, in milliseconds (medians over the frames timed).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -61,8 +62,9 @@ pub fn count_floor(cfg: &FloorConfig<'_>) -> Option<Floor> {
         let t = Instant::now();
         let fresh = zeroed_u32(pixels, cfg.threads);
         replay(cfg, &fresh);
-        // Read back on the same threads, as the frame's check does.
-        let sum: u64 = map_parts(&fresh, cfg.threads, 1, |part| {
+        // Read back on the same threads and in the same parts as the frame's check
+        // (`fragrace_kernels::common::parallel_sum`).
+        let sum: u64 = map_parts(&fresh, cfg.threads, SUM_MIN_PER_THREAD, |part| {
             part.iter()
                 .map(|w| u64::from(w.load(Ordering::Relaxed)))
                 .sum::<u64>()

@@ -163,12 +163,14 @@ pub fn fresh(exec: &ExecConfig) -> Device {
     Device::with_threads(exec.threads)
 }
 
+/// Fewest values per thread of [`parallel_sum`]: below this a thread costs more than it
+/// saves.
+pub const SUM_MIN_PER_THREAD: usize = 1 << 18;
+
 /// The sum of `values`, split over `threads` threads: checks that read every pixel's count
 /// are bound by memory bandwidth (16 MB at 2048x2048), which one core does not saturate.
 pub fn parallel_sum(values: &[u32], threads: usize) -> u64 {
-    // Below this a thread costs more than it saves.
-    const MIN_PER_THREAD: usize = 1 << 18;
-    fragrace_emu::sync::pool::map_parts(values, threads, MIN_PER_THREAD, |part| {
+    fragrace_emu::sync::pool::map_parts(values, threads, SUM_MIN_PER_THREAD, |part| {
         part.iter().map(|&c| u64::from(c)).sum::<u64>()
     })
     .into_iter()
