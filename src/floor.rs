@@ -20,8 +20,9 @@ use fragrace_kernels::common::SUM_MIN_PER_THREAD;
 pub struct Floor {
     /// The atomic adds alone, into a buffer already allocated and zeroed.
     pub atomics_ms: f64,
-    /// A fresh zeroed buffer of one word per pixel, the adds, and the sum read back: the
-    /// part of the `count` frame that is memory and atomics.
+    /// A fresh zeroed buffer of one word per pixel and the adds: the part of the `count`
+    /// frame that is memory and atomics (the sum read back to check them is untimed, as
+    /// the frame's self-check).
     pub frame_ms: f64,
 }
 
@@ -62,8 +63,9 @@ pub fn count_floor(cfg: &FloorConfig<'_>) -> Option<Floor> {
         let t = Instant::now();
         let fresh = zeroed_u32(pixels, cfg.threads);
         replay(cfg, &fresh);
-        // Read back on the same threads and in the same parts as the frame's check
-        // (`fragrace_kernels::common::parallel_sum`).
+        frame.push(t.elapsed().as_secs_f64() * 1e3);
+        // Read back, untimed as the frame's check (on the same threads and in the same parts:
+        // `fragrace_kernels::common::parallel_sum`).
         let sum: u64 = map_parts(&fresh, cfg.threads, SUM_MIN_PER_THREAD, |part| {
             part.iter()
                 .map(|w| u64::from(w.load(Ordering::Relaxed)))
@@ -71,7 +73,6 @@ pub fn count_floor(cfg: &FloorConfig<'_>) -> Option<Floor> {
         })
         .into_iter()
         .sum();
-        frame.push(t.elapsed().as_secs_f64() * 1e3);
         drop(fresh);
         // The replay is exact: a floor that dropped adds would be no floor.
         if sum != expected {

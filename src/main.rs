@@ -217,7 +217,7 @@ struct BenchArgs {
     #[arg(long, default_value_t = 2)]
     warmup: usize,
     /// Also measure the machine's floor under the frame (`--algo count` only): its atomic
-    /// adds alone on the same threads, and with the buffer allocation and read-back.
+    /// adds alone on the same threads, and with the allocation of a zeroed buffer.
     #[arg(long)]
     floor: bool,
 }
@@ -555,20 +555,31 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
     for _ in 0..a.warmup {
         run::render(&spec, &loaded)?;
     }
+    // A frame is what the llvmpipe peer times as one (clears, passes, resolve); the
+    // self-checks that read whole buffers back run after it, timed apart (the peer checks
+    // untimed). Every frame is checked.
     let mut times = Vec::new();
     let mut pass_times = Vec::new();
+    let mut check_times = Vec::new();
+    let mut checked_times = Vec::new();
+    // Hazard-prone algorithms may fail a check under real races: reported, not fatal.
+    let mut failed_checks = 0;
     let mut last = None;
     for _ in 0..a.frames.max(1) {
-        let t = Instant::now();
         let r = run::render(&spec, &loaded)?;
-        times.push(t.elapsed().as_secs_f64() * 1e3);
+        failed_checks += r.result.checks.iter().filter(|c| !c.passed).count();
+        times.push(r.wall_ms);
+        check_times.push(r.check_ms);
+        checked_times.push(r.wall_ms + r.check_ms);
         pass_times.push(r.result.report.wall.as_secs_f64() * 1e3);
         last = Some(r);
     }
     let r = last.expect("one frame");
     let ms = fragrace::floor::median(&mut times);
+    let check_ms = fragrace::floor::median(&mut check_times);
+    let checked_ms = fragrace::floor::median(&mut checked_times);
     // The passes alone (transform, binning, shading, fixed function), without buffer
-    // allocation, clears and read-back.
+    // allocation and clears.
     let pass_ms = fragrace::floor::median(&mut pass_times);
     let stats = &r.result.report.stats;
     let tris = loaded.scene.mesh.triangle_count() as f64 * stats.geometry_passes.max(1) as f64;
@@ -603,6 +614,9 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         "frames": times.len(),
         "median_ms": ms,
         "passes_median_ms": pass_ms,
+        "check_median_ms": check_ms,
+        "checked_median_ms": checked_ms,
+        "failed_checks": failed_checks,
         "min_ms": times.first(),
         "max_ms": times.last(),
         "fragments": stats.fragments_generated,
@@ -619,14 +633,17 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         println!("{v}");
     } else {
         println!(
-            "{} on {} ({} triangles) {}x{}, {} with {} threads: median {:.2} ms over {} frames (min {:.2}, max {:.2}); passes alone {:.2} ms\n  {:.1} M fragments/s, {:.1} M triangles/s, {:.2} M steps/s",
+            "{} on {} ({} triangles) {}x{}, {} with {} threads: median {:.2} ms over {} frames (min {:.2}, max {:.2}); passes alone {:.2} ms; self-checks after it {:.2} ms (frame and checks {:.2} ms)\n  {:.1} M fragments/s, {:.1} M triangles/s, {:.2} M steps/s",
             spec.algo, spec.scene.name(), loaded.scene.mesh.triangle_count(), spec.width, spec.height, spec.exec.mode.name(), spec.exec.threads,
-            ms, times.len(), times[0], times[times.len() - 1], pass_ms,
+            ms, times.len(), times[0], times[times.len() - 1], pass_ms, check_ms, checked_ms,
             stats.fragments_generated as f64 / (ms / 1e3) / 1e6, tris / (ms / 1e3) / 1e6, stats.steps as f64 / (ms / 1e3) / 1e6
         );
+        if failed_checks > 0 {
+            println!("  {failed_checks} failed checks over the frames (see `fragrace render`)");
+        }
         if let Some(f) = floor {
             println!(
-                "  floor: the frame's {} atomic adds alone {:.2} ms; with a fresh buffer and the read-back {:.2} ms",
+                "  floor: the frame's {} atomic adds alone {:.2} ms; with a fresh zeroed buffer {:.2} ms",
                 stats.fragments_generated, f.atomics_ms, f.frame_ms
             );
         }

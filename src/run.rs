@@ -245,21 +245,34 @@ pub fn load(spec: &RunSpec) -> Result<Loaded, RunError> {
 pub struct Rendered {
     pub info: AlgoInfo,
     pub result: AlgoResult,
+    /// The frame: clears, passes and resolve
+    /// ([`run_frame`](fragrace_kernels::Algorithm::run_frame)).
     pub wall_ms: f64,
+    /// The self-checks run after it ([`self_check`](fragrace_kernels::Algorithm::self_check);
+    /// nearly zero for the algorithms whose checks are part of the frame).
+    pub check_ms: f64,
 }
 
-/// Runs the algorithm of `spec` on an already loaded scene.
+/// Runs the algorithm of `spec` on an already loaded scene: its frame, then its
+/// self-checks, timed apart.
+///
+/// [`Algorithm::run_frame`]: fragrace_kernels::Algorithm::run_frame
+/// [`Algorithm::self_check`]: fragrace_kernels::Algorithm::self_check
 pub fn render(spec: &RunSpec, loaded: &Loaded) -> Result<Rendered, RunError> {
     let algo = fragrace_kernels::algorithm(&spec.algo)
         .ok_or_else(|| RunError::UnknownAlgo(spec.algo.clone()))?;
     let info = algo.info();
     let frame = loaded.frame(spec);
     let t = Instant::now();
-    let result = algo.run(&frame, &spec.params, &spec.exec)?;
+    let mut result = algo.run_frame(&frame, &spec.params, &spec.exec)?;
+    let wall_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    algo.self_check(&mut result, &spec.exec);
     Ok(Rendered {
         info,
         result,
-        wall_ms: t.elapsed().as_secs_f64() * 1e3,
+        wall_ms,
+        check_ms: t.elapsed().as_secs_f64() * 1e3,
     })
 }
 
@@ -360,6 +373,7 @@ pub fn summary_json(
         "checks": r.checks,
         "hazard_class": rendered.info.hazard.name(),
         "wall_ms": rendered.wall_ms,
+        "check_ms": rendered.check_ms,
         "epr": serde_json::Value::Null,
     });
     if let Some(c) = checked {

@@ -167,3 +167,51 @@ fn lockstep_lanes_race_on_one_thread_and_independent_lanes_do_not() {
         "independent lanes on one thread lost an update"
     );
 }
+
+/// `bench` times a frame without its self-check (as the llvmpipe peer times its frames):
+/// `run` must still be exactly the frame followed by the check, and `render` must run both.
+#[test]
+fn count_frame_then_self_check_is_run() {
+    use fragrace_kernels::{Algorithm, Params};
+    let s = spec("hairball", "count", 96, ExecConfig::parallel(2));
+    let loaded = run::load(&s).unwrap();
+    let frame = loaded.frame(&s);
+    let count = fragrace_kernels::algorithm("count").unwrap();
+    let whole = count.run(&frame, &Params::default(), &s.exec).unwrap();
+    let mut split = count
+        .run_frame(&frame, &Params::default(), &s.exec)
+        .unwrap();
+    assert!(
+        split.checks.is_empty(),
+        "the frame alone reads nothing back"
+    );
+    count.self_check(&mut split, &s.exec);
+    assert_eq!(split.counts, whole.counts);
+    let names = |r: &fragrace_kernels::AlgoResult| {
+        r.checks
+            .iter()
+            .map(|c| (c.name.clone(), c.passed, c.detail.clone()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(names(&split), names(&whole));
+    assert!(!whole.checks.is_empty() && whole.checks.iter().all(|c| c.passed));
+    let rendered = run::render(&s, &loaded).unwrap();
+    assert_eq!(
+        names(&rendered.result),
+        names(&whole),
+        "render checks the frame"
+    );
+
+    // count-plain: what the check finds missing is what races lost.
+    let s = spec("hairball", "count-plain", 96, ExecConfig::parallel(2));
+    let r = run::render(&s, &loaded).unwrap().result;
+    let sum: u64 = r
+        .counts
+        .as_ref()
+        .unwrap()
+        .iter()
+        .map(|&c| u64::from(c))
+        .sum();
+    assert_eq!(r.dropped, r.report.stats.fragments_generated - sum);
+    assert_eq!(r.checks.len(), 1);
+}

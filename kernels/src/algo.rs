@@ -212,13 +212,36 @@ pub enum AlgoError {
 /// A multi-fragment algorithm.
 pub trait Algorithm: Send + Sync {
     fn info(&self) -> AlgoInfo;
-    /// Runs every pass of the algorithm on a fresh device, shading with `exec`, and resolves.
+    /// Runs every pass of the algorithm on a fresh device, shading with `exec`, resolves,
+    /// and checks the algorithm's invariants ([`AlgoResult::checks`]). The same as
+    /// [`Algorithm::run_frame`] followed by [`Algorithm::self_check`].
     fn run(
         &self,
         frame: &Frame<'_>,
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError>;
+
+    /// The frame alone: [`Algorithm::run`] without the self-checks that read a whole
+    /// buffer back only to check it (the frame as the llvmpipe peer times it: clears,
+    /// passes, resolve; its own checks run untimed). `fragrace bench` times this and then
+    /// [`Algorithm::self_check`] apart. By default the whole of `run` (its checks are cheap
+    /// next to its passes).
+    fn run_frame(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
+        self.run(frame, params, exec)
+    }
+
+    /// Completes a result of [`Algorithm::run_frame`] with the checks it left out (and what
+    /// they find, as [`AlgoResult::dropped`]). By default nothing: `run_frame` left nothing
+    /// out.
+    fn self_check(&self, result: &mut AlgoResult, exec: &ExecConfig) {
+        let _ = (result, exec);
+    }
 }
 
 /// Runs with a fresh device (helper for implementations).
