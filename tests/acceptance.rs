@@ -172,7 +172,7 @@ fn lockstep_lanes_race_on_one_thread_and_independent_lanes_do_not() {
 /// `run` must still be exactly the frame followed by the check, and `render` must run both.
 #[test]
 fn count_frame_then_self_check_is_run() {
-    use fragrace_kernels::{Algorithm, Params};
+    use fragrace_kernels::Params;
     let s = spec("hairball", "count", 96, ExecConfig::parallel(2));
     let loaded = run::load(&s).unwrap();
     let frame = loaded.frame(&s);
