@@ -244,6 +244,19 @@ pub trait Algorithm: Send + Sync {
     }
 }
 
+/// [`Algorithm::run`] of an algorithm that splits it ([`Algorithm::run_frame`] and
+/// [`Algorithm::self_check`] overridden): the frame, then its checks.
+pub fn frame_then_check<A: Algorithm + ?Sized>(
+    algo: &A,
+    frame: &Frame<'_>,
+    params: &Params,
+    exec: &ExecConfig,
+) -> Result<AlgoResult, AlgoError> {
+    let mut r = algo.run_frame(frame, params, exec)?;
+    algo.self_check(&mut r, exec);
+    Ok(r)
+}
+
 /// Runs with a fresh device (helper for implementations).
 pub fn fresh_device() -> Device {
     Device::new()

@@ -8,8 +8,8 @@ use fragrace_emu::{
 };
 
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
-    HazardClass, Params,
+    frame_then_check, AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag,
+    Check, Frame, HazardClass, Params,
 };
 use crate::common::{self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments};
 
@@ -128,9 +128,7 @@ impl Algorithm for Count {
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
-        let mut r = self.run_frame(frame, params, exec)?;
-        self.self_check(&mut r, exec);
-        Ok(r)
+        frame_then_check(self, frame, params, exec)
     }
     fn run_frame(
         &self,
@@ -164,9 +162,7 @@ impl Algorithm for CountPlain {
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
-        let mut r = self.run_frame(frame, params, exec)?;
-        self.self_check(&mut r, exec);
-        Ok(r)
+        frame_then_check(self, frame, params, exec)
     }
     fn run_frame(
         &self,
