@@ -5,7 +5,7 @@
 //! properties ([`AlgoInfo`]: passes, memory per pixel, hazard class, source), and its
 //! invariants, checked on every run ([`AlgoResult::checks`]).
 //!
-//! An algorithm's result is compared with [`truth`], the exact A-buffer (every fragment
+//! An algorithm's result is compared with [`truth`](basic::Truth), the exact A-buffer (every fragment
 //! captured under the `ordered` executor, sorted by depth then primitive id), by one
 //! differential oracle ([`oracle`]).
 

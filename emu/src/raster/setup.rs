@@ -1442,9 +1442,9 @@ impl<'a> Prepared<'a> {
     }
 
     /// Sets up input triangles `range` (clipped, culled, with their coverage and, unless
-    /// skipped, planes) into `out`, unbinned: one [`FlatEntry`] per setup triangle, in API
-    /// order. [`FlatChunk::spans`] then rasterizes them. Setup indices (`Span::tri`) are
-    /// relative to the chunk ([`FlatChunk::tris`]).
+    /// skipped, planes) and rasterizes them into `out`, unbinned: each setup triangle's
+    /// covered runs go to [`FlatChunk::spans`], in API order. Setup indices (`Span::tri`)
+    /// are relative to the chunk ([`FlatChunk::tris`]).
     pub fn setup_flat(&self, range: std::ops::Range<usize>, out: &mut FlatChunk) {
         let range = range.start.min(self.indices.len())..range.end.min(self.indices.len());
         let mut o = ChunkOut {

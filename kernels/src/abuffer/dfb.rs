@@ -1,5 +1,5 @@
 //! `dfb`: the dynamic fragment buffer (Maule et al. 2012, "\[MCTB12\]" of the z-thickness paper),
-//! and the slot claim its store pass shares with SB's ([`claim_slot`]).
+//! and the slot claim its store pass shares with SB's (`claim_slot`).
 //!
 //! DFB as the z-thickness fragment-merging paper uses it (section 4.3, "Unbounded memory usage
 //! approach", and section 5.1.2, "Performance analysis"): a **count pass** counts the fragments
@@ -122,7 +122,7 @@ pub(super) async fn claim_slot(
     Some(i)
 }
 
-/// DFB store pass: slot = `offsets[p] + atomicAdd(fill[p], 1)` ([`claim_slot`]).
+/// DFB store pass: slot = `offsets[p] + atomicAdd(fill[p], 1)` (`claim_slot`).
 pub struct DfbStore {
     pub counts: Buf<u32>,
     pub offsets: Buf<u32>,

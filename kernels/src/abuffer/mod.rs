@@ -1,9 +1,9 @@
 //! The A-buffers: every fragment per pixel, in unbounded (linked lists) or exactly sized
 //! (count, scan, store) memory.
 //!
-//! Each algorithm has its module; what they share has one module per concept: [`run`] (the
-//! scaffolding of a run: device, passes, result), [`checks`] (the invariants every
-//! A-buffer checks), [`array`] (the fixed-array and count-scan-store storage and its
+//! Each algorithm has its module; what they share has one module per concept: `run` (the
+//! scaffolding of a run: device, passes, result), `checks` (the invariants every
+//! A-buffer checks), `array` (the fixed-array and count-scan-store storage and its
 //! resolve). The count pass is `basic::CountKernel`.
 
 mod array;

@@ -88,7 +88,7 @@ impl FragmentKernel for GroupScan {
 
 /// Store pass: `slot = group_base[g] + offset[p] + atomicAdd(fill[p], 1)`; a fragment past its
 /// pixel's counted range (the passes disagree) is dropped and counted, never written into
-/// another pixel's range (the claim is DFB's, [`claim_slot`]).
+/// another pixel's range (the claim is DFB's, `claim_slot`).
 pub struct SbStore {
     pub counts: Buf<u32>,
     pub offsets: Buf<u32>,
