@@ -255,9 +255,6 @@ pub struct Rendered {
 
 /// Runs the algorithm of `spec` on an already loaded scene: its frame, then its
 /// self-checks, timed apart.
-///
-/// [`Algorithm::run_frame`]: fragrace_kernels::Algorithm::run_frame
-/// [`Algorithm::self_check`]: fragrace_kernels::Algorithm::self_check
 pub fn render(spec: &RunSpec, loaded: &Loaded) -> Result<Rendered, RunError> {
     let algo = fragrace_kernels::algorithm(&spec.algo)
         .ok_or_else(|| RunError::UnknownAlgo(spec.algo.clone()))?;

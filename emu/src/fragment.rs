@@ -347,9 +347,9 @@ impl<'a> Frag<'a> {
 
 /// The context of the fused path of the direct executors: every access is performed when
 /// it is made and never suspends (see the module docs). The fragment's input, step count,
-/// discard flag, depth output and operation counters are a `DirectState` (crate-private) the executor
-/// keeps in a local (in registers, once the kernel is inlined); colour outputs and faults
-/// go to the invocation's slot, as under [`Frag`].
+/// discard flag, depth output and operation counters are a `DirectState` (crate-private)
+/// the executor keeps in a local (in registers, once the kernel is inlined); colour outputs
+/// and faults go to the invocation's slot, as under [`Frag`].
 #[derive(Clone, Copy)]
 pub struct DirectFrag<'a> {
     frag: Frag<'a>,

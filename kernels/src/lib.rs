@@ -5,9 +5,9 @@
 //! properties ([`AlgoInfo`]: passes, memory per pixel, hazard class, source), and its
 //! invariants, checked on every run ([`AlgoResult::checks`]).
 //!
-//! An algorithm's result is compared with [`truth`](basic::Truth), the exact A-buffer (every fragment
-//! captured under the `ordered` executor, sorted by depth then primitive id), by one
-//! differential oracle ([`oracle`]).
+//! An algorithm's result is compared with [`truth`](basic::Truth), the exact A-buffer
+//! (every fragment captured under the `ordered` executor, sorted by depth then primitive
+//! id), by one differential oracle ([`oracle`]).
 
 pub mod abuffer;
 pub mod algo;
