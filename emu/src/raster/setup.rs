@@ -983,10 +983,7 @@ impl Ctx<'_> {
         }
         let (w, h) = (r[2] - r[0], r[3] - r[1]);
         if self.si.offs.len() == 1 && w < 4 && h < 4 {
-            let bb = bbox(v);
-            let bits = if bb[2] - bb[0] < coverage::BLOCK_EXTENT
-                && bb[3] - bb[1] < coverage::BLOCK_EXTENT
-            {
+            let bits = if coverage::block_fits(r, self.w, self.h) {
                 coverage::block_mask(v, &self.si, r)
             } else {
                 coverage::block_mask_wide(&Edges::new(v), &self.si, r)
