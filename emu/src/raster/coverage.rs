@@ -266,124 +266,123 @@ pub(crate) fn pixel_mask(v: &[[i32; 2]; 3], si: &SampleInfo, px: i32, py: i32) -
 /// to the viewport has such a box ([`block_fits`]).
 pub(crate) const BLOCK_EXTENT: i32 = 5 * ONE;
 
-/// Whether a one-sample triangle with pixel rectangle `r` (at most 4x4, inside a viewport
-/// of `w` x `h` pixels) can take [`block_mask`]: `r` touches no viewport border, so it was
-/// not clamped, and the box it came from ([`SampleInfo::pixel_rect`]: at most
-/// `4 ONE + ONE - 1` wide from a sample at the pixel centre) is below [`BLOCK_EXTENT`].
-/// Four comparisons, where the box's extent took a dozen instructions to recompute.
+/// [`BLOCK_EXTENT`] for [`block_mask8`]: a box narrower than 9 pixels.
+pub(crate) const BLOCK8_EXTENT: i32 = 9 * ONE;
+
+/// Whether a one-sample triangle with pixel rectangle `r` (at most 8x8, inside a viewport
+/// of `w` x `h` pixels) can take [`block_mask`] or [`block_mask8`]: `r` touches no viewport
+/// border, so it was not clamped, and the box it came from ([`SampleInfo::pixel_rect`]: at
+/// most `n ONE + ONE - 1` wide for `n + 1` columns of pixel centres) is below
+/// [`BLOCK_EXTENT`] (at most 4x4) or [`BLOCK8_EXTENT`]. Four comparisons, where the box's
+/// extent took a dozen instructions to recompute.
 #[inline(always)]
 pub(crate) fn block_fits(r: [i32; 4], w: i32, h: i32) -> bool {
     (r[0] > 0) & (r[1] > 0) & (r[2] < w - 1) & (r[3] < h - 1)
 }
 
+/// Bit mask of the pixels of the inclusive rectangle `r` (at most 8x8) in a block mask:
+/// bit `8 j + i` is pixel `(r[0] + i, r[1] + j)`.
+#[inline(always)]
+fn rect_bits(r: [i32; 4]) -> u64 {
+    let cols = (1u64 << (r[2] - r[0] + 1)) - 1;
+    let rows = (r[3] - r[1] + 1) as u32;
+    let all = cols * 0x0101_0101_0101_0101;
+    // `rows` is 1..=8: shifting by 64 would overflow.
+    all & (u64::MAX >> (64 - 8 * rows))
+}
+
 /// One-sample coverage of the pixels of the inclusive rectangle `r`, at most 4x4 pixels:
-/// bit `4 j + i` is pixel `(r[0] + i, r[1] + j)`, for a positively oriented triangle whose
-/// bounding box is less than [`BLOCK_EXTENT`] wide and high. The same edge functions as
-/// [`raster`], evaluated exactly relative to the block's first sample: the vertices lie
-/// within 2 [`BLOCK_EXTENT`] of it and the edge deltas below [`BLOCK_EXTENT`], so the
-/// products that make up an edge function and its values at the 16 samples stay below
-/// 2^24 in magnitude, which lets the block be evaluated as 16 independent `i32` lanes, and
-/// the products be taken in `f32` (exact below 2^24) where SSE2 has no 32-bit multiply.
+/// bit `8 j + i` is pixel `(r[0] + i, r[1] + j)` (the layout of [`block_mask8`]), for a
+/// positively oriented triangle whose bounding box is less than [`BLOCK_EXTENT`] wide and
+/// high. The same edge functions as [`raster`], evaluated exactly relative to the block's
+/// first sample: the vertices lie within 2 [`BLOCK_EXTENT`] of it and the edge deltas below
+/// [`BLOCK_EXTENT`], so the products that make up an edge function and its values at the
+/// 16 samples stay below 2^24 in magnitude, which lets the block be evaluated as 16
+/// independent `i32` lanes, and the products be taken in `f32` (exact below 2^24) where
+/// SSE2 has no 32-bit multiply.
 ///
 /// The bound is on the box, not on `r`: `r` is clamped to the viewport, so a small `r` can
 /// belong to a sliver reaching far off screen, whose edge functions need [`Edges`]' `i64`.
 ///
 /// On x86_64 the whole test is SSE2, one register per edge and row of four samples, with no
 /// scalar setup: the three edges are set up side by side in the lanes of one register and
-/// then spread out. A 4x4 block took 218 instructions with a scalar setup (callgrind, the
-/// 871K dragon @2048), this takes about 80.
+/// then spread out ([`BlockEdges`]). A 4x4 block took 218 instructions with a scalar setup
+/// (callgrind, the 871K dragon @2048), this about 90.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-pub(crate) fn block_mask(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4]) -> u16 {
-    use std::arch::x86_64::{
-        _mm_add_epi32, _mm_and_si128, _mm_castps_si128, _mm_castsi128_ps, _mm_cmpeq_epi32,
-        _mm_cmpgt_epi32, _mm_cmplt_epi32, _mm_cvtepi32_ps, _mm_cvtps_epi32, _mm_loadl_epi64,
-        _mm_loadu_si128, _mm_movemask_epi8, _mm_mul_ps, _mm_or_si128, _mm_packs_epi16,
-        _mm_packs_epi32, _mm_set1_epi32, _mm_setr_epi32, _mm_setr_ps, _mm_setzero_si128,
-        _mm_shuffle_epi32, _mm_shuffle_ps, _mm_slli_epi32, _mm_sub_epi32, _mm_sub_ps,
-        _mm_xor_si128,
-    };
+pub(crate) fn block_mask(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4]) -> u64 {
+    use std::arch::x86_64::{_mm_movemask_epi8, _mm_packs_epi16, _mm_packs_epi32};
     debug_assert!(si.offs.len() == 1 && r[2] - r[0] < 4 && r[3] - r[1] < 4);
     debug_assert!({
         let b = bbox(v);
         b[2] - b[0] < BLOCK_EXTENT && b[3] - b[1] < BLOCK_EXTENT
     });
-    let (ox, oy) = si.offs[0];
-    let (bx, by) = ((r[0] << SUBPIXEL_BITS) + ox, (r[1] << SUBPIXEL_BITS) + oy);
-    let cols = (1u32 << (r[2] - r[0] + 1)) - 1;
-    // The bits of the rectangle's pixels: `cols` in each of its rows.
-    let valid = (cols * 0x1111) & ((1u32 << (4 * (r[3] - r[1] + 1))) - 1);
-    // SAFETY: these intrinsics need SSE2 only, which is part of the x86_64 baseline. The two
-    // loads read the six `i32` of `v` (16 bytes from its start, 8 from its fifth `i32`).
+    let mut e = BlockEdges::new(v, si, r);
+    // SAFETY: SSE2 only (x86_64 baseline); no memory is touched.
     let outside = unsafe {
-        let p = v.as_ptr().cast::<i32>();
-        let origin = _mm_setr_epi32(bx, by, bx, by);
-        let a = _mm_castsi128_ps(_mm_sub_epi32(_mm_loadu_si128(p.cast()), origin));
-        let b = _mm_castsi128_ps(_mm_sub_epi32(_mm_loadl_epi64(p.add(4).cast()), origin));
-        // Vertex coordinates by lane (x0 x1 x2 x2, y0 y1 y2 y2), and those of each lane's
-        // next vertex: lane i is edge i, and lane 3 repeats edge 2.
-        let x = _mm_castps_si128(_mm_shuffle_ps::<0b00_00_10_00>(a, b));
-        let y = _mm_castps_si128(_mm_shuffle_ps::<0b01_01_11_01>(a, b));
-        let dx = _mm_sub_epi32(_mm_shuffle_epi32::<0b00_00_10_01>(x), x);
-        let dy = _mm_sub_epi32(_mm_shuffle_epi32::<0b00_00_10_01>(y), y);
-        // E(s) = dx (s_y - y_i) - dy (s_x - x_i): at the first sample `dy x_i - dx y_i`,
-        // minus one off the edges that are not top-left ([`is_top_left`]).
-        let zero = _mm_setzero_si128();
-        let top_left = _mm_or_si128(
-            _mm_cmplt_epi32(dy, zero),
-            _mm_and_si128(_mm_cmpeq_epi32(dy, zero), _mm_cmpgt_epi32(dx, zero)),
-        );
-        let f = _mm_cvtepi32_ps;
-        let e = _mm_sub_ps(_mm_mul_ps(f(dy), f(x)), _mm_mul_ps(f(dx), f(y)));
-        let base = _mm_add_epi32(
-            _mm_cvtps_epi32(e),
-            _mm_xor_si128(top_left, _mm_set1_epi32(-1)),
-        );
-        const SHIFT: i32 = SUBPIXEL_BITS as i32;
-        // Steps per pixel: `-dy ONE` along a row (times 0..3 for the four columns, in f32
-        // as well), `dx ONE` down a column.
-        let sx = f(_mm_sub_epi32(zero, _mm_slli_epi32::<SHIFT>(dy)));
-        let sy = _mm_slli_epi32::<SHIFT>(dx);
-        let columns = _mm_setr_ps(0.0, 1.0, 2.0, 3.0);
-        macro_rules! edge {
-            ($k:literal) => {{
-                const K: i32 = $k * 0b01_01_01_01;
-                let row = _mm_cvtps_epi32(_mm_mul_ps(_mm_shuffle_ps::<K>(sx, sx), columns));
-                (
-                    _mm_add_epi32(_mm_shuffle_epi32::<K>(base), row),
-                    _mm_shuffle_epi32::<K>(sy),
-                )
-            }};
-        }
-        let ((e0, d0), (e1, d1), (e2, d2)) = (edge!(0), edge!(1), edge!(2));
-        // A sample is outside when one of its edge functions is negative: the sign of
-        // `E0 | E1 | E2`, row by row, packed (with saturation, which keeps signs) into the
-        // 16 bytes whose sign bits are the block's 16 samples in bit order.
-        let any = |(e0, e1, e2)| _mm_or_si128(_mm_or_si128(e0, e1), e2);
-        let down = |(e0, e1, e2)| {
-            (
-                _mm_add_epi32(e0, d0),
-                _mm_add_epi32(e1, d1),
-                _mm_add_epi32(e2, d2),
-            )
-        };
-        let row0 = (e0, e1, e2);
-        let row1 = down(row0);
-        let row2 = down(row1);
-        let row3 = down(row2);
-        let (r0, r1, r2, r3) = (any(row0), any(row1), any(row2), any(row3));
-        let rows = _mm_packs_epi16(_mm_packs_epi32(r0, r1), _mm_packs_epi32(r2, r3));
-        _mm_movemask_epi8(rows) as u32
+        let (r0, r1, r2, r3) = (e.row(), e.row(), e.row(), e.row());
+        // Sign-preserving packs: each row's four lanes, then four zero lanes (the block's
+        // columns 4..8, masked off below), so that row `j` lands in byte `j`'s low bits.
+        let z = std::arch::x86_64::_mm_setzero_si128();
+        let lo = _mm_packs_epi16(_mm_packs_epi32(r0, z), _mm_packs_epi32(r1, z));
+        let hi = _mm_packs_epi16(_mm_packs_epi32(r2, z), _mm_packs_epi32(r3, z));
+        (_mm_movemask_epi8(lo) as u32 as u64) | (_mm_movemask_epi8(hi) as u32 as u64) << 16
     };
-    (!outside & valid) as u16
+    !outside & rect_bits(r)
 }
 
-/// [`block_mask`] computed with scalar edge setup (and, off x86_64, scalar evaluation):
-/// the reference the SSE2 version is tested against.
+/// [`block_mask`] for rectangles of at most 8x8 pixels, of triangles whose bounding box is
+/// less than [`BLOCK8_EXTENT`] wide and high: two registers per edge and row, eight columns.
+/// The bound keeps the products and the 64 samples' edge functions below 2^24 (the
+/// vertices lie within 2 [`BLOCK8_EXTENT`] of the first sample, the edge deltas below
+/// [`BLOCK8_EXTENT`]). Most triangles too large for [`block_mask`] on a dense mesh are of
+/// this size (95 % on the 871K dragon @2048); row by row, with three exact divisions a row,
+/// they took about twice the instructions.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn block_mask8(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4]) -> u64 {
+    use std::arch::x86_64::{
+        _mm_add_epi32, _mm_movemask_epi8, _mm_packs_epi16, _mm_packs_epi32, _mm_slli_epi32,
+    };
+    debug_assert!(si.offs.len() == 1 && r[2] - r[0] < 8 && r[3] - r[1] < 8);
+    debug_assert!({
+        let b = bbox(v);
+        b[2] - b[0] < BLOCK8_EXTENT && b[3] - b[1] < BLOCK8_EXTENT
+    });
+    let mut lo = BlockEdges::new(v, si, r);
+    // SAFETY: SSE2 only (x86_64 baseline); no memory is touched.
+    let outside = unsafe {
+        // Columns 4..8: four steps along the row further.
+        let right = |e, s| _mm_add_epi32(e, _mm_slli_epi32::<2>(s));
+        let mut hi = BlockEdges {
+            e: [
+                right(lo.e[0], lo.sx[0]),
+                right(lo.e[1], lo.sx[1]),
+                right(lo.e[2], lo.sx[2]),
+            ],
+            ..lo
+        };
+        let mut bits = 0u64;
+        // Two rows (16 bytes of signs) at a time, as many pairs as the rectangle has.
+        let pairs = ((r[3] - r[1]) / 2 + 1) as u32;
+        for p in 0..pairs {
+            let a = _mm_packs_epi32(lo.row(), hi.row());
+            let b = _mm_packs_epi32(lo.row(), hi.row());
+            let m = _mm_movemask_epi8(_mm_packs_epi16(a, b)) as u32 as u64;
+            bits |= m << (16 * p);
+        }
+        bits
+    };
+    !outside & rect_bits(r)
+}
+
+/// [`block_mask`] and [`block_mask8`] with a scalar setup and evaluation, one sample at a
+/// time in `i32` (exact under the same bounds): off x86_64, and the reference the SSE2
+/// versions are tested against.
 #[cfg(any(test, not(target_arch = "x86_64")))]
 #[inline]
-pub(crate) fn block_mask_scalar(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4]) -> u16 {
-    debug_assert!(si.offs.len() == 1 && r[2] - r[0] < 4 && r[3] - r[1] < 4);
+pub(crate) fn block_mask_scalar(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4]) -> u64 {
+    debug_assert!(si.offs.len() == 1 && r[2] - r[0] < 8 && r[3] - r[1] < 8);
     let (ox, oy) = si.offs[0];
     let (bx, by) = ((r[0] << SUBPIXEL_BITS) + ox, (r[1] << SUBPIXEL_BITS) + oy);
     let x = [v[0][0] - bx, v[1][0] - bx, v[2][0] - bx];
@@ -400,39 +399,146 @@ pub(crate) fn block_mask_scalar(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4])
         sx[i] = -dy << SUBPIXEL_BITS;
         sy[i] = dx << SUBPIXEL_BITS;
     }
-    let cols = (1u32 << (r[2] - r[0] + 1)) - 1;
-    let rows = (r[3] - r[1] + 1) as u32;
-    let mut bits = 0u32;
-    for j in 0..rows as i32 {
-        for i in 0..4 {
+    let mut bits = 0u64;
+    for j in 0..=r[3] - r[1] {
+        for i in 0..=r[2] - r[0] {
             let e = [0, 1, 2].map(|k| base[k] + i * sx[k] + j * sy[k]);
-            bits |= u32::from((e[0] | e[1] | e[2]) >= 0) << (4 * j + i);
+            bits |= u64::from((e[0] | e[1] | e[2]) >= 0) << (8 * j + i);
         }
-        bits &= !(((!cols) & 0xf) << (4 * j));
     }
-    bits as u16
+    bits
 }
 
 /// [`block_mask`] off x86_64.
 #[cfg(not(target_arch = "x86_64"))]
 #[inline]
-pub(crate) fn block_mask(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4]) -> u16 {
+pub(crate) fn block_mask(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4]) -> u64 {
     block_mask_scalar(v, si, r)
 }
 
-/// [`block_mask`] for any triangle (edge functions in `i64`), one sample at a time: for the
-/// rare small pixel rectangle of a large triangle (a sliver reaching off screen).
+/// [`block_mask8`] off x86_64.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline]
+pub(crate) fn block_mask8(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4]) -> u64 {
+    block_mask_scalar(v, si, r)
+}
+
+/// [`block_mask`] for any triangle (edge functions in `i64`), one sample at a time, for
+/// rectangles of at most 8x8: for the rare small pixel rectangle of a large triangle (a
+/// sliver reaching off screen).
 #[cold]
-pub(crate) fn block_mask_wide(e: &Edges, si: &SampleInfo, r: [i32; 4]) -> u16 {
-    debug_assert!(si.offs.len() == 1 && r[2] - r[0] < 4 && r[3] - r[1] < 4);
-    let mut bits = 0u16;
+pub(crate) fn block_mask_wide(e: &Edges, si: &SampleInfo, r: [i32; 4]) -> u64 {
+    debug_assert!(si.offs.len() == 1 && r[2] - r[0] < 8 && r[3] - r[1] < 8);
+    let mut bits = 0u64;
     for y in r[1]..=r[3] {
         for x in r[0]..=r[2] {
             let m = e.mask_at(si, (x as i64) << SUBPIXEL_BITS, (y as i64) << SUBPIXEL_BITS);
-            bits |= u16::from(m) << (4 * (y - r[1]) + (x - r[0]));
+            bits |= u64::from(m) << (8 * (y - r[1]) + (x - r[0]));
         }
     }
     bits
+}
+
+/// The edge functions of a block test ([`block_mask`], [`block_mask8`]): for each edge, its
+/// values at a row of four samples starting at the block's first, and its steps per pixel
+/// along a row and down a column, in SSE2 registers.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct BlockEdges {
+    e: [std::arch::x86_64::__m128i; 3],
+    /// Step per pixel along a row, in every lane.
+    sx: [std::arch::x86_64::__m128i; 3],
+    /// Step per pixel down a column, in every lane.
+    sy: [std::arch::x86_64::__m128i; 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl BlockEdges {
+    /// Sets up the three edges side by side in the lanes of one register (lane 3 repeats
+    /// edge 2), products in `f32` (exact: see [`block_mask8`]'s bounds), then spreads each
+    /// edge over a register of four columns.
+    #[inline(always)]
+    fn new(v: &[[i32; 2]; 3], si: &SampleInfo, r: [i32; 4]) -> BlockEdges {
+        use std::arch::x86_64::{
+            _mm_add_epi32, _mm_and_si128, _mm_castps_si128, _mm_castsi128_ps, _mm_cmpeq_epi32,
+            _mm_cmpgt_epi32, _mm_cmplt_epi32, _mm_cvtepi32_ps, _mm_cvtps_epi32, _mm_loadl_epi64,
+            _mm_loadu_si128, _mm_mul_ps, _mm_or_si128, _mm_set1_epi32, _mm_setr_epi32, _mm_setr_ps,
+            _mm_setzero_si128, _mm_shuffle_epi32, _mm_shuffle_ps, _mm_slli_epi32, _mm_sub_epi32,
+            _mm_sub_ps, _mm_xor_si128,
+        };
+        const SHIFT: i32 = SUBPIXEL_BITS as i32;
+        let (ox, oy) = si.offs[0];
+        let (bx, by) = ((r[0] << SUBPIXEL_BITS) + ox, (r[1] << SUBPIXEL_BITS) + oy);
+        // SAFETY: these intrinsics need SSE2 only, which is part of the x86_64 baseline. The
+        // two loads read the six `i32` of `v` (16 bytes from its start, 8 from its fifth).
+        unsafe {
+            let p = v.as_ptr().cast::<i32>();
+            let origin = _mm_setr_epi32(bx, by, bx, by);
+            let a = _mm_castsi128_ps(_mm_sub_epi32(_mm_loadu_si128(p.cast()), origin));
+            let b = _mm_castsi128_ps(_mm_sub_epi32(_mm_loadl_epi64(p.add(4).cast()), origin));
+            // Vertex coordinates by lane (x0 x1 x2 x2, y0 y1 y2 y2), and those of each
+            // lane's next vertex: lane i is edge i, and lane 3 repeats edge 2.
+            let x = _mm_castps_si128(_mm_shuffle_ps::<0b00_00_10_00>(a, b));
+            let y = _mm_castps_si128(_mm_shuffle_ps::<0b01_01_11_01>(a, b));
+            let dx = _mm_sub_epi32(_mm_shuffle_epi32::<0b00_00_10_01>(x), x);
+            let dy = _mm_sub_epi32(_mm_shuffle_epi32::<0b00_00_10_01>(y), y);
+            // E(s) = dx (s_y - y_i) - dy (s_x - x_i): at the first sample `dy x_i - dx y_i`,
+            // minus one off the edges that are not top-left ([`is_top_left`]).
+            let zero = _mm_setzero_si128();
+            let top_left = _mm_or_si128(
+                _mm_cmplt_epi32(dy, zero),
+                _mm_and_si128(_mm_cmpeq_epi32(dy, zero), _mm_cmpgt_epi32(dx, zero)),
+            );
+            let f = _mm_cvtepi32_ps;
+            let e = _mm_sub_ps(_mm_mul_ps(f(dy), f(x)), _mm_mul_ps(f(dx), f(y)));
+            let base = _mm_add_epi32(
+                _mm_cvtps_epi32(e),
+                _mm_xor_si128(top_left, _mm_set1_epi32(-1)),
+            );
+            // Steps per pixel: `-dy ONE` along a row (times 0..3 for the four columns, in
+            // f32 as well), `dx ONE` down a column.
+            let sx = _mm_sub_epi32(zero, _mm_slli_epi32::<SHIFT>(dy));
+            let sxf = f(sx);
+            let sy = _mm_slli_epi32::<SHIFT>(dx);
+            let columns = _mm_setr_ps(0.0, 1.0, 2.0, 3.0);
+            macro_rules! edge {
+                ($k:literal) => {{
+                    const K: i32 = $k * 0b01_01_01_01;
+                    let along = _mm_mul_ps(_mm_shuffle_ps::<K>(sxf, sxf), columns);
+                    (
+                        _mm_add_epi32(_mm_shuffle_epi32::<K>(base), _mm_cvtps_epi32(along)),
+                        _mm_shuffle_epi32::<K>(sx),
+                        _mm_shuffle_epi32::<K>(sy),
+                    )
+                }};
+            }
+            let (e0, sx0, sy0) = edge!(0);
+            let (e1, sx1, sy1) = edge!(1);
+            let (e2, sx2, sy2) = edge!(2);
+            BlockEdges {
+                e: [e0, e1, e2],
+                sx: [sx0, sx1, sx2],
+                sy: [sy0, sy1, sy2],
+            }
+        }
+    }
+
+    /// The current row's four samples, whose sign bits are set where a sample is outside
+    /// (the sign of `E0 | E1 | E2`: one negative edge function puts a sample outside);
+    /// then steps down to the next row.
+    #[inline(always)]
+    fn row(&mut self) -> std::arch::x86_64::__m128i {
+        use std::arch::x86_64::{_mm_add_epi32, _mm_or_si128};
+        // SAFETY: SSE2 only (x86_64 baseline); no memory is touched.
+        unsafe {
+            let [e0, e1, e2] = self.e;
+            let out = _mm_or_si128(_mm_or_si128(e0, e1), e2);
+            for (e, sy) in self.e.iter_mut().zip(self.sy) {
+                *e = _mm_add_epi32(*e, sy);
+            }
+            out
+        }
+    }
 }
 
 /// The covered run `start..end` (pixel offsets in `0..width`) of a row whose edge functions
@@ -638,12 +744,12 @@ mod tests {
         };
         let si = SampleInfo::new(SampleCount::X1);
         let (w, h) = (64, 64);
-        let mut blocks = 0;
-        for t in 0..400_000 {
+        let (mut blocks, mut blocks8) = (0, 0);
+        for t in 0..800_000 {
             // Small triangles around pixel (20, 30): vertices on the sample grid or between
             // samples (every fourth on a coarse grid, for edges through sample centres and
-            // horizontal or vertical edges), of every size a 4x4 rectangle takes.
-            let ext = [ONE, 2 * ONE, 3 * ONE, 5 * ONE][t % 4];
+            // horizontal or vertical edges), of every size an 8x8 rectangle takes.
+            let ext = [ONE, 2 * ONE, 3 * ONE, 5 * ONE, 7 * ONE, 9 * ONE][t % 6];
             let grid = if t % 4 == 0 { ONE / 2 } else { 1 };
             let mut c = || {
                 [
@@ -662,15 +768,22 @@ mod tests {
             let Some(r) = si.pixel_rect(bbox(&v), w, h) else {
                 continue;
             };
-            if r[2] - r[0] >= 4 || r[3] - r[1] >= 4 || !block_fits(r, w, h) {
+            if r[2] - r[0] >= 8 || r[3] - r[1] >= 8 || !block_fits(r, w, h) {
                 continue;
             }
-            blocks += 1;
             let wide = block_mask_wide(&Edges::new(&v), &si, r);
-            assert_eq!(block_mask(&v, &si, r), wide, "{v:?} {r:?}");
             assert_eq!(block_mask_scalar(&v, &si, r), wide, "{v:?} {r:?}");
+            assert_eq!(block_mask8(&v, &si, r), wide, "{v:?} {r:?}");
+            blocks8 += 1;
+            if r[2] - r[0] < 4 && r[3] - r[1] < 4 {
+                assert_eq!(block_mask(&v, &si, r), wide, "{v:?} {r:?}");
+                blocks += 1;
+            }
         }
-        assert!(blocks > 200_000, "{blocks} blocks tested");
+        assert!(
+            blocks > 200_000 && blocks8 > 400_000,
+            "{blocks}, {blocks8} blocks tested"
+        );
     }
 
     #[test]

@@ -141,30 +141,52 @@ struct TriMeta {
     front_facing: bool,
 }
 
-/// The coverage of a small one-sample triangle (pixel rectangle of at most 4x4, most
-/// triangles of a dense mesh at high resolution), computed once at setup: bit `4 j + i` is
+/// The coverage of a small one-sample triangle (pixel rectangle of at most 8x8, most
+/// triangles of a dense mesh at high resolution), computed once at setup: bit `8 j + i` is
 /// pixel `(x + i, y + j)`. Rasterizing it is then a walk over bits, with no edge set-up
 /// and no per-pixel edge stepping, in every tile it is binned to.
 #[derive(Clone, Copy, Debug, Default)]
 struct SmallCoverage {
     x: i32,
     y: i32,
-    bits: u16,
+    bits: u64,
 }
 
 impl SmallCoverage {
+    /// Calls `f(y, x0, x1)` for the covered run of each row with one, in order. The block
+    /// must hold one run per row at most, as the coverage of a one-sample triangle does
+    /// (the samples inside a convex region, along a line, are consecutive).
+    #[inline(always)]
+    fn convex_runs(&self, mut f: impl FnMut(u32, u32, u32)) {
+        let mut bits = self.bits;
+        while bits != 0 {
+            let k = bits.trailing_zeros();
+            let (j, start) = (k / 8, k % 8);
+            let row = (bits >> (8 * j)) as u32 & 0xff;
+            let len = (!(row >> start)).trailing_zeros();
+            debug_assert!(row >> (start + len) == 0, "two runs in a row of {self:?}");
+            bits &= !(0xff << (8 * j));
+            let x0 = (self.x + start as i32) as u32;
+            f((self.y + j as i32) as u32, x0, x0 + len);
+        }
+    }
+
     /// Calls `f(y, x0, x1)` for the covered runs inside the pixel rectangle `rect`
     /// (`[x0, y0, x1, y1)`), in row-major order.
     #[inline]
     fn runs(&self, rect: [i32; 4], mut f: impl FnMut(u32, u32, u32)) {
-        // Columns of the 4-wide block inside the rectangle.
-        let lo = (rect[0] - self.x).clamp(0, 4);
-        let hi = (rect[2] - self.x).clamp(0, 4);
-        let cols = ((1u32 << hi) - 1) & !((1u32 << lo) - 1);
-        for j in 0..4 {
-            let y = self.y + j;
-            let mut row = (self.bits as u32 >> (4 * j)) & cols;
-            if row == 0 || y < rect[1] || y >= rect[3] {
+        // Columns of the 8-wide block inside the rectangle.
+        let lo = (rect[0] - self.x).clamp(0, 8);
+        let hi = (rect[2] - self.x).clamp(0, 8);
+        let cols = ((1u64 << hi) - 1) & !((1u64 << lo) - 1);
+        // Only the rows with a covered pixel are visited.
+        let mut bits = self.bits & (cols * 0x0101_0101_0101_0101);
+        while bits != 0 {
+            let j = bits.trailing_zeros() / 8;
+            let mut row = (bits >> (8 * j)) as u32 & 0xff;
+            bits &= !(0xff << (8 * j));
+            let y = self.y + j as i32;
+            if y < rect[1] || y >= rect[3] {
                 continue;
             }
             while row != 0 {
@@ -785,7 +807,14 @@ impl Ctx<'_> {
 
     /// Sets up a range of triangles, in batches: a branch-free reject pass first, then the
     /// full setup of the few that remain.
-    fn run(&self, range: std::ops::Range<usize>, out: &mut ChunkOut) {
+    ///
+    /// `LEAN`: the context is flat, with one sample and no planes (counting passes, see
+    /// [`Prepared::setup_flat`]). The setup path is then compiled apart, with the branches
+    /// of the other configurations gone: fewer values live across the triangle loop, fewer
+    /// kept on the stack (the 871K dragon @2048: 351 -> 318 M instructions in this loop, callgrind).
+    fn run<const LEAN: bool>(&self, range: std::ops::Range<usize>, out: &mut ChunkOut) {
+        debug_assert!(!LEAN || (self.flat && self.plane_setup == PlaneSetup::Skip));
+        debug_assert!(!LEAN || self.si.offs.len() == 1);
         let mut keep = [Kept::default(); BATCH];
         let mut t = range.start;
         while t < range.end {
@@ -799,7 +828,7 @@ impl Ctx<'_> {
                 out.rejected += (end - t) as u64; // every index is out of range
             }
             for k in &keep[..n] {
-                self.setup(k, out);
+                self.setup::<LEAN>(k, out);
             }
             t = end;
         }
@@ -848,7 +877,7 @@ impl Ctx<'_> {
 
     /// Full setup of one triangle that passed [`Ctx::reject`].
     #[inline]
-    fn setup(&self, k: &Kept, out: &mut ChunkOut) {
+    fn setup<const LEAN: bool>(&self, k: &Kept, out: &mut ChunkOut) {
         let t = k.t as usize;
         let [ia, ib, ic] = self.indices[t];
         let (Some(&a), Some(&b), Some(&c)) = (
@@ -878,7 +907,7 @@ impl Ctx<'_> {
         // `1/w` as `b_i / w`.
         let pv = v;
         let v = if a2 > 0 { v } else { [a, c, b] };
-        let Some(cov) = self.coverage(&v, r) else {
+        let Some(cov) = self.coverage::<LEAN>(&v, r) else {
             return;
         };
         // Loaded only for the planes: three more scattered loads per triangle otherwise.
@@ -890,7 +919,7 @@ impl Ctx<'_> {
                 [zc[0], 0.0, 0.0, zc[1]],
             ]
         };
-        self.finish(out, t as u32, front, false, cov, v, r, (&pv, attrs));
+        self.finish::<LEAN>(out, t as u32, front, false, cov, v, r, (&pv, attrs));
     }
 
     /// Slow path: a vertex is outside a clip plane (or not finite).
@@ -947,7 +976,7 @@ impl Ctx<'_> {
             if area2(&v) <= 0 {
                 continue;
             }
-            let Some(cov) = self.coverage(&v, r) else {
+            let Some(cov) = self.coverage::<false>(&v, r) else {
                 continue;
             };
             let attrs = || {
@@ -962,31 +991,39 @@ impl Ctx<'_> {
                     ]
                 })
             };
-            self.finish(out, source, front, m > 3, cov, v, r, (&v, attrs));
+            self.finish::<false>(out, source, front, m > 3, cov, v, r, (&v, attrs));
         }
         if self.flat && m > 3 && self.si.offs.len() > 1 {
             merge_piece_spans(&mut out.spans, first_span);
         }
     }
 
-    /// Exact coverage of small triangles (pixel rectangle `r` of at most 4x4 with one
+    /// Exact coverage of small triangles (pixel rectangle `r` of at most 8x8 with one
     /// sample, 2x2 with several): `None` when no sample is covered.
     // Always inlined: returned from a call, the enum went through the stack in narrow
     // stores read back as one wide load, a store-forwarding stall (a fifth of `chunk`'s
     // samples in `perf` on the 871K dragon at 2048).
     #[inline(always)]
-    fn coverage(&self, v: &[[i32; 2]; 3], r: [i32; 4]) -> Option<SetupCoverage> {
+    fn coverage<const LEAN: bool>(&self, v: &[[i32; 2]; 3], r: [i32; 4]) -> Option<SetupCoverage> {
         let single = |x: i32, y: i32, mask: u8| SetupCoverage::Single { x, y, mask };
         if r[0] == r[2] && r[1] == r[3] {
             let m = coverage::pixel_mask(v, &self.si, r[0], r[1]);
             return (m != 0).then(|| single(r[0], r[1], m));
         }
         let (w, h) = (r[2] - r[0], r[3] - r[1]);
-        if self.si.offs.len() == 1 && w < 4 && h < 4 {
-            let bits = if coverage::block_fits(r, self.w, self.h) {
-                coverage::block_mask(v, &self.si, r)
+        if (LEAN || self.si.offs.len() == 1) && w < 8 && h < 8 {
+            let fits = coverage::block_fits(r, self.w, self.h);
+            let bits = if w < 4 && h < 4 {
+                if fits {
+                    coverage::block_mask(v, &self.si, r)
+                } else {
+                    coverage::block_mask_wide(&Edges::new(v), &self.si, r)
+                }
+            } else if fits {
+                coverage::block_mask8(v, &self.si, r)
             } else {
-                coverage::block_mask_wide(&Edges::new(v), &self.si, r)
+                // Clamped to the viewport: rare, rasterized row by row.
+                return Some(SetupCoverage::Vertices);
             };
             // Not `count_ones`: without POPCNT (not in the x86_64 baseline) that is a dozen
             // instructions.
@@ -994,7 +1031,7 @@ impl Ctx<'_> {
                 None
             } else if bits & (bits - 1) == 0 {
                 let k = bits.trailing_zeros() as i32;
-                Some(single(r[0] + k % 4, r[1] + k / 4, 1))
+                Some(single(r[0] + k % 8, r[1] + k / 8, 1))
             } else {
                 Some(SetupCoverage::Small(SmallCoverage {
                     x: r[0],
@@ -1019,7 +1056,7 @@ impl Ctx<'_> {
     /// vertices in the order of their attributes `attrs` (see [`planes`]).
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn finish(
+    fn finish<const LEAN: bool>(
         &self,
         out: &mut ChunkOut,
         source: u32,
@@ -1033,13 +1070,13 @@ impl Ctx<'_> {
         let sh = self.tile_shift;
         let tri = out.setups;
         out.setups += 1;
-        if !self.flat {
+        if !LEAN && !self.flat {
             out.meta.push(TriMeta {
                 source,
                 front_facing,
             });
         }
-        if self.plane_setup == PlaneSetup::Compute {
+        if !LEAN && self.plane_setup == PlaneSetup::Compute {
             let [depth, b0, b1, b2] = planes(pv, &attrs(), r[0], r[1]);
             out.tris.push(SetupTriangle {
                 source,
@@ -1051,7 +1088,7 @@ impl Ctx<'_> {
             });
         }
         let piece = if piece { PIECE } else { 0 };
-        if self.flat {
+        if LEAN || self.flat {
             let spans = &mut out.spans;
             let mut emit = |y: u32, x0: u32, x1: u32, coverage: u8| {
                 spans.push(Span {
@@ -1069,7 +1106,29 @@ impl Ctx<'_> {
                     emit(y as u32, x as u32, x as u32 + 1, mask)
                 }
                 SetupCoverage::Small(small) => {
-                    small.runs([0, 0, self.w, self.h], |y, x0, x1| emit(y, x0, x1, 1))
+                    // At most one run per row of the block: room for all of them first, so
+                    // that a run is seven stores, with no capacity check (more than a
+                    // third of the instructions per run of the 871K dragon @2048).
+                    spans.reserve(8);
+                    let base = spans.len();
+                    let room = &mut spans.spare_capacity_mut()[..8];
+                    let mut n = 0;
+                    small.convex_runs(|y, x0, x1| {
+                        room[n & 7].write(Span {
+                            y,
+                            x0,
+                            x1,
+                            tri,
+                            coverage: 1,
+                            source,
+                            front_facing,
+                        });
+                        n += 1;
+                    });
+                    debug_assert!(n <= 8);
+                    // SAFETY: `convex_runs` gives at most one run per row of the 8-row block
+                    // (`n <= 8`), and the first `n` spare elements were written above.
+                    unsafe { spans.set_len(base + n) };
                 }
                 // `r` is the pixel rectangle inside the viewport (inclusive).
                 SetupCoverage::Vertices => coverage::raster(&Edges::new(&v), &self.si, r, emit),
@@ -1164,7 +1223,7 @@ impl Ctx<'_> {
             setups: 0,
             rejected: 0,
         };
-        self.run(range, &mut out);
+        self.run::<false>(range, &mut out);
         let mut tile_start = STARTS.take();
         tile_start.resize(self.ntiles + 1, 0);
         for &(tile, _) in &out.bins {
@@ -1458,7 +1517,11 @@ impl<'a> Prepared<'a> {
         o.spans.clear();
         let ctx = self.ctx(true);
         if ctx.ntiles > 0 {
-            ctx.run(range, &mut o);
+            if ctx.plane_setup == PlaneSetup::Skip && ctx.si.offs.len() == 1 {
+                ctx.run::<true>(range, &mut o);
+            } else {
+                ctx.run::<false>(range, &mut o);
+            }
         }
         out.tris = o.tris;
         out.spans = o.spans;
