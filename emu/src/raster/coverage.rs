@@ -650,6 +650,14 @@ pub(crate) fn raster(
 mod tests {
     use super::*;
 
+    /// xorshift64*: deterministic test input, no dependency.
+    fn xorshift(state: &mut u64) -> u64 {
+        *state ^= *state >> 12;
+        *state ^= *state << 25;
+        *state ^= *state >> 27;
+        state.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
     #[test]
     fn fixed_offsets_match_float_positions() {
         for s in [
@@ -738,14 +746,8 @@ mod tests {
 
     #[test]
     fn block_mask_matches_scalar_and_wide() {
-        // xorshift64*: deterministic, no dependency.
         let mut state = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = |n: i32| {
-            state ^= state >> 12;
-            state ^= state << 25;
-            state ^= state >> 27;
-            ((state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 33) % n as u64) as i32
-        };
+        let mut next = |n: i32| ((xorshift(&mut state) >> 33) % n as u64) as i32;
         let si = SampleInfo::new(SampleCount::X1);
         let (w, h) = (64, 64);
         let (mut blocks, mut blocks8) = (0, 0);
@@ -827,15 +829,8 @@ mod tests {
 
     #[test]
     fn row_run_is_the_stepping_scan() {
-        // xorshift64*: deterministic, no dependency.
         let mut state = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = |bound: i64| {
-            state ^= state >> 12;
-            state ^= state << 25;
-            state ^= state >> 27;
-            let r = state.wrapping_mul(0x2545_F491_4F6C_DD1D);
-            (r % (2 * bound as u64)) as i64 - bound
-        };
+        let mut next = |bound: i64| (xorshift(&mut state) % (2 * bound as u64)) as i64 - bound;
         for t in 0..400_000 {
             // Small and large edge values and steps, zero steps included.
             let vb = if t % 2 == 0 { 1 << 12 } else { 1 << 40 };
