@@ -815,7 +815,8 @@ impl Ctx<'_> {
     /// `LEAN`: the context is flat, with one sample and no planes (counting passes, see
     /// [`Prepared::setup_flat`]). The setup path is then compiled apart, with the branches
     /// of the other configurations gone: fewer values live across the triangle loop, fewer
-    /// kept on the stack (the 871K dragon @2048: 351 -> 318 M instructions in this loop, callgrind).
+    /// kept on the stack (the 871K dragon @2048: 351 -> 318 M instructions in this loop,
+    /// callgrind).
     fn run<const LEAN: bool>(&self, range: std::ops::Range<usize>, out: &mut ChunkOut) {
         debug_assert!(!LEAN || (self.flat && self.plane_setup == PlaneSetup::Skip));
         debug_assert!(!LEAN || self.si.offs.len() == 1);
