@@ -264,9 +264,13 @@ pub(crate) fn pixel_mask(v: &[[i32; 2]; 3], si: &SampleInfo, px: i32, py: i32) -
 /// [`block_mask`] takes: a box narrower than 5 pixels reaches the samples of at most 4
 /// columns of pixels. A triangle whose pixel rectangle is at most 4x4 and was not clamped
 /// to the viewport has such a box ([`block_fits`]).
+// Read by the SSE2 block tests' debug checks (and their docs) only.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) const BLOCK_EXTENT: i32 = 5 * ONE;
 
 /// [`BLOCK_EXTENT`] for [`block_mask8`]: a box narrower than 9 pixels.
+// As BLOCK_EXTENT.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) const BLOCK8_EXTENT: i32 = 9 * ONE;
 
 /// Whether a one-sample triangle with pixel rectangle `r` (at most 8x8, inside a viewport
@@ -282,6 +286,7 @@ pub(crate) fn block_fits(r: [i32; 4], w: i32, h: i32) -> bool {
 
 /// Bit mask of the pixels of the inclusive rectangle `r` (at most 8x8) in a block mask:
 /// bit `8 j + i` is pixel `(r[0] + i, r[1] + j)`.
+#[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn rect_bits(r: [i32; 4]) -> u64 {
     let cols = (1u64 << (r[2] - r[0] + 1)) - 1;
