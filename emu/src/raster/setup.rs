@@ -1037,18 +1037,13 @@ impl Ctx<'_> {
         }
         let (w, h) = (r[2] - r[0], r[3] - r[1]);
         if (LEAN || self.si.offs.len() == 1) && w < 8 && h < 8 {
-            let fits = coverage::block_fits(r, self.w, self.h);
-            let bits = if w < 4 && h < 4 {
-                if fits {
-                    coverage::block_mask(v, &self.si, r)
-                } else {
-                    coverage::block_mask_wide(&Edges::new(v), &self.si, r)
-                }
-            } else if fits {
-                coverage::block_mask8(v, &self.si, r)
+            let bits = if !coverage::block_fits(r, self.w, self.h) {
+                // Clamped to the viewport (rare): the box may be too large for `i32`.
+                coverage::block_mask_wide(&Edges::new(v), &self.si, r)
+            } else if w < 4 && h < 4 {
+                coverage::block_mask(v, &self.si, r)
             } else {
-                // Clamped to the viewport: rare, rasterized row by row.
-                return Some(SetupCoverage::Vertices);
+                coverage::block_mask8(v, &self.si, r)
             };
             // Not `count_ones`: without POPCNT (not in the x86_64 baseline) that is a dozen
             // instructions.
@@ -1151,8 +1146,9 @@ impl Ctx<'_> {
                         n += 1;
                     });
                     debug_assert!(n <= 8);
-                    // SAFETY: `convex_runs` gives at most one run per row of the 8-row block
-                    // (`n <= 8`), and the first `n` spare elements were written above.
+                    // SAFETY: `convex_runs` calls back once per non-empty row of the 8-row
+                    // block at most (it clears a row's byte as it emits its run), so
+                    // `n <= 8` and the first `n` spare elements were written above.
                     unsafe { spans.set_len(base + n) };
                 }
                 // `r` is the pixel rectangle inside the viewport (inclusive).
