@@ -28,7 +28,7 @@ fn scheduled(policy: Policy, seed: u64) -> ExecConfig {
 fn counts(s: &RunSpec) -> (Vec<u32>, fragrace_emu::PassReport) {
     let loaded = run::load(s).unwrap();
     let r = run::render(s, &loaded).unwrap().result;
-    (r.counts.unwrap(), r.report)
+    (r.counts.unwrap().into_vec(), r.report)
 }
 
 #[test]

@@ -43,7 +43,7 @@ pub use kernel::FragInput;
 pub use kernel::{
     Access, CompareExchange, FaultKind, Frag, FragmentKernel, KernelInfo, PixelArray, Store,
 };
-pub use memory::{Buf, Memory, Word};
+pub use memory::{Buf, Memory, Values, Word};
 pub use pipeline::{Device, Fault, OcclusionQuery, PassError, PassReport, PassState};
 pub use raster::{CullMode, FrontFace, RasterState, SampleCount, Viewport};
 pub use state::{

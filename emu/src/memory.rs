@@ -214,14 +214,118 @@ pub enum MemoryError {
 }
 
 enum Words {
-    W32(Box<[AtomicU32]>),
-    W64(Box<[AtomicU64]>),
+    W32(AlignedWords<AtomicU32>),
+    W64(AlignedWords<AtomicU64>),
+}
+
+/// Where a buffer's first word lies: a multiple of this many bytes (two cache lines, the
+/// unit x86's adjacent-line prefetcher fetches).
+///
+/// Why: per-pixel arrays are addressed by pixel, and tiles (and the screen regions two
+/// threads work on) start at pixel columns that are multiples of 8 or 16. `malloc` returns
+/// large blocks 16 bytes past a page boundary, so a tile's rows shared their first and last
+/// cache lines with the neighbouring tiles', and two threads adding into neighbouring tiles
+/// took those lines from each other at every row: 8 % of the pure atomic adds of the
+/// bunny at 2048x2048 on two threads (`bench --floor`), and as much of the `count` pass
+/// (docs/performance.md). GPU APIs align storage buffers too (Vulkan's
+/// `minStorageBufferOffsetAlignment`, up to 256 bytes).
+pub const BUFFER_ALIGN: usize = 128;
+
+/// A buffer's words, starting at a multiple of [`BUFFER_ALIGN`] bytes: a `Vec` a little
+/// longer than the buffer (so that it is allocated, reused and freed as any `Vec`, and its
+/// values can move out without a copy: [`Memory::take`]), whose first `start` elements
+/// are padding.
+pub(crate) struct AlignedWords<A> {
+    all: Vec<A>,
+    start: usize,
+}
+
+impl<A> Default for AlignedWords<A> {
+    fn default() -> Self {
+        AlignedWords {
+            all: Vec::new(),
+            start: 0,
+        }
+    }
+}
+
+impl<A> std::ops::Deref for AlignedWords<A> {
+    type Target = [A];
+    #[inline(always)]
+    fn deref(&self) -> &[A] {
+        // `start <= all.len()` (set once, by the constructors).
+        debug_assert!(self.start <= self.all.len());
+        // SAFETY: `start` is at most the length (see above), so the range is in bounds.
+        unsafe { self.all.get_unchecked(self.start..) }
+    }
 }
 
 struct Buffer {
     name: String,
     ty: &'static str,
     words: Words,
+}
+
+/// A buffer's values moved out to the host by [`Memory::take`] without a copy: the
+/// buffer's own allocation, read as values. Derefs to the values (its first elements may
+/// be the padding that aligned the buffer, [`BUFFER_ALIGN`], which it hides).
+#[derive(Clone)]
+pub struct Values<T> {
+    all: Vec<T>,
+    start: usize,
+}
+
+impl<T> std::ops::Deref for Values<T> {
+    type Target = [T];
+    fn deref(&self) -> &[T] {
+        &self.all[self.start..]
+    }
+}
+
+impl<'a, T> IntoIterator for &'a Values<T> {
+    type Item = &'a T;
+    type IntoIter = std::slice::Iter<'a, T>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.iter()
+    }
+}
+
+impl<T> From<Vec<T>> for Values<T> {
+    fn from(all: Vec<T>) -> Self {
+        Values { all, start: 0 }
+    }
+}
+
+impl<T> Default for Values<T> {
+    fn default() -> Self {
+        Values::from(Vec::new())
+    }
+}
+
+impl<T: PartialEq> PartialEq for Values<T> {
+    fn eq(&self, other: &Self) -> bool {
+        **self == **other
+    }
+}
+
+impl<T: PartialEq> PartialEq<Vec<T>> for Values<T> {
+    fn eq(&self, other: &Vec<T>) -> bool {
+        **self == **other
+    }
+}
+
+impl<T: std::fmt::Debug> std::fmt::Debug for Values<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        (**self).fmt(f)
+    }
+}
+
+impl<T> Values<T> {
+    /// The values as a `Vec` (a copy only if the buffer had padding before them).
+    pub fn into_vec(mut self) -> Vec<T> {
+        self.all.drain(..self.start);
+        self.all
+    }
 }
 
 /// The storage of a device: every buffer, by id.
@@ -443,31 +547,37 @@ impl Memory {
     /// Moves a buffer's contents out (host side, after the passes that use it): the same
     /// values as [`Memory::read`] without a copy. The buffer is left empty, so a later
     /// access to it is out of range; the storage it held still counts in [`Memory::bytes`].
-    pub fn take<T: Word>(&mut self, buf: Buf<T>) -> Result<Vec<T>, MemoryError> {
+    pub fn take<T: Word>(&mut self, buf: Buf<T>) -> Result<Values<T>, MemoryError> {
         self.check(buf)?;
         #[cfg(loom)]
         let values = {
             let v = self.read(buf)?;
-            self.buffers[buf.id as usize].words = Words::W32(Box::new([]));
-            v
+            self.buffers[buf.id as usize].words = Words::W32(AlignedWords::default());
+            Values::from(v)
         };
         #[cfg(not(loom))]
         let values = match std::mem::replace(
             &mut self.buffers[buf.id as usize].words,
-            Words::W32(Box::new([])),
+            Words::W32(AlignedWords::default()),
         ) {
             // Both collects reuse the allocation (same size and alignment) and compile to
-            // plain loads: no atomics, no second buffer.
-            Words::W32(w) => w
-                .into_vec()
-                .into_iter()
-                .map(|a| T::from_bits(a.into_inner() as u64))
-                .collect(),
-            Words::W64(w) => w
-                .into_vec()
-                .into_iter()
-                .map(|a| T::from_bits(a.into_inner()))
-                .collect(),
+            // plain loads: no atomics, no second buffer. The padding comes along.
+            Words::W32(w) => Values {
+                all: w
+                    .all
+                    .into_iter()
+                    .map(|a| T::from_bits(a.into_inner() as u64))
+                    .collect(),
+                start: w.start,
+            },
+            Words::W64(w) => Values {
+                all: w
+                    .all
+                    .into_iter()
+                    .map(|a| T::from_bits(a.into_inner()))
+                    .collect(),
+                start: w.start,
+            },
         };
         Ok(values)
     }
@@ -667,46 +777,73 @@ impl<'m> WordCache<'m> {
     }
 }
 
-/// `len` zero 32-bit words, allocated and zeroed as a new buffer of a
+/// `len` zero 32-bit words, allocated, aligned and zeroed as a new buffer of a
 /// [`Memory::with_threads`]`(threads)` is (for measurements that replay a pass's accesses
 /// outside the emulator, such as the CLI's `bench --floor`).
-pub fn zeroed_u32(len: usize, threads: usize) -> Box<[AtomicU32]> {
-    zeroed_words(len, threads)
+pub fn zeroed_u32(len: usize, threads: usize) -> impl std::ops::Deref<Target = [AtomicU32]> {
+    zeroed_words::<AtomicU32>(len, threads)
 }
 
-/// `len` zero words, zeroed by up to `threads` threads.
+/// `len` zero words starting at a multiple of [`BUFFER_ALIGN`] bytes, zeroed by up to
+/// `threads` threads.
 ///
 /// One thread: a zero-filled allocation (`calloc`). `malloc` keeps freed blocks of the size
 /// of a frame's buffers and hands them back, and `calloc` then zeroes them on the calling
 /// thread (1.3-1.7 ms for the 16 MiB of a 2048x2048 `count`, a tenth of the bunny's frame).
 /// Large buffers with several threads: an uninitialized allocation zeroed in parts, one per
-/// thread, all at once.
+/// thread, all at once. Either way through `Vec` (an allocation aligned by `Layout` would
+/// be mapped afresh at every frame, a page fault per 4 KiB).
 #[cfg(not(loom))]
-fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) -> Box<[A]> {
+fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) -> AlignedWords<A> {
     /// Below this a thread costs more than it saves.
     const PER_THREAD_BYTES: usize = 1 << 20;
-    let bytes = len.saturating_mul(std::mem::size_of::<A>());
+    let size = std::mem::size_of::<A>();
+    // Room to move the start to an aligned address, whatever `malloc` returns.
+    let total = len.saturating_add(BUFFER_ALIGN / size);
+    let bytes = total.saturating_mul(size);
     let threads = threads.min(bytes / PER_THREAD_BYTES).max(1);
-    if threads == 1 {
+    let all = if threads == 1 {
         // SAFETY: `A` is an atomic integer (`ZeroIsValid` is implemented for `AtomicU32`
         // and `AtomicU64` only), for which all-zero bytes are a valid value (zero).
-        return unsafe { Box::<[A]>::new_zeroed_slice(len).assume_init() };
-    }
-    let mut words = Box::<[A]>::new_uninit_slice(len);
-    let parts: Vec<_> = words.chunks_mut(len.div_ceil(threads)).collect();
-    crate::sync::pool::broadcast_each(parts, |part| {
-        // SAFETY: `part` is a slice of `MaybeUninit<A>`, valid for writes of its length;
-        // any bytes are a valid `MaybeUninit`.
-        unsafe { std::ptr::write_bytes(part.as_mut_ptr(), 0, part.len()) };
-    });
-    // SAFETY: every element was zeroed just above (the parts cover the slice), and all-zero
-    // bytes are a valid `A` (see the one-thread case).
-    unsafe { words.assume_init() }
+        unsafe { Box::<[A]>::new_zeroed_slice(total).assume_init() }.into_vec()
+    } else {
+        let mut words = Box::<[A]>::new_uninit_slice(total);
+        let parts: Vec<_> = words.chunks_mut(total.div_ceil(threads)).collect();
+        crate::sync::pool::broadcast_each(parts, |part| {
+            // SAFETY: `part` is a slice of `MaybeUninit<A>`, valid for writes of its
+            // length; any bytes are a valid `MaybeUninit`.
+            unsafe { std::ptr::write_bytes(part.as_mut_ptr(), 0, part.len()) };
+        });
+        // SAFETY: every element was zeroed just above (the parts cover the slice), and
+        // all-zero bytes are a valid `A` (see the one-thread case).
+        unsafe { words.assume_init() }.into_vec()
+    };
+    aligned(all, len)
+}
+
+/// `all` cut to `len` words from its first one at a multiple of [`BUFFER_ALIGN`] bytes
+/// (`all` has room for the padding before it).
+#[cfg(not(loom))]
+fn aligned<A>(mut all: Vec<A>, len: usize) -> AlignedWords<A> {
+    let size = std::mem::size_of::<A>();
+    // `align_offset` may answer `usize::MAX` ("cannot tell"); the start then stays put,
+    // unaligned but correct.
+    let start = all.as_ptr().align_offset(BUFFER_ALIGN);
+    let start = if start.saturating_add(len) <= all.len() && start * size < BUFFER_ALIGN {
+        start
+    } else {
+        0
+    };
+    all.truncate(start + len);
+    AlignedWords { all, start }
 }
 
 #[cfg(loom)]
-fn zeroed_words<A: ZeroIsValid>(len: usize, _threads: usize) -> Box<[A]> {
-    (0..len).map(|_| A::zero()).collect()
+fn zeroed_words<A: ZeroIsValid>(len: usize, _threads: usize) -> AlignedWords<A> {
+    AlignedWords {
+        all: (0..len).map(|_| A::zero()).collect(),
+        start: 0,
+    }
 }
 
 /// Atomic words whose all-zero bit pattern is the value zero.
@@ -966,6 +1103,41 @@ fn apply64(a: &AtomicU64, op: MemOp, ord: Ordering) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Buffers start at a multiple of `BUFFER_ALIGN` bytes, whatever their size and
+    /// however many threads zero them, and `take` hands back exactly their values (the
+    /// padding before them hidden).
+    #[test]
+    fn buffers_are_aligned_and_take_returns_their_values() {
+        for threads in [1, 2] {
+            let mut m = Memory::with_threads(threads);
+            for len in [2u64, 3, 1000, 1 << 20] {
+                let a = m.create::<u32>("a", len).unwrap();
+                let b = m.create::<u64>("b", len).unwrap();
+                for id in [a.id, b.id] {
+                    let start = match &m.buffers[id as usize].words {
+                        Words::W32(w) => w.as_ptr() as usize,
+                        Words::W64(w) => w.as_ptr() as usize,
+                    };
+                    assert_eq!(start % BUFFER_ALIGN, 0, "len {len}, {threads} threads");
+                }
+                assert_eq!(m.buffer_len(a.id), len as u32);
+                let last = len as u32 - 1;
+                m.set(a, 0, 7).unwrap();
+                m.set(a, last, 9).unwrap();
+                m.set(b, last, u64::MAX).unwrap();
+                let read = m.read(a).unwrap();
+                let taken = m.take(a).unwrap();
+                assert_eq!(taken.len(), len as usize);
+                assert_eq!(&taken[..], &read[..]);
+                assert_eq!((taken[0], taken[last as usize]), (7, 9));
+                assert_eq!(taken.clone().into_vec(), read);
+                let b_taken = m.take(b).unwrap();
+                assert_eq!(b_taken[last as usize], u64::MAX);
+                assert_eq!(b_taken.iter().filter(|&&v| v != 0).count(), 1);
+            }
+        }
+    }
 
     /// A pixel's slot is word `pixel * stride` of the buffer, for both word widths; a slot
     /// past the end, or a buffer that does not exist, gives no address.

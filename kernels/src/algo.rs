@@ -182,7 +182,7 @@ pub struct AlgoResult {
     /// What was kept per pixel (for `Capacity::All`, `KNearest`, `Nearest`).
     pub capture: Option<Capture>,
     /// Per-pixel counts (for `Capacity::Count`), row-major, top row first.
-    pub counts: Option<Vec<u32>>,
+    pub counts: Option<fragrace_emu::Values<u32>>,
     /// The resolved image (RGBA, row-major, top row first), e.g. the OIT composite.
     pub image: Option<Vec<[f32; 4]>>,
     /// All passes' reports merged.

@@ -352,7 +352,7 @@ impl Truth {
         let filled = device.memory.read(fill)?;
         let checks = vec![Check::new(
             "store pass fills exactly what the count pass counted",
-            filled == counts,
+            filled[..] == counts[..],
             format!("{} pixels", n),
         )];
         Ok(AlgoResult {
