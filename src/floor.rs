@@ -16,7 +16,8 @@ use std::time::Instant;
 
 use fragrace_emu::memory::zeroed_u32;
 use fragrace_emu::sync::pool::{broadcast, map_parts};
-use fragrace_emu::sync::{AtomicU32, AtomicUsize, Ordering};
+use fragrace_emu::sync::split::SplitRange;
+use fragrace_emu::sync::{AtomicU32, Ordering};
 use fragrace_kernels::common::SUM_MIN_PER_THREAD;
 
 /// The floor of one frame, in milliseconds (medians over the frames timed).
@@ -123,17 +124,15 @@ impl Plan {
 /// The planned adds, tile by tile, on `threads` threads.
 fn replay(plan: &Plan, threads: usize, words: &[AtomicU32]) {
     let tiles = plan.starts.len() - 1;
-    let next = AtomicUsize::new(0);
-    let work = || loop {
-        let t = next.fetch_add(1, Ordering::Relaxed);
-        if t >= tiles {
-            break;
+    let threads = threads.max(1);
+    let queue = SplitRange::new(tiles, threads);
+    broadcast(threads, |me| {
+        while let Some(t) = queue.next(me) {
+            for &p in &plan.order[plan.starts[t]..plan.starts[t + 1]] {
+                words[p as usize].fetch_add(1, Ordering::AcqRel);
+            }
         }
-        for &p in &plan.order[plan.starts[t]..plan.starts[t + 1]] {
-            words[p as usize].fetch_add(1, Ordering::AcqRel);
-        }
-    };
-    broadcast(threads.max(1), |_| work());
+    });
 }
 
 /// The median of timings (the upper one of an even count); sorts `v`.

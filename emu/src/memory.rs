@@ -226,9 +226,9 @@ enum Words {
 /// large blocks 16 bytes past a page boundary, so a tile's rows shared their first and last
 /// cache lines with the neighbouring tiles', and two threads adding into neighbouring tiles
 /// took those lines from each other at every row: 8 % of the pure atomic adds of the
-/// bunny at 2048x2048 on two threads (`bench --floor`), and as much of the `count` pass
-/// (docs/performance.md). GPU APIs align storage buffers too (Vulkan's
-/// `minStorageBufferOffsetAlignment`, up to 256 bytes).
+/// bunny at 2048x2048 on two threads (`bench --floor`), 2 % of a binned `count` pass
+/// (docs/performance.md, "2026-11-27, night"). GPU APIs align storage buffers too
+/// (Vulkan's `minStorageBufferOffsetAlignment`, up to 256 bytes).
 pub const BUFFER_ALIGN: usize = 128;
 
 /// A buffer's words, starting at a multiple of [`BUFFER_ALIGN`] bytes: a `Vec` a little

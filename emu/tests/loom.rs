@@ -191,3 +191,21 @@ fn ordered_interlock_passes_the_turn_of_fragments_that_never_enter() {
         assert_eq!(mem.read(count).unwrap()[0], 1);
     });
 }
+
+/// The split work queue of the passes (`sync::split`): an owner taking its part's front
+/// and a thief taking its back never both take one index, and none is lost.
+#[test]
+fn split_range_hands_out_every_index_once() {
+    use fragrace_emu::sync::split::SplitRange;
+    model(|| {
+        let r = Arc::new(SplitRange::new(3, 2));
+        let thief = {
+            let r = r.clone();
+            loom::thread::spawn(move || std::iter::from_fn(|| r.next(1)).collect::<Vec<_>>())
+        };
+        let mut all: Vec<usize> = std::iter::from_fn(|| r.next(0)).collect();
+        all.extend(thief.join().unwrap());
+        all.sort_unstable();
+        assert_eq!(all, vec![0, 1, 2]);
+    });
+}

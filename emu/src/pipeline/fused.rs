@@ -39,6 +39,7 @@ use crate::memory::PixelPrefetcher;
 use crate::raster::{Binned, FlatChunk, Prepared, SampleCount, Segment, SetupTriangle, Span};
 use crate::state::FragmentState;
 use crate::sync::pool;
+use crate::sync::split::SplitRange;
 
 /// What a fused pass needs besides the kernel and its environment.
 pub(crate) struct FusedPass<'a> {
@@ -175,28 +176,38 @@ pub(crate) fn run_fused<K: FragmentKernel>(
                 binned.tile_segments(t, max, &mut segments);
             }
             let tiles: &[TileMemory] = tiles;
-            let next = crate::sync::AtomicUsize::new(0);
-            let work = || {
+            let threads = threads.min(segments.len().max(1));
+            let queue = SplitRange::new(segments.len(), threads);
+            let work = |me: usize| {
                 let mut w = Worker::new(kernel, env, pass);
-                loop {
-                    let i = next.fetch_add(1, crate::sync::Ordering::Relaxed);
-                    let Some(&seg) = segments.get(i) else { break };
+                while let Some(i) = queue.next(me) {
+                    let seg = segments[i];
                     let tile = TileAccess::Shared(&tiles[seg.tile as usize]);
                     w.run_unit(&SegmentSpans { binned, seg }, env, Some(tile));
                 }
                 w.finish()
             };
-            on_threads(threads.min(segments.len().max(1)), work)
+            pool::broadcast(threads, work)
         }
         None => {
             let count = tiles.len();
-            let queue = pool::Mutex::new(tiles.iter_mut().enumerate());
-            let work = || {
+            let threads = threads.min(count.max(1));
+            // Each tile is handed out once (`SplitRange`), so its lock is never contended:
+            // it only moves the `&mut` to the thread that took the index.
+            let slots: Vec<pool::Mutex<Option<&mut TileMemory>>> = tiles
+                .iter_mut()
+                .map(|t| pool::Mutex::new(Some(t)))
+                .collect();
+            let queue = SplitRange::new(count, threads);
+            let work = |me: usize| {
                 let mut w = Worker::new(kernel, env, pass);
                 let mut segs = Vec::new();
-                loop {
-                    let next = queue.lock().unwrap_or_else(|e| e.into_inner()).next();
-                    let Some((index, tile)) = next else { break };
+                while let Some(index) = queue.next(me) {
+                    let taken = slots[index]
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .take();
+                    let Some(tile) = taken else { continue };
                     segs.clear();
                     // Several units in turn, in API order: each unit's spans are gathered
                     // before shading (see `Worker::run_unit`).
@@ -208,7 +219,7 @@ pub(crate) fn run_fused<K: FragmentKernel>(
                 }
                 w.finish()
             };
-            on_threads(threads.min(count.max(1)), work)
+            pool::broadcast(threads, work)
         }
     };
     let mut outcome = ShadeOutcome::default();
@@ -255,16 +266,14 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
     // spreads over the threads.
     let size = n.div_ceil(threads * 8).clamp(16, UNBINNED_CHUNK);
     let chunks = n.div_ceil(size);
-    let next = crate::sync::AtomicUsize::new(0);
-    let work = || {
+    let threads = threads.min(chunks.max(1));
+    // Threads start far apart in the mesh (see `SplitRange`).
+    let queue = SplitRange::new(chunks, threads);
+    let work = |me: usize| {
         let mut w = Worker::new(kernel, env, pass);
         let mut chunk = FlatChunk::default();
         let mut rejected = 0;
-        loop {
-            let c = next.fetch_add(1, crate::sync::Ordering::Relaxed);
-            if c >= chunks {
-                break;
-            }
+        while let Some(c) = queue.next(me) {
             prepared.setup_flat(c * size..(c + 1) * size, &mut chunk);
             rejected += chunk.rejected;
             // The chunk's setup records are this unit's planes.
@@ -277,7 +286,7 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
         let (acc, counts) = w.finish();
         (acc, counts, rejected)
     };
-    let results = on_threads(threads.min(chunks.max(1)), work);
+    let results = pool::broadcast(threads, work);
     let mut outcome = ShadeOutcome::default();
     let mut counts = FusedCounts::default();
     let mut rejected = 0;
@@ -287,13 +296,6 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
         rejected += r;
     }
     (outcome, counts, rejected)
-}
-
-/// Runs `work` on `threads` threads at once (`pool::broadcast`: the caller and kept
-/// threads; inline with one) and collects the results.
-fn on_threads<R: Send>(threads: usize, work: impl Fn() -> R + Sync) -> Vec<R> {
-    // Kernel panics are caught per invocation; a panic resumed here is a bug of ours.
-    pool::broadcast(threads.max(1), |_| work())
 }
 
 /// What the fragments of a unit of work share before shading: coverage masking and the

@@ -16,3 +16,4 @@ pub use loom::sync::{Arc, Mutex};
 pub use loom::thread;
 
 pub mod pool;
+pub mod split;
