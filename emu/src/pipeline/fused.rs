@@ -176,18 +176,20 @@ pub(crate) fn run_fused<K: FragmentKernel>(
                 binned.tile_segments(t, max, &mut segments);
             }
             let tiles: &[TileMemory] = tiles;
-            let threads = threads.min(segments.len().max(1));
-            let queue = SplitRange::new(segments.len(), threads);
-            let work = |me: usize| {
+            // One shared counter, not `SplitRange`: segments of one tile are cut so that
+            // different threads shade them at the same time (`ExecConfig::segment`).
+            let next = crate::sync::AtomicUsize::new(0);
+            let work = |_| {
                 let mut w = Worker::new(kernel, env, pass);
-                while let Some(i) = queue.next(me) {
-                    let seg = segments[i];
+                loop {
+                    let i = next.fetch_add(1, crate::sync::Ordering::Relaxed);
+                    let Some(&seg) = segments.get(i) else { break };
                     let tile = TileAccess::Shared(&tiles[seg.tile as usize]);
                     w.run_unit(&SegmentSpans { binned, seg }, env, Some(tile));
                 }
                 w.finish()
             };
-            pool::broadcast(threads, work)
+            pool::broadcast(threads.min(segments.len().max(1)), work)
         }
         None => {
             let count = tiles.len();
