@@ -640,9 +640,10 @@ fn plane_values(a: [&[f32; 4]; 3], c: [f64; 6]) -> [[f32; 3]; 4] {
     plane_values_scalar(a, c)
 }
 
-/// [`plane_values_scalar`] with two attributes per SSE2 register: the same IEEE operations
-/// in the same order (Rust does not contract `a * b + c`), so the same bits, for half the
-/// instructions (a large part of setting up a small triangle).
+/// `plane_values_scalar` (the scalar reference, in tests and off x86) with two attributes
+/// per SSE2 register: the same IEEE operations in the same order (Rust does not contract
+/// `a * b + c`), so the same bits, for half the instructions (a large part of setting up a
+/// small triangle).
 #[cfg(target_arch = "x86_64")]
 #[inline]
 fn plane_values(a: [&[f32; 4]; 3], c: [f64; 6]) -> [[f32; 3]; 4] {

@@ -1,5 +1,5 @@
 //! The atomic-min k-buffers: each slot is updated only by `atomicMin`, so no fragment is ever
-//! lost to a race (the "atomic operations" k-buffer variants [MCTB13] of the occupancy paper,
+//! lost to a race (the "atomic operations" k-buffer variants \[MCTB13\] of the occupancy paper,
 //! section 1, and DESIGN.md 7; the llvmpipe peer's `kbuf-atomic`).
 //!
 //! **The insertion chain.** A fragment carries its key `v` down the pixel's k slots:

@@ -1,6 +1,6 @@
 //! The interlock k-buffers: Bavoil's read-modify-write insertion (see [`super::rmw`]) inside
 //! the per-pixel critical section of fragment shader interlock / rasterizer-ordered views
-//! (pixel synchronization [Sal13], cited by the occupancy paper, section 1, as "ensures
+//! (pixel synchronization \[Sal13\], cited by the occupancy paper, section 1, as "ensures
 //! accurate k-buffer construction", and used by the z-thickness paper, section 4.2, for its
 //! k-buffer store pass: "other fragments coming towards the same pixel must wait for the
 //! processing of an occupying fragment to end").

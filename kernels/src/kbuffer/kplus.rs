@@ -1,5 +1,5 @@
 //! The k+-buffer (Vasilakis & Fudos, "k+-buffer: fragment synchronized k-buffer", I3D 2014;
-//! cited as [VF14] by the occupancy-fragment-culling seed, and as [VPF15], its TVCG 2015
+//! cited as \[VF14\] by the occupancy-fragment-culling seed, and as \[VPF15\], its TVCG 2015
 //! extension, by the z-thickness seed, section 4.2): the k nearest fragments per pixel in a
 //! single geometry pass, exact because every update of a pixel's k slots happens inside a
 //! per-pixel critical section (pixel synchronization; here ordered pixel interlock).
@@ -18,7 +18,7 @@
 //! bound that fragments test *before* entering the critical section: a stale bound is
 //! never smaller than the current maximum, so the early test only culls fragments the
 //! in-section test would cull too, and culled fragments never wait for the interlock
-//! (the contention relief the occupancy-culling seed, section 1, credits to [VF14]). The
+//! (the contention relief the occupancy-culling seed, section 1, credits to \[VF14\]). The
 //! test is repeated inside the section against the exact maximum.
 //!
 //! Ties: a fragment whose depth equals the maximum is culled. The kept depth multiset is
@@ -232,7 +232,7 @@ impl FragmentKernel for Store {
 }
 
 /// The resolve pass (full screen): read the pixel's slots, sort (insertion sort below 16
-/// fragments, shell sort above, as [VPF15] via the z-thickness seed, section 5.1.2), and
+/// fragments, shell sort above, as \[VPF15\] via the z-thickness seed, section 5.1.2), and
 /// composite front to back.
 struct Resolve {
     k: u32,

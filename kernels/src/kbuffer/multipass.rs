@@ -1,5 +1,5 @@
 //! `kb-multipass`: the multipass k-buffer (MultiKB) of Liu, Wei, Xu and Wu, "Multi-layer
-//! depth peeling via fragment sort" (MSR-TR-2006-81; CAD/Graphics 2009), cited as [19] by the
+//! depth peeling via fragment sort" (MSR-TR-2006-81; CAD/Graphics 2009), cited as \[19\] by the
 //! depth-fighting paper (section 2: "Read-modify-write hazards (RMWH) during KB updates can
 //! be fixed using a multi-pass variation of this algorithm"; Table 1 row MultiKB: 1...K
 //! layers per iteration, 1 to K passes) and by the bucket-depth-peeling paper (section 2:

@@ -1,5 +1,5 @@
 //! `kb-rmw`: the original k-buffer (Bavoil et al. 2007, "Multi-fragment effects on the GPU
-//! using the k-buffer", cited as [17] by the depth-fighting paper, section 2 and Table 1 row
+//! using the k-buffer", cited as \[17\] by the depth-fighting paper, section 2 and Table 1 row
 //! KB; the llvmpipe peer's `kbuf-rmw`), and the pieces the other k-buffers of this folder
 //! that keep `(depth, primitive)` slots share with it: the slot layout, the sorted
 //! read-modify-write insertion, the full-screen resolve, the readback and the slot-shape

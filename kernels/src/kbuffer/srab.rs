@@ -1,6 +1,6 @@
 //! The stencil-routed A-buffer (SRAB; Myers & Bavoil, "Stencil routed A-buffer", SIGGRAPH
-//! 2007 sketch, and the NVIDIA "Stencil Routed K-Buffer" SDK whitepaper, 2007; [18] in the
-//! depth-fighting seed, section 2 and Table 1; [BMO08] in the occupancy-culling seed): up to
+//! 2007 sketch, and the NVIDIA "Stencil Routed K-Buffer" SDK whitepaper, 2007; \[18\] in the
+//! depth-fighting seed, section 2 and Table 1; \[BMO08\] in the occupancy-culling seed): up to
 //! 8 fragments per pixel captured in one geometry pass by fixed-function hardware alone,
 //! with no read-modify-write of shared memory.
 //!

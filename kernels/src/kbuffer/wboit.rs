@@ -1,5 +1,5 @@
 //! Weighted blended order-independent transparency (WBOIT; McGuire & Bavoil, "Weighted
-//! Blended Order-Independent Transparency", JCGT 2(2), 2013; [MB13] in the z-thickness seed,
+//! Blended Order-Independent Transparency", JCGT 2(2), 2013; \[MB13\] in the z-thickness seed,
 //! section 2, the blended-OIT baseline it compares against): no fragment is stored and
 //! nothing is sorted. One geometry pass accumulates, with plain additive blending,
 //!

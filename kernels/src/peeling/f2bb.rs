@@ -18,7 +18,7 @@
 //!   and counts the rest, so that the loss is counted exactly. Which `K` of a larger group
 //!   survive depends on the order of the atomics, so the kept primitives, and the image,
 //!   may differ between executors there; the kept depths and the count do not.)
-//! - **F2B-KB**: "for i = 0 to A.length do if A[i] == 0 then A[i] ← FR.color; break". The
+//! - **F2B-KB**: "for i = 0 to A.length do if A\[i\] == 0 then A\[i\] ← FR.color; break". The
 //!   paper's legend under Algorithm 3 says "← denotes an atomic memory operation", and it
 //!   calls the approach RMWH-free ("there is no need for pre-sorting and post-sorting, since
 //!   we peel fragments placed at same memory space (RMWH-free)"); yet it offers KB "when
