@@ -54,7 +54,7 @@ pub fn count_floor(cfg: &FloorConfig<'_>) -> Option<Floor> {
     }
     let frames = cfg.frames.max(1);
     let expected: u64 = cfg.counts.iter().map(|&c| u64::from(c)).sum();
-    let plan = Plan::new(cfg);
+    let plan = Plan::new(cfg, expected);
     let warm = zeroed_u32(pixels, cfg.threads);
     let mut atomics = Vec::with_capacity(frames);
     let mut frame = Vec::with_capacity(frames);
@@ -99,9 +99,9 @@ struct Plan {
 }
 
 impl Plan {
-    fn new(cfg: &FloorConfig<'_>) -> Plan {
+    /// The plan of `cfg`'s counts, which add up to `total`.
+    fn new(cfg: &FloorConfig<'_>, total: u64) -> Plan {
         let (w, h, ts) = (cfg.width, cfg.height, cfg.tile);
-        let total: u64 = cfg.counts.iter().map(|&c| u64::from(c)).sum();
         let mut order = Vec::with_capacity(usize::try_from(total).unwrap_or(0));
         let mut starts = vec![0];
         for ty in (0..h).step_by(ts as usize) {

@@ -214,8 +214,8 @@ pub enum MemoryError {
 }
 
 enum Words {
-    W32(AlignedWords<AtomicU32>),
-    W64(AlignedWords<AtomicU64>),
+    W32(Values<AtomicU32>),
+    W64(Values<AtomicU64>),
 }
 
 /// Where a buffer's first word lies: a multiple of this many bytes (two cache lines, the
@@ -231,44 +231,17 @@ enum Words {
 /// (Vulkan's `minStorageBufferOffsetAlignment`, up to 256 bytes).
 pub const BUFFER_ALIGN: usize = 128;
 
-/// A buffer's words, starting at a multiple of [`BUFFER_ALIGN`] bytes: a `Vec` a little
-/// longer than the buffer (so that it is allocated, reused and freed as any `Vec`, and its
-/// values can move out without a copy: [`Memory::take`]), whose first `start` elements
-/// are padding.
-pub(crate) struct AlignedWords<A> {
-    all: Vec<A>,
-    start: usize,
-}
-
-impl<A> Default for AlignedWords<A> {
-    fn default() -> Self {
-        AlignedWords {
-            all: Vec::new(),
-            start: 0,
-        }
-    }
-}
-
-impl<A> std::ops::Deref for AlignedWords<A> {
-    type Target = [A];
-    #[inline(always)]
-    fn deref(&self) -> &[A] {
-        // `start <= all.len()` (set once, by the constructors).
-        debug_assert!(self.start <= self.all.len());
-        // SAFETY: `start` is at most the length (see above), so the range is in bounds.
-        unsafe { self.all.get_unchecked(self.start..) }
-    }
-}
-
 struct Buffer {
     name: String,
     ty: &'static str,
     words: Words,
 }
 
-/// A buffer's values moved out to the host by [`Memory::take`] without a copy: the
-/// buffer's own allocation, read as values. Derefs to the values (its first elements may
-/// be the padding that aligned the buffer, [`BUFFER_ALIGN`], which it hides).
+/// A buffer's contents: a `Vec` a little longer than the buffer, whose first `start`
+/// elements are padding that puts the first word at a multiple of [`BUFFER_ALIGN`] bytes.
+/// Derefs to the words, the padding hidden. `Memory` keeps its buffers' atomic words so
+/// (allocated, reused and freed as any `Vec`), and [`Memory::take`] hands them to the host
+/// as plain values in the same allocation, without a copy.
 #[derive(Clone)]
 pub struct Values<T> {
     all: Vec<T>,
@@ -277,8 +250,12 @@ pub struct Values<T> {
 
 impl<T> std::ops::Deref for Values<T> {
     type Target = [T];
+    #[inline(always)]
     fn deref(&self) -> &[T] {
-        &self.all[self.start..]
+        // `start <= all.len()` (set once, by the constructors).
+        debug_assert!(self.start <= self.all.len());
+        // SAFETY: `start` is at most the length (see above), so the range is in bounds.
+        unsafe { self.all.get_unchecked(self.start..) }
     }
 }
 
@@ -552,13 +529,13 @@ impl Memory {
         #[cfg(loom)]
         let values = {
             let v = self.read(buf)?;
-            self.buffers[buf.id as usize].words = Words::W32(AlignedWords::default());
+            self.buffers[buf.id as usize].words = Words::W32(Values::default());
             Values::from(v)
         };
         #[cfg(not(loom))]
         let values = match std::mem::replace(
             &mut self.buffers[buf.id as usize].words,
-            Words::W32(AlignedWords::default()),
+            Words::W32(Values::default()),
         ) {
             // Both collects reuse the allocation (same size and alignment) and compile to
             // plain loads: no atomics, no second buffer. The padding comes along.
@@ -794,7 +771,7 @@ pub fn zeroed_u32(len: usize, threads: usize) -> impl std::ops::Deref<Target = [
 /// thread, all at once. Either way through `Vec` (an allocation aligned by `Layout` would
 /// be mapped afresh at every frame, a page fault per 4 KiB).
 #[cfg(not(loom))]
-fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) -> AlignedWords<A> {
+fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) -> Values<A> {
     /// Below this a thread costs more than it saves.
     const PER_THREAD_BYTES: usize = 1 << 20;
     let size = std::mem::size_of::<A>();
@@ -824,23 +801,22 @@ fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) -> AlignedWor
 /// `all` cut to `len` words from its first one at a multiple of [`BUFFER_ALIGN`] bytes
 /// (`all` has room for the padding before it).
 #[cfg(not(loom))]
-fn aligned<A>(mut all: Vec<A>, len: usize) -> AlignedWords<A> {
-    let size = std::mem::size_of::<A>();
+fn aligned<A>(mut all: Vec<A>, len: usize) -> Values<A> {
     // `align_offset` may answer `usize::MAX` ("cannot tell"); the start then stays put,
     // unaligned but correct.
     let start = all.as_ptr().align_offset(BUFFER_ALIGN);
-    let start = if start.saturating_add(len) <= all.len() && start * size < BUFFER_ALIGN {
+    let start = if start.saturating_add(len) <= all.len() {
         start
     } else {
         0
     };
     all.truncate(start + len);
-    AlignedWords { all, start }
+    Values { all, start }
 }
 
 #[cfg(loom)]
-fn zeroed_words<A: ZeroIsValid>(len: usize, _threads: usize) -> AlignedWords<A> {
-    AlignedWords {
+fn zeroed_words<A: ZeroIsValid>(len: usize, _threads: usize) -> Values<A> {
+    Values {
         all: (0..len).map(|_| A::zero()).collect(),
         start: 0,
     }
