@@ -562,16 +562,22 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
     let mut pass_times = Vec::new();
     let mut check_times = Vec::new();
     let mut checked_times = Vec::new();
+    let mut imbalance_times = Vec::new();
     // Hazard-prone algorithms may fail a check under real races: reported, not fatal.
     let mut failed_checks = 0;
     let mut last = None;
     for _ in 0..a.frames.max(1) {
+        // The previous frame's buffers are freed first, so that the allocator hands the
+        // same memory to this frame, as a renderer reuses its buffers from frame to frame
+        // (and as the llvmpipe peer clears and reuses one storage buffer).
+        drop(last.take());
         let r = run::render(&spec, &loaded)?;
         failed_checks += r.result.checks.iter().filter(|c| !c.passed).count();
         times.push(r.wall_ms);
         check_times.push(r.check_ms);
         checked_times.push(r.wall_ms + r.check_ms);
         pass_times.push(r.result.report.wall.as_secs_f64() * 1e3);
+        imbalance_times.push(r.result.report.imbalance.as_secs_f64() * 1e3);
         last = Some(r);
     }
     let r = last.expect("one frame");
@@ -581,6 +587,8 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
     // The passes alone (transform, binning, shading, fixed function), without buffer
     // allocation and clears.
     let pass_ms = fragrace::floor::median(&mut pass_times);
+    // Threads waiting for the last one at the end of shading, summed over threads.
+    let imbalance_ms = fragrace::floor::median(&mut imbalance_times);
     let stats = &r.result.report.stats;
     let tris = loaded.scene.mesh.triangle_count() as f64 * stats.geometry_passes.max(1) as f64;
     let floor = if a.floor {
@@ -614,6 +622,7 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         "frames": times.len(),
         "median_ms": ms,
         "passes_median_ms": pass_ms,
+        "imbalance_median_ms": imbalance_ms,
         "check_median_ms": check_ms,
         "checked_median_ms": checked_ms,
         "failed_checks": failed_checks,
@@ -638,6 +647,11 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
             ms, times.len(), times[0], times[times.len() - 1], pass_ms, check_ms, checked_ms,
             stats.fragments_generated as f64 / (ms / 1e3) / 1e6, tris / (ms / 1e3) / 1e6, stats.steps as f64 / (ms / 1e3) / 1e6
         );
+        if spec.exec.threads > 1 {
+            println!(
+                "  threads idle at the end of shading, waiting for the last one: {imbalance_ms:.3} ms (median, summed over threads)"
+            );
+        }
         if failed_checks > 0 {
             println!("  {failed_checks} failed checks over the frames (see `fragrace render`)");
         }

@@ -28,6 +28,7 @@ use std::future::Future;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::pin::Pin;
 use std::task::{Context, Poll, Waker};
+use std::time::{Duration, Instant};
 
 use crate::exec::{record_panic, Acc, ShadeOutcome, Tally};
 use crate::fragment::DirectFrag;
@@ -160,7 +161,7 @@ pub(crate) fn run_fused<K: FragmentKernel>(
     pass: &FusedPass<'_>,
     binned: &Binned,
     tiles: &mut [TileMemory],
-) -> (ShadeOutcome, FusedCounts) {
+) -> (ShadeOutcome, FusedCounts, Duration) {
     let threads = pass.threads.max(1);
     if pass.state.depth.test || pass.state.stencil.enabled {
         // Tests read the depth and stencil planes of every tile (lazily allocated).
@@ -168,7 +169,7 @@ pub(crate) fn run_fused<K: FragmentKernel>(
             t.materialize();
         }
     }
-    let results: Vec<(Acc, FusedCounts)> = match pass.segment {
+    let (results, imbalance): (Vec<(Acc, FusedCounts)>, Duration) = match pass.segment {
         Some(max) => {
             debug_assert!(commutes(pass.state, pass.targets));
             let mut segments = Vec::new();
@@ -189,7 +190,7 @@ pub(crate) fn run_fused<K: FragmentKernel>(
                 }
                 w.finish()
             };
-            pool::broadcast(threads.min(segments.len().max(1)), work)
+            broadcast_timed(threads.min(segments.len().max(1)), work)
         }
         None => {
             let count = tiles.len();
@@ -221,7 +222,7 @@ pub(crate) fn run_fused<K: FragmentKernel>(
                 }
                 w.finish()
             };
-            pool::broadcast(threads, work)
+            broadcast_timed(threads, work)
         }
     };
     let mut outcome = ShadeOutcome::default();
@@ -230,7 +231,23 @@ pub(crate) fn run_fused<K: FragmentKernel>(
         acc.finish(&mut outcome);
         counts.add(&c);
     }
-    (outcome, counts)
+    (outcome, counts, imbalance)
+}
+
+/// [`pool::broadcast`], and how long the threads waited for the last one to finish: the sum
+/// over threads of the time from a thread's end to the last thread's end (load imbalance,
+/// [`PassReport::imbalance`](super::PassReport::imbalance)).
+fn broadcast_timed<R: Send>(n: usize, work: impl Fn(usize) -> R + Sync) -> (Vec<R>, Duration) {
+    let results = pool::broadcast(n, |i| {
+        let r = work(i);
+        (r, Instant::now())
+    });
+    let last = results.iter().map(|(_, end)| *end).max();
+    let imbalance = match last {
+        Some(last) => results.iter().map(|(_, end)| last - *end).sum(),
+        None => Duration::ZERO,
+    };
+    (results.into_iter().map(|(r, _)| r).collect(), imbalance)
 }
 
 /// Most bin entries per unit of work of a tile that one worker holds (units of one tile run
@@ -240,6 +257,13 @@ const EXCLUSIVE_UNIT: u32 = 1024;
 /// Most input triangles per unit of work of [`run_unbinned`]: its setup records stay in
 /// the worker's cache between setup and shading.
 pub(crate) const UNBINNED_CHUNK: usize = 512;
+
+/// Fewest chunks of [`run_unbinned`] per thread (when the mesh has enough triangles): a
+/// thread that ends its part takes chunks from the back of another's, so the threads end
+/// at most about a chunk apart. With 8 a thread, the bunny @2048 (3674 triangles, chunks
+/// of 230, about 0.35 ms each on two threads) left the threads 221 µs apart on average at
+/// the end of the pass (`PassReport::imbalance`), 5 % of its frame; 32: 102 µs, 64: 53 µs.
+const CHUNKS_PER_THREAD: usize = 64;
 
 /// Whether a pass can run unbinned ([`run_unbinned`]): its fixed-function work commutes,
 /// and it has no depth or stencil test and no target, so that a fragment needs nothing
@@ -260,13 +284,15 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
     env: &PassEnv<'_>,
     pass: &FusedPass<'_>,
     prepared: &Prepared<'_>,
-) -> (ShadeOutcome, FusedCounts, u64) {
+) -> (ShadeOutcome, FusedCounts, u64, Duration) {
     debug_assert!(unbinned(pass.state, pass.targets) && !pass.early_tests());
     let n = prepared.triangle_count();
     let threads = pass.threads.max(1);
-    // At least about eight chunks a thread, so that a mesh of few large triangles still
-    // spreads over the threads.
-    let size = n.div_ceil(threads * 8).clamp(16, UNBINNED_CHUNK);
+    // At least about `CHUNKS_PER_THREAD` chunks a thread, so that a mesh of few large
+    // triangles still spreads over the threads and the threads end close together.
+    let size = n
+        .div_ceil(threads * CHUNKS_PER_THREAD)
+        .clamp(16, UNBINNED_CHUNK);
     let chunks = n.div_ceil(size);
     let threads = threads.min(chunks.max(1));
     // Threads start far apart in the mesh (see `SplitRange`).
@@ -288,7 +314,7 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
         let (acc, counts) = w.finish();
         (acc, counts, rejected)
     };
-    let results = pool::broadcast(threads, work);
+    let (results, imbalance) = broadcast_timed(threads, work);
     let mut outcome = ShadeOutcome::default();
     let mut counts = FusedCounts::default();
     let mut rejected = 0;
@@ -297,7 +323,7 @@ pub(crate) fn run_unbinned<K: FragmentKernel>(
         counts.add(&c);
         rejected += r;
     }
-    (outcome, counts, rejected)
+    (outcome, counts, rejected, imbalance)
 }
 
 /// What the fragments of a unit of work share before shading: coverage masking and the

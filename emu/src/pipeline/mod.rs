@@ -73,6 +73,11 @@ pub struct PassReport {
     /// True when conditional rendering skipped the pass.
     pub skipped: bool,
     pub wall: Duration,
+    /// Load imbalance of the parallel executor's shading: the sum over its threads of the
+    /// time each waited, at the end of a shading section, for the last one to finish (zero
+    /// with one thread and in the other executors). Timing, like `wall`: it varies from
+    /// run to run.
+    pub imbalance: Duration,
 }
 
 impl PassReport {
@@ -101,6 +106,7 @@ impl PassReport {
                 .extend_from_slice(s);
         }
         self.wall += o.wall;
+        self.imbalance += o.imbalance;
     }
 }
 
@@ -480,8 +486,9 @@ impl Device {
             // `Device::draw` makes unbinned geometry only for passes this path runs.
             debug_assert!(direct && info.interlock.is_none() && contention.is_none());
             let pass = fused_pass(*instance, *single);
-            let (outcome, counts, rejected) =
+            let (outcome, counts, rejected, imbalance) =
                 fused::run_unbinned(kernel, &env_base, &pass, prepared);
+            report.imbalance += imbalance;
             // Invocation ids are by source triangle (see `fused::Row`).
             *seq_base =
                 seq_base.wrapping_add((prepared.triangle_count() as u64).wrapping_mul(pixels));
@@ -502,8 +509,9 @@ impl Device {
         ) = (direct, info.interlock, contention.as_ref(), geo)
         {
             let pass = fused_pass(*instance, *single);
-            let (outcome, counts) =
+            let (outcome, counts, imbalance) =
                 fused::run_fused(kernel, &env_base, &pass, binned, fb.tiles_mut());
+            report.imbalance += imbalance;
             // Invocation ids are by source triangle (see `fused::Row`).
             *seq_base =
                 seq_base.wrapping_add((binned.input_triangles() as u64).wrapping_mul(pixels));
