@@ -782,9 +782,15 @@ fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) -> Values<A> 
     let all = if threads == 1 {
         // SAFETY: `A` is an atomic integer (`ZeroIsValid` is implemented for `AtomicU32`
         // and `AtomicU64` only), for which all-zero bytes are a valid value (zero).
-        unsafe { Box::<[A]>::new_zeroed_slice(total).assume_init() }.into_vec()
+        let words = unsafe { Box::<[A]>::new_zeroed_slice(total).assume_init() };
+        // After `calloc`: memory it got fresh from the OS is still untouched, so the pages
+        // faulted in by the pass can be huge ones.
+        advise_huge_pages(&words);
+        words.into_vec()
     } else {
         let mut words = Box::<[A]>::new_uninit_slice(total);
+        // Before zeroing, so that fresh memory is faulted in as huge pages.
+        advise_huge_pages(&words);
         let parts: Vec<_> = words.chunks_mut(total.div_ceil(threads)).collect();
         crate::sync::pool::broadcast_each(parts, |part| {
             // SAFETY: `part` is a slice of `MaybeUninit<A>`, valid for writes of its
@@ -797,6 +803,46 @@ fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) -> Values<A> 
     };
     aligned(all, len)
 }
+
+/// Asks the OS to back the 2 MiB pages that lie wholly inside `words` with huge pages, for
+/// buffers of [`HUGE_PAGE_MIN_BYTES`] or more.
+///
+/// Why: a per-pixel buffer puts each row of a covered run on a page of its own (8 KiB a
+/// row at 2048 pixels), so with 4 KiB pages nearly every run needs a new address
+/// translation, and the 4096 pages of a 2048x2048 buffer of counters are more than the
+/// second-level TLB holds (3072 entries on Zen 4). Measured in `docs/performance.md`
+/// ("huge pages").
+///
+/// Advice only: `madvise(MADV_HUGEPAGE)` changes neither contents nor protections; it
+/// marks the range so that pages faulted in from then on may be huge (when the system's
+/// `transparent_hugepage` setting is `madvise` or `always`; with `never` it does nothing).
+/// Memory the allocator had already faulted in keeps its pages. Failure is ignored: the
+/// buffer works the same with small pages.
+#[cfg(all(target_os = "linux", not(loom)))]
+fn advise_huge_pages<T>(words: &[T]) {
+    const HUGE_PAGE: usize = 2 << 20;
+    let bytes = std::mem::size_of_val(words);
+    if bytes < HUGE_PAGE_MIN_BYTES {
+        return;
+    }
+    let start = words.as_ptr() as usize;
+    let first = start.next_multiple_of(HUGE_PAGE);
+    let end = (start + bytes) / HUGE_PAGE * HUGE_PAGE;
+    if end > first {
+        // SAFETY: `madvise` with `MADV_HUGEPAGE` reads and writes no memory of ours and
+        // changes no protection; `[first, end)` is page aligned and inside the allocation
+        // of `words`, which outlives the call.
+        unsafe { libc::madvise(first as *mut libc::c_void, end - first, libc::MADV_HUGEPAGE) };
+    }
+}
+
+#[cfg(all(not(target_os = "linux"), not(loom)))]
+fn advise_huge_pages<T>(_words: &[T]) {}
+
+/// Buffers from this size on are advised to use huge pages ([`advise_huge_pages`]): two
+/// huge pages, so that a buffer holds at least one whole one.
+#[cfg(not(loom))]
+const HUGE_PAGE_MIN_BYTES: usize = 4 << 20;
 
 /// `all` cut to `len` words from its first one at a multiple of [`BUFFER_ALIGN`] bytes
 /// (`all` has room for the padding before it).
