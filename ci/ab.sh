@@ -20,7 +20,7 @@ for _ in $(seq "$rounds"); do
     for b in "$before" "$after"; do
         label=after
         [ "$b" = "$before" ] && label=before
-        "$b" bench "$@" --json 2>/dev/null | python3 -c "import json,sys; d=json.load(sys.stdin); print('$label', round(d['median_ms'], 2), round(d['min_ms'], 2), round(d['passes_median_ms'], 2))" | tee -a "$log" | awk '{print $1, $2, "ms (min", $3, "ms); passes alone", $4, "ms"}'
+        python3 -c "import json,sys; d=json.load(sys.stdin); print('$label', round(d['median_ms'], 2), round(d['min_ms'], 2), round(d['passes_median_ms'], 2))" <<< "$("$b" bench "$@" --json 2>/dev/null)" | tee -a "$log" | awk '{print $1, $2, "ms (min", $3, "ms); passes alone", $4, "ms"}'
     done
 done
 python3 - "$log" <<'PY'

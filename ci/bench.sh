@@ -21,14 +21,14 @@ echo "|---|---|---|---|---|---|---|---|---|---|---|"
 for case in "dragon.obj.gz 512" "dragon.obj.gz 2048" "bunny.obj.gz 2048" "dragon_res2.obj.gz 512"; do
     set -- $case
     for threads in 1 2; do
-        read -r ours passes < <($F bench --obj "$M/$1" --algo count --threads "$threads" --width "$2" --height "$2" --frames 15 --warmup 3 --json | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), round(d['passes_median_ms'], 2))")
-        read -r free floor floor_frame < <($F bench --obj "$M/$1" --algo count --threads "$threads" --width "$2" --height "$2" --frames 15 --warmup 3 --no-lockstep --floor --json | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), round(d['floor_atomics_ms'], 2), round(d['floor_frame_ms'], 2))")
+        read -r ours passes < <(python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), round(d['passes_median_ms'], 2))" <<< "$($F bench --obj "$M/$1" --algo count --threads "$threads" --width "$2" --height "$2" --frames 15 --warmup 3 --json)")
+        read -r free floor floor_frame < <(python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), round(d['floor_atomics_ms'], 2), round(d['floor_frame_ms'], 2))" <<< "$($F bench --obj "$M/$1" --algo count --threads "$threads" --width "$2" --height "$2" --frames 15 --warmup 3 --no-lockstep --floor --json)")
         theirs="-"
         ratio="-"
         ratio_free="-"
         ratio_floor="-"
         if [ "$have_peer" = 1 ] && [ "$threads" = 2 ]; then
-            theirs=$(LP_NUM_THREADS=$threads python3 "$PEER" "$M/$1" --algo count --width "$2" --height "$2" --frames 15 --warmup 3 2>/dev/null | tail -1 | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d.get('median_ms', d.get('frame_ms_median', 0)), 2))")
+            theirs=$(python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d.get('median_ms', d.get('frame_ms_median', 0)), 2))" <<< "$(LP_NUM_THREADS=$threads python3 "$PEER" "$M/$1" --algo count --width "$2" --height "$2" --frames 15 --warmup 3 2>/dev/null | tail -1)")
             ratio=$(python3 -c "print(f'{$ours / $theirs:.2f}' if $theirs else '-')")
             ratio_free=$(python3 -c "print(f'{$free / $theirs:.2f}' if $theirs else '-')")
             ratio_floor=$(python3 -c "print(f'{$floor / $theirs:.2f} / {$floor_frame / $theirs:.2f}' if $theirs else '-')")
@@ -40,7 +40,7 @@ echo
 # Unbinned counting passes against the tile-binned path (`--binning always`), same frames.
 for size in 512 2048; do
     for binning in auto always; do
-        echo "dragon $size, 2 threads, --no-lockstep --binning $binning: $($F bench --obj "$M/dragon.obj.gz" --algo count --threads 2 --width $size --height $size --frames 15 --warmup 3 --no-lockstep --binning $binning --json | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), 'ms')")"
+        echo "dragon $size, 2 threads, --no-lockstep --binning $binning: $(python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), 'ms')" <<< "$($F bench --obj "$M/dragon.obj.gz" --algo count --threads 2 --width $size --height $size --frames 15 --warmup 3 --no-lockstep --binning $binning --json)")"
     done
 done
 echo

@@ -7,6 +7,10 @@
 # A frame is timed as the peer times one (clears and passes); fragrace's self-check (the sum
 # of the counts read back, which the peer does untimed) is timed apart and shown too.
 # Needs ../shared and the peer's dependencies (see ci/bench.sh).
+# Each side's JSON is captured first and parsed after it has exited (`python3 <<< "$(...)"`):
+# piping it into python3 started the interpreter while a 75 ms fragrace run was timing its
+# frames, and on two cores that took one from it (bunny @2048: 6.1-8.1 ms piped against
+# 4.4-5.8 ms captured, alternating runs). ci/bench.sh and ci/ab.sh do the same.
 # Usage: bash ci/pairs.sh [ROUNDS] [THREADS]   (defaults: 3 rounds, 2 threads)
 # Env: CASES (default "dragon.obj.gz:512 dragon.obj.gz:2048 bunny.obj.gz:2048"; MESH:SIZE).
 set -euo pipefail
@@ -25,8 +29,8 @@ for c in ${CASES:-dragon.obj.gz:512 dragon.obj.gz:2048 bunny.obj.gz:2048}; do
     ratios=()
     cratios=()
     for r in $(seq "$rounds"); do
-        theirs=$(LP_NUM_THREADS=$threads python3 "$PEER" "$M/$mesh" --algo count --width "$size" --height "$size" --frames 15 --warmup 3 2>/dev/null | tail -1 | python3 -c "import json,sys; print(round(json.load(sys.stdin)['median_ms'], 2))")
-        read -r ours checked < <($F bench --obj "$M/$mesh" --algo count --threads "$threads" --width "$size" --height "$size" --frames 15 --warmup 3 --no-lockstep --json | python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), round(d['checked_median_ms'], 2))")
+        theirs=$(python3 -c "import json,sys; print(round(json.load(sys.stdin)['median_ms'], 2))" <<< "$(LP_NUM_THREADS=$threads python3 "$PEER" "$M/$mesh" --algo count --width "$size" --height "$size" --frames 15 --warmup 3 2>/dev/null | tail -1)")
+        read -r ours checked < <(python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), round(d['checked_median_ms'], 2))" <<< "$($F bench --obj "$M/$mesh" --algo count --threads "$threads" --width "$size" --height "$size" --frames 15 --warmup 3 --no-lockstep --json)")
         ratio=$(python3 -c "print(f'{$ours / $theirs:.2f}')")
         cratio=$(python3 -c "print(f'{$checked / $theirs:.2f}')")
         ratios+=("$ratio")
