@@ -1038,3 +1038,50 @@ fn unbinned_draws_match_binned_and_ordered_ones() {
         }
     }
 }
+
+/// `PassReport::imbalance`: zero when nothing runs beside the caller (one thread, the
+/// ordered and scheduled executors); with two threads, at most what the threads could have
+/// waited (each at most the pass's wall time), on the unbinned and the binned fused paths.
+#[test]
+fn imbalance_is_zero_without_threads_and_bounded_with_them() {
+    let mesh = two_layers();
+    let draw = fragrace_emu::Draw::new(&mesh, glam::Mat4::IDENTITY);
+    let state = fragrace_emu::PassState::default();
+    let unbinned = |threads| ExecConfig {
+        lockstep: false,
+        ..ExecConfig::parallel(threads)
+    };
+    let binned = ExecConfig {
+        binning: fragrace_emu::Binning::Always,
+        ..unbinned(2)
+    };
+    let cases = [
+        (ExecConfig::ordered(), false),
+        (scheduled(Policy::Random, 1), false),
+        (unbinned(1), false),
+        (unbinned(2), true),
+        (binned, true),
+    ];
+    for (e, threaded) in cases {
+        let mut dev = Device::new();
+        let counter = dev.buffer::<u32>("counter", 1).unwrap();
+        let mut fb = Framebuffer::new(64, 64, SampleCount::X1, 8, &[]).unwrap();
+        let kernel = GlobalCounter {
+            counter,
+            atomic: true,
+        };
+        let r = dev.draw(&mut fb, &draw, &state, &kernel, &e).unwrap();
+        // Both layers cover every pixel.
+        assert_eq!(dev.memory.read(counter).unwrap()[0], 2 * 64 * 64, "{e:?}");
+        if threaded {
+            assert!(
+                r.imbalance <= r.wall * 2,
+                "{e:?}: {:?} of {:?}",
+                r.imbalance,
+                r.wall
+            );
+        } else {
+            assert_eq!(r.imbalance, std::time::Duration::ZERO, "{e:?}");
+        }
+    }
+}
