@@ -14,7 +14,7 @@
 //! calls have returned, and nested or concurrent calls simply take other threads.
 //!
 //! Between jobs a kept thread spins for up to 100 µs before it blocks, and so does the
-//! caller waiting for the last call to end ([`spin_until`]): a frame's sections follow each
+//! caller waiting for the last call to end (`spin_until`): a frame's sections follow each
 //! other within tens of microseconds, and waking a blocked thread took 20-70 µs.
 //!
 //! Always `std`, also under `--cfg loom`: loom model-checks the memory and interlock
