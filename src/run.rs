@@ -371,6 +371,9 @@ pub fn summary_json(
         "hazard_class": rendered.info.hazard.name(),
         "wall_ms": rendered.wall_ms,
         "check_ms": rendered.check_ms,
+        // Threads of the parallel executor waiting at the end of shading for the last one,
+        // summed over threads (`PassReport::imbalance`).
+        "imbalance_ms": r.report.imbalance.as_secs_f64() * 1e3,
         "epr": serde_json::Value::Null,
     });
     if let Some(c) = checked {
