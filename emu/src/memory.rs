@@ -805,7 +805,7 @@ fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) -> Values<A> 
 }
 
 /// Asks the OS to back the 2 MiB pages that lie wholly inside `words` with huge pages, for
-/// buffers of [`HUGE_PAGE_MIN_BYTES`] or more.
+/// buffers of 4 MiB or more (two huge pages, so that a buffer holds at least one whole one).
 ///
 /// Why: a per-pixel buffer puts each row of a covered run on a page of its own (8 KiB a
 /// row at 2048 pixels), so with 4 KiB pages nearly every run needs a new address
@@ -822,7 +822,7 @@ fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) -> Values<A> 
 fn advise_huge_pages<T>(words: &[T]) {
     const HUGE_PAGE: usize = 2 << 20;
     let bytes = std::mem::size_of_val(words);
-    if bytes < HUGE_PAGE_MIN_BYTES {
+    if bytes < 2 * HUGE_PAGE {
         return;
     }
     let start = words.as_ptr() as usize;
@@ -838,11 +838,6 @@ fn advise_huge_pages<T>(words: &[T]) {
 
 #[cfg(all(not(target_os = "linux"), not(loom)))]
 fn advise_huge_pages<T>(_words: &[T]) {}
-
-/// Buffers from this size on are advised to use huge pages ([`advise_huge_pages`]): two
-/// huge pages, so that a buffer holds at least one whole one.
-#[cfg(not(loom))]
-const HUGE_PAGE_MIN_BYTES: usize = 4 << 20;
 
 /// `all` cut to `len` words from its first one at a multiple of [`BUFFER_ALIGN`] bytes
 /// (`all` has room for the padding before it).

@@ -14,7 +14,7 @@
 //! calls have returned, and nested or concurrent calls simply take other threads.
 //!
 //! Between jobs a kept thread spins for up to 100 µs before it blocks, and so does the
-//! caller waiting for the last call to end (`spin_until`): a frame's sections follow each
+//! caller waiting for the last call to end (`spin_for`): a frame's sections follow each
 //! other within tens of microseconds, and waking a blocked thread took 20-70 µs.
 //!
 //! Always `std`, also under `--cfg loom`: loom model-checks the memory and interlock
@@ -61,7 +61,7 @@ impl Latch {
         // Spin a little first: the threads of a broadcast usually end close together
         // (their work is split to balance), and waking a parked thread takes tens of
         // microseconds on these VMs.
-        if spin_until(|| self.left.load(Ordering::Acquire) == 0) {
+        if spin_for(|| (self.left.load(Ordering::Acquire) == 0).then_some(())).is_some() {
             return;
         }
         // `park` may return spuriously (or for an unpark meant for an earlier wait).
@@ -174,24 +174,24 @@ fn take_idle(n: usize) -> Vec<Sender<Job>> {
     workers
 }
 
-/// How long a thread spins for an event before blocking ([`spin_until`]).
+/// How long a thread spins for an event before blocking ([`spin_for`]).
 const SPIN: std::time::Duration = std::time::Duration::from_micros(100);
 
-/// Polls `done` for up to [`SPIN`]; true as soon as it returns true. Blocking and waking
-/// a thread costs tens of microseconds on the VMs this is measured on (a frame's parallel
-/// sections start and end a few times per frame); spinning costs only the idle core's
-/// time, and for a bounded while.
-fn spin_until(mut done: impl FnMut() -> bool) -> bool {
+/// Polls `event` for up to [`SPIN`]; its value as soon as it has one (`None`: none came).
+/// Blocking and waking a thread costs tens of microseconds on the VMs this is measured on
+/// (a frame's parallel sections start and end a few times per frame); spinning costs only
+/// the idle core's time, and for a bounded while.
+fn spin_for<T>(mut event: impl FnMut() -> Option<T>) -> Option<T> {
     let start = std::time::Instant::now();
     loop {
         for _ in 0..64 {
-            if done() {
-                return true;
+            if let Some(v) = event() {
+                return Some(v);
             }
             std::hint::spin_loop();
         }
         if start.elapsed() >= SPIN {
-            return false;
+            return None;
         }
     }
 }
@@ -202,25 +202,11 @@ fn start_thread() -> Sender<Job> {
     thread::Builder::new()
         .name("fragrace-worker".into())
         .spawn(move || {
-            loop {
-                // A frame's parallel sections follow each other closely (a buffer's
-                // clear, then the pass): wait for the next job spinning a little before
-                // blocking, which would take tens of microseconds to wake from.
-                let mut next = None;
-                spin_until(|| match rx.try_recv() {
-                    Ok(job) => {
-                        next = Some(job);
-                        true
-                    }
-                    Err(_) => false,
-                });
-                let job = match next {
-                    Some(job) => job,
-                    None => match rx.recv() {
-                        Ok(job) => job,
-                        Err(_) => break,
-                    },
-                };
+            // A frame's parallel sections follow each other closely (a buffer's clear,
+            // then the pass): wait for the next job spinning a little before blocking,
+            // which would take tens of microseconds to wake from. Ends when the channel
+            // closes.
+            while let Some(job) = spin_for(|| rx.try_recv().ok()).or_else(|| rx.recv().ok()) {
                 // SAFETY: see `Job`: the task outlives the job, until `count_down`.
                 let task = unsafe { &*job.task };
                 // `task` catches the panics of the work it wraps; this guard is for a
