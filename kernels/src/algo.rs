@@ -30,6 +30,10 @@ pub struct Params {
     pub fab_capacity: u32,
     /// Background colour of the composite.
     pub background: [f32; 3],
+    /// Occupancy-map culling in front of the capture pass (`--occupancy D`), for the
+    /// algorithms that take it ([`Algorithm::takes_occupancy`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub occupancy: Option<crate::occupancy::Occupancy>,
 }
 
 impl Default for Params {
@@ -42,6 +46,7 @@ impl Default for Params {
             buckets: 5,
             fab_capacity: 64,
             background: [1.0, 1.0, 1.0],
+            occupancy: None,
         }
     }
 }
@@ -194,6 +199,8 @@ pub struct AlgoResult {
     pub dropped: u64,
     /// Storage the algorithm allocated (buffers and its render targets), in bytes.
     pub storage_bytes: u64,
+    /// What occupancy culling did, when it ran ([`Params::occupancy`]).
+    pub culling: Option<crate::occupancy::CullSummary>,
 }
 
 /// Why an algorithm could not run.
@@ -212,6 +219,14 @@ pub enum AlgoError {
 /// A multi-fragment algorithm.
 pub trait Algorithm: Send + Sync {
     fn info(&self) -> AlgoInfo;
+
+    /// Whether the algorithm runs its capture pass behind occupancy culling when
+    /// [`Params::occupancy`] asks for it (the k-buffers whose capture is one geometry pass).
+    /// Others refuse the parameter (the CLI checks this before running).
+    fn takes_occupancy(&self) -> bool {
+        false
+    }
+
     /// Runs every pass of the algorithm on a fresh device, shading with `exec`, resolves,
     /// and checks the algorithm's invariants ([`AlgoResult::checks`]). The same as
     /// [`Algorithm::run_frame`] followed by [`Algorithm::self_check`].

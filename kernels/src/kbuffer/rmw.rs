@@ -14,7 +14,8 @@
 //! exact.
 
 use fragrace_emu::{
-    Buf, Device, ExecConfig, Fragment, FragmentKernel, KernelInfo, PassReport, SampleCount,
+    Buf, Device, ExecConfig, Fragment, FragmentKernel, Framebuffer, KernelInfo, PassReport,
+    SampleCount,
 };
 
 use crate::algo::{
@@ -24,6 +25,7 @@ use crate::algo::{
 use crate::common::{
     self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
 };
+use crate::occupancy::Culling;
 use crate::resolve::{self, Composite};
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -237,6 +239,10 @@ pub(super) struct KbRun<'a> {
     pub exec: &'a ExecConfig,
     pub k: u32,
     pub n: usize,
+    /// The capture passes' framebuffer (its depth buffer holds the culling bound).
+    fb: Option<Framebuffer>,
+    /// Occupancy culling, when the parameters ask for it.
+    culling: Option<Culling>,
 }
 
 impl<'a> KbRun<'a> {
@@ -252,20 +258,42 @@ impl<'a> KbRun<'a> {
             exec,
             k: k_of(params)?,
             n: pixels(frame),
+            fb: None,
+            culling: None,
         })
     }
 
-    /// One capture pass of the frame with `kernel`, every fragment through (no targets).
-    pub(super) fn capture<K: FragmentKernel>(&self, kernel: &K) -> Result<PassReport, AlgoError> {
-        let mut fb = framebuffer(&self.frame, SampleCount::X1, &[])?;
-        geometry_pass(
-            &self.device,
-            &mut fb,
-            &self.frame,
-            &capture_state(),
-            kernel,
-            self.exec,
-        )
+    /// One capture pass of the frame with `kernel`, every fragment through (no targets), or,
+    /// with occupancy culling, every fragment up to its pixel's bound: the first capture
+    /// runs the culling stage. The report is the capture pass's alone (the stage's passes
+    /// join the result in [`KbRun::finish`]), so the algorithm's checks see its own pass.
+    pub(super) fn capture<K: FragmentKernel>(
+        &mut self,
+        kernel: &K,
+    ) -> Result<PassReport, AlgoError> {
+        let fb = match &mut self.fb {
+            Some(fb) => fb,
+            None => {
+                let mut fb = framebuffer(&self.frame, SampleCount::X1, &[])?;
+                self.culling = Culling::prepare(
+                    &mut self.device,
+                    &mut fb,
+                    &self.frame,
+                    self.params,
+                    self.exec,
+                )?;
+                self.fb.insert(fb)
+            }
+        };
+        let state = match self.culling {
+            Some(_) => Culling::peel_state(&capture_state()),
+            None => capture_state(),
+        };
+        let report = geometry_pass(&self.device, fb, &self.frame, &state, kernel, self.exec)?;
+        if let Some(c) = &mut self.culling {
+            c.add_peel(&report);
+        }
+        Ok(report)
     }
 
     /// The sum of a per-pixel counter buffer (the instrumentation counts of the invariants).
@@ -298,6 +326,13 @@ impl<'a> KbRun<'a> {
         };
         report.merge(&resolve::pass(&self.device, &mut fb, &kernel, self.exec)?);
         let image = resolve::read_image(&fb);
+        // The culling stage's depth buffer (4 bytes a pixel) is storage too.
+        let culling = self.culling.map(|c| {
+            let (stage, summary) = c.finish();
+            report.merge(&stage);
+            summary
+        });
+        let depth_bytes = if culling.is_some() { 4 } else { 0 };
         let lists = slots.read(&self.device, self.k)?.into_iter().map(|l| {
             let mut v: Vec<CapturedFrag> = l.into_iter().flatten().collect();
             sort_fragments(&mut v);
@@ -311,7 +346,8 @@ impl<'a> KbRun<'a> {
             checks,
             dropped,
             storage_bytes: self.device.memory.bytes()
-                + self.n as u64 * (target_bytes + resolve::TARGET_BYTES),
+                + self.n as u64 * (target_bytes + depth_bytes + resolve::TARGET_BYTES),
+            culling,
             ..Default::default()
         })
     }
