@@ -1003,6 +1003,23 @@ pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
             buckets: u32::arbitrary(u)?,
             fab_capacity: u32::arbitrary(u)?,
             background: [finite_f32(u)?, finite_f32(u)?, finite_f32(u)?],
+            occupancy: if bool::arbitrary(u)? {
+                Some(fragrace_kernels::occupancy::Occupancy {
+                    d: u32::arbitrary(u)?,
+                    range: [
+                        fragrace_kernels::occupancy::RangeSource::Exact,
+                        fragrace_kernels::occupancy::RangeSource::Bbox,
+                        fragrace_kernels::occupancy::RangeSource::Hull,
+                    ][u.int_in_range(0..=2)?],
+                    fill: if bool::arbitrary(u)? {
+                        fragrace_kernels::occupancy::FillMode::Plain
+                    } else {
+                        fragrace_kernels::occupancy::FillMode::Atomic
+                    },
+                })
+            } else {
+                None
+            },
         },
         exec: ExecConfig {
             mode,

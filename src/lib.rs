@@ -6,6 +6,7 @@
 //! The GPU itself is [`fragrace_emu`]; the algorithms are [`fragrace_kernels`].
 
 pub mod case;
+pub mod culling;
 pub mod floor;
 pub mod fuzz;
 pub mod fuzzing;

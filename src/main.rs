@@ -184,6 +184,19 @@ struct RunArgs {
     /// Opacity of every fragment in the OIT composite.
     #[arg(long, default_value_t = 0.3)]
     alpha: f32,
+    /// Occupancy-map culling in front of the k-buffer's capture pass, with D words (32 D
+    /// depth sub-intervals) per pixel, 1 to 64 and at least k/32 (`fragrace list` says
+    /// which algorithms take it).
+    #[arg(long, value_name = "D")]
+    occupancy: Option<u32>,
+    /// Occupancy culling: the per-pixel depth range from the scene (`exact`), its bounding
+    /// box (`bbox`) or its convex hull (`hull`). Default exact.
+    #[arg(long)]
+    range: Option<fragrace_kernels::occupancy::RangeSource>,
+    /// Occupancy culling: set the map's bits with `atomic` OR (default), or with a `plain`
+    /// load, OR and store (racy by design: bits are lost).
+    #[arg(long)]
+    occupancy_fill: Option<fragrace_kernels::occupancy::FillMode>,
     /// Output PNG.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -264,10 +277,27 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
             k: a.k.max(1),
             alpha: a.alpha,
             spin_cap: a.spin_cap.max(1),
+            occupancy: occupancy_of(a)?,
             ..Params::default()
         },
         exec,
     })
+}
+
+/// The occupancy-culling parameters of a run; `--range` and `--occupancy-fill` mean
+/// nothing without `--occupancy` and are refused alone.
+fn occupancy_of(a: &RunArgs) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
+    match a.occupancy {
+        Some(d) => Ok(Some(fragrace_kernels::occupancy::Occupancy {
+            d,
+            range: a.range.unwrap_or_default(),
+            fill: a.occupancy_fill.unwrap_or_default(),
+        })),
+        None if a.range.is_some() || a.occupancy_fill.is_some() => {
+            bail!("--range and --occupancy-fill configure occupancy culling: add --occupancy D (1 to 64)")
+        }
+        None => Ok(None),
+    }
 }
 
 fn main() {
@@ -297,7 +327,10 @@ fn cmd_render(a: &RunArgs) -> Result<()> {
     let loaded = run::load(&spec)?;
     let rendered = run::render(&spec, &loaded)?;
     write_outputs(a, &spec, &rendered, None)?;
-    let summary = run::summary_json(&spec, &loaded, None, &rendered);
+    let mut summary = run::summary_json(&spec, &loaded, None, &rendered);
+    if let Some(base) = fragrace::culling::baseline(&spec, &loaded)? {
+        summary["occupancy"] = fragrace::culling::summary(&rendered.result, None, Some(&base));
+    }
     if a.json {
         println!("{summary}");
     } else {
@@ -355,6 +388,14 @@ fn write_outputs(
                 spec.height,
                 &errs,
             )?;
+            if !c.metrics.culled_heat.is_empty() {
+                fragrace::output::write_heatmap(
+                    &dir.join("culled.png"),
+                    spec.width,
+                    spec.height,
+                    &c.metrics.culled_heat,
+                )?;
+            }
         }
     }
     Ok(())
@@ -400,6 +441,26 @@ fn print_summary(v: &serde_json::Value) {
         v["bytes_per_pixel"].as_f64().unwrap_or(0.0),
         v["wall_ms"].as_f64().unwrap_or(0.0)
     );
+    let o = &v["occupancy"];
+    if !o.is_null() {
+        println!(
+            "  occupancy culling (d = {}, range {}, fill {}): culled {} of {} fragments ({:.1} %){}",
+            o["d"],
+            o["range"].as_str().unwrap_or("?"),
+            o["fill"].as_str().unwrap_or("?"),
+            o["culled_fragments"],
+            o["peel_fragments"],
+            100.0 * o["culled_fraction"].as_f64().unwrap_or(0.0),
+            match o["saved"]["invocation_ratio"].as_f64() {
+                Some(r) => format!(
+                    "; k-buffer invocations {:.1} % of the unculled run's, {} memory accesses saved",
+                    100.0 * r,
+                    o["saved"]["memory_ops"]
+                ),
+                None => String::new(),
+            }
+        );
+    }
     if let Some(checks) = v["checks"].as_array() {
         for c in checks {
             let ok = c["passed"].as_bool().unwrap_or(false);
@@ -443,6 +504,10 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
     let (wspec, w) = worst.expect("at least one run");
     write_outputs(&a.run, &wspec, &w.rendered, Some(&w))?;
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
+    if let Some(base) = fragrace::culling::baseline(&wspec, &loaded)? {
+        summary["occupancy"] =
+            fragrace::culling::summary(&w.rendered.result, Some(&w.metrics), Some(&base));
+    }
     summary["schedules"] = serde_json::json!(n);
     summary["anomalous_runs"] = serde_json::json!(anomalous_runs);
     summary["hazards_total"] = serde_json::json!({"lost_updates": totals.lost_updates, "races": totals.races, "torn": totals.torn});
@@ -511,9 +576,14 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
 }
 
 fn cmd_list(json: bool) -> Result<()> {
-    let infos: Vec<_> = fragrace_kernels::algorithms()
+    let algos = fragrace_kernels::algorithms();
+    let infos: Vec<_> = algos
         .iter()
-        .map(|a| a.info())
+        .map(|a| {
+            let mut v = serde_json::to_value(a.info()).expect("AlgoInfo serializes");
+            v["occupancy"] = serde_json::json!(a.takes_occupancy());
+            v
+        })
         .collect();
     if json {
         println!(
@@ -526,7 +596,8 @@ fn cmd_list(json: bool) -> Result<()> {
         "{:<24} {:<12} {:<16} {:<26} memory per pixel",
         "algorithm", "family", "hazard class", "passes"
     );
-    for i in &infos {
+    for a in &algos {
+        let i = a.info();
         println!(
             "{:<24} {:<12} {:<16} {:<26} {}",
             i.name,
@@ -536,6 +607,12 @@ fn cmd_list(json: bool) -> Result<()> {
             i.memory
         );
     }
+    let takers: Vec<_> = algos
+        .iter()
+        .filter(|a| a.takes_occupancy())
+        .map(|a| a.info().name)
+        .collect();
+    println!("\noccupancy culling (--occupancy D): {}", takers.join(", "));
     println!("\nscenes: {}", fragrace::scene::builtin_names().join(", "));
     println!("policies: random, pct:D, warp:N, reverse, fifo, far-first, bytes:HEX");
     Ok(())

@@ -159,6 +159,14 @@ impl RunSpec {
         if self.params.spin_cap != Params::default().spin_cap {
             c += &format!(" --spin-cap {}", self.params.spin_cap);
         }
+        if let Some(o) = self.params.occupancy {
+            c += &format!(
+                " --occupancy {} --range {} --occupancy-fill {}",
+                o.d,
+                o.range.name(),
+                o.fill.name()
+            );
+        }
         if let Some(s) = self.schedule() {
             c += &format!(
                 " --policy {} --seed {} --window {} --block {}",
@@ -258,6 +266,7 @@ pub struct Rendered {
 pub fn render(spec: &RunSpec, loaded: &Loaded) -> Result<Rendered, RunError> {
     let algo = fragrace_kernels::algorithm(&spec.algo)
         .ok_or_else(|| RunError::UnknownAlgo(spec.algo.clone()))?;
+    crate::culling::validate(spec, &*algo)?;
     let info = algo.info();
     let frame = loaded.frame(spec);
     let t = Instant::now();
@@ -312,8 +321,10 @@ pub fn check_with(
     loaded: &Loaded,
     truth: &AlgoResult,
 ) -> Result<Checked, RunError> {
-    let rendered = render(spec, loaded)?;
+    let mut rendered = render(spec, loaded)?;
     let metrics = compare(&rendered.info, &rendered.result, truth, &spec.params);
+    let culling_checks = crate::culling::checks(&metrics, &rendered.result);
+    rendered.result.checks.extend(culling_checks);
     Ok(Checked { rendered, metrics })
 }
 
@@ -382,6 +393,9 @@ pub fn summary_json(
         v["robustness"] = serde_json::json!(c.metrics.robustness);
         v["coplanarity"] = serde_json::json!(c.metrics.coplanarity);
         v["first_error"] = serde_json::json!(c.metrics.first_error);
+    }
+    if r.culling.is_some() {
+        v["occupancy"] = crate::culling::summary(r, checked.map(|c| &c.metrics), None);
     }
     v
 }

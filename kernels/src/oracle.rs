@@ -35,6 +35,16 @@ pub struct Metrics {
     /// Per-pixel error flags, row-major (for heatmaps).
     #[serde(skip)]
     pub error_mask: Vec<bool>,
+    /// Occupancy culling only: true fragments among a pixel's k nearest that the culling
+    /// bound rejects (Lemma 2.1 of "Improving k-buffer methods via occupancy maps" says
+    /// none).
+    pub lemma_2_1_violations: Option<u64>,
+    /// Occupancy culling only: true fragments beyond their pixel's bound (what the peel
+    /// pass's early test must have culled).
+    pub culled_truth: Option<u64>,
+    /// Occupancy culling only: those fragments per pixel, row-major (for heatmaps).
+    #[serde(skip)]
+    pub culled_heat: Vec<u32>,
 }
 
 /// Tolerance of image comparisons (one 8-bit step).
@@ -55,8 +65,24 @@ pub fn compare(
         ..Default::default()
     };
     let k = params.k.max(1) as usize;
+    let bounds = result.culling.as_ref().map(|c| &c.bounds[..]);
+    if bounds.is_some() {
+        m.lemma_2_1_violations = Some(0);
+        m.culled_truth = Some(0);
+        m.culled_heat = vec![0; n];
+    }
     for p in 0..n {
         let tp = t.pixel(p);
+        if let Some(b) = bounds {
+            // The peel pass keeps `z <= bound` (early LEQUAL test); truth is sorted, so the
+            // culled ones are a suffix and a violation is one among the first k.
+            let bound = b.get(p).copied().unwrap_or(f32::NAN);
+            let culled = tp.iter().filter(|f| !(f.depth <= bound)).count();
+            let violations = tp.iter().take(k).filter(|f| !(f.depth <= bound)).count();
+            m.culled_heat[p] = culled as u32;
+            *m.culled_truth.as_mut().expect("set above") += culled as u64;
+            *m.lemma_2_1_violations.as_mut().expect("set above") += violations as u64;
+        }
         if tp.is_empty() {
             continue;
         }

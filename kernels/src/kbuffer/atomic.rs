@@ -193,6 +193,11 @@ impl FragmentKernel for Store64 {
 pub struct KbAtomic32;
 
 impl Algorithm for KbAtomic32 {
+    /// Its capture passes run through `KbRun::capture`, which puts them behind occupancy
+    /// culling when asked.
+    fn takes_occupancy(&self) -> bool {
+        true
+    }
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "kb-atomic32",
@@ -259,6 +264,11 @@ impl Algorithm for KbAtomic32 {
 pub struct KbAtomic64;
 
 impl Algorithm for KbAtomic64 {
+    /// Its capture passes run through `KbRun::capture`, which puts them behind occupancy
+    /// culling when asked.
+    fn takes_occupancy(&self) -> bool {
+        true
+    }
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "kb-atomic64",

@@ -84,6 +84,11 @@ impl KbInterlock {
 }
 
 impl Algorithm for KbInterlock {
+    /// Its capture passes run through `KbRun::capture`, which puts them behind occupancy
+    /// culling when asked.
+    fn takes_occupancy(&self) -> bool {
+        true
+    }
     fn info(&self) -> AlgoInfo {
         let (name, summary) = if self.mode.ordered {
             (

@@ -32,6 +32,7 @@ use crate::algo::{
     HazardClass, Params,
 };
 use crate::common::{self, capture_state, geometry_pass, pixels, sort_fragments, EMPTY};
+use crate::occupancy::Culling;
 use crate::resolve::{self, Composite};
 
 /// Words per slot: depth (f32 bits) and primitive id.
@@ -297,6 +298,9 @@ impl Algorithm for KPlus {
     fn info(&self) -> AlgoInfo {
         info(Structure::MaxArray)
     }
+    fn takes_occupancy(&self) -> bool {
+        true
+    }
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -310,6 +314,9 @@ impl Algorithm for KPlus {
 impl Algorithm for KPlusHeap {
     fn info(&self) -> AlgoInfo {
         info(Structure::MaxHeap)
+    }
+    fn takes_occupancy(&self) -> bool {
+        true
     }
     fn run(
         &self,
@@ -360,9 +367,26 @@ fn run(
         evicted,
     };
     let mut fb = resolve::framebuffer(frame)?;
-    let mut report = geometry_pass(&device, &mut fb, frame, &capture_state(), &store, exec)?;
+    // Occupancy culling (when asked): its passes fill the depth buffer with each pixel's
+    // bound, and the store pass runs behind an early test against it.
+    let culling = Culling::prepare(&mut device, &mut fb, frame, params, exec)?;
+    let state = match culling {
+        Some(_) => Culling::peel_state(&capture_state()),
+        None => capture_state(),
+    };
+    let mut report = geometry_pass(&device, &mut fb, frame, &state, &store, exec)?;
+    let culling = culling.map(|mut c| {
+        c.add_peel(&report);
+        c.finish()
+    });
     let store_stats = report.stats.clone();
     let store_faults = report.faults.len();
+    // The culling stage's passes join the run's report after the store pass's own figures
+    // are taken for the checks below.
+    let culling = culling.map(|(stage, summary)| {
+        report.merge(&stage);
+        summary
+    });
 
     let kernel = Resolve {
         k,
@@ -436,7 +460,9 @@ fn run(
     let kept_total: u64 = counts.iter().map(|&c| c.min(k) as u64).sum();
     let evicted_total: u64 = evictions.iter().map(|&e| e as u64).sum();
     let culled = store_stats.discarded;
-    let generated = store_stats.fragments_generated;
+    // Fragments that reached the store kernel (occupancy culling kills the others before
+    // shading: they are neither kept nor culled by the k+-buffer).
+    let generated = store_stats.fragments_generated - store_stats.early_culled;
     let structure_name = match structure {
         Structure::MaxArray => "max-array: the tracked position holds the maximum",
         Structure::MaxHeap => "max-heap: every parent at least as far as its children",
@@ -465,13 +491,16 @@ fn run(
             unused_bad.unwrap_or_else(|| format!("{n} pixels")),
         ),
     ];
-    let storage_bytes = device.memory.bytes() + n as u64 * resolve::TARGET_BYTES;
+    // The culling stage's depth buffer shares the resolve's framebuffer: 4 bytes a pixel.
+    let depth_bytes = if culling.is_some() { 4 } else { 0 };
+    let storage_bytes = device.memory.bytes() + n as u64 * (resolve::TARGET_BYTES + depth_bytes);
     Ok(AlgoResult {
         capture: Some(Capture::from_lists(frame.width, frame.height, lists)),
         image: Some(image),
         report,
         checks,
         storage_bytes,
+        culling,
         ..Default::default()
     })
 }

@@ -472,6 +472,11 @@ impl FragmentKernel for RmwStore {
 pub struct KbRmw;
 
 impl Algorithm for KbRmw {
+    /// Its capture passes run through `KbRun::capture`, which puts them behind occupancy
+    /// culling when asked.
+    fn takes_occupancy(&self) -> bool {
+        true
+    }
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "kb-rmw",

@@ -159,6 +159,11 @@ impl KbSpinlock {
 }
 
 impl Algorithm for KbSpinlock {
+    /// Its capture passes run through `KbRun::capture`, which puts them behind occupancy
+    /// culling when asked.
+    fn takes_occupancy(&self) -> bool {
+        true
+    }
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "kb-spinlock",

@@ -196,6 +196,9 @@ pub struct CullSummary {
     pub bounds: Vec<f32>,
     /// Samples per pixel of the peel pass (a multisampled peel tests each sample's depth).
     pub samples: u32,
+    /// The stage's own passes (range, fill, count) merged: what culling costs.
+    #[serde(skip)]
+    pub stage: fragrace_emu::Stats,
 }
 
 impl CullSummary {
@@ -335,7 +338,8 @@ impl Culling {
     }
 
     /// The stage's passes (to merge into the run's report) and its summary.
-    pub fn finish(self) -> (PassReport, CullSummary) {
+    pub fn finish(mut self) -> (PassReport, CullSummary) {
+        self.summary.stage = self.report.stats.clone();
         (self.report, self.summary)
     }
 }
