@@ -78,6 +78,16 @@ struct FuzzArgs {
     /// Only these built-in scenes (comma-separated; default: a random mix).
     #[arg(long, value_delimiter = ',')]
     scene: Vec<String>,
+    /// Occupancy culling with D words per pixel for every fuzzed algorithm that takes it
+    /// (default: a quarter of their runs culled, with random D and range).
+    #[arg(long, value_name = "D")]
+    occupancy: Option<u32>,
+    /// With --occupancy: exact, bbox or hull.
+    #[arg(long)]
+    range: Option<fragrace_kernels::occupancy::RangeSource>,
+    /// With --occupancy: atomic or plain (racy by design).
+    #[arg(long)]
+    occupancy_fill: Option<fragrace_kernels::occupancy::FillMode>,
     #[arg(long)]
     json: bool,
 }
@@ -298,6 +308,33 @@ fn occupancy_of(a: &RunArgs) -> Result<Option<fragrace_kernels::occupancy::Occup
         }
         None => Ok(None),
     }
+}
+
+/// The occupancy culling a fuzz campaign forces, checked against its algorithms: at
+/// least one of them must take it, and `d` must hold the largest k the campaign draws (16).
+fn fuzz_occupancy(a: &FuzzArgs) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
+    let Some(d) = a.occupancy else {
+        if a.range.is_some() || a.occupancy_fill.is_some() {
+            bail!("--range and --occupancy-fill configure occupancy culling: add --occupancy D (1 to 64)");
+        }
+        return Ok(None);
+    };
+    let occ = fragrace_kernels::occupancy::Occupancy {
+        d,
+        range: a.range.unwrap_or_default(),
+        fill: a.occupancy_fill.unwrap_or_default(),
+    };
+    occ.validate(16)?;
+    let all = fragrace_kernels::algorithms();
+    let takers: Vec<&str> = all.iter().filter(|x| x.takes_occupancy()).map(|x| x.info().name).collect();
+    if !a.algo.is_empty() && !a.algo.iter().any(|n| takers.contains(&n.as_str())) {
+        bail!(
+            "--occupancy: none of {} runs behind occupancy culling; the algorithms that do: {}",
+            a.algo.join(", "),
+            takers.join(", ")
+        );
+    }
+    Ok(Some(occ))
 }
 
 fn main() {
@@ -778,6 +815,7 @@ fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
         shrink_budget: std::time::Duration::from_secs(a.shrink_secs),
         max_size: a.max_size,
         scenes: a.scene.clone(),
+        occupancy: fuzz_occupancy(a)?,
     };
     if cfg.time.is_none() && cfg.iterations.is_none() {
         bail!("give --time or --iterations (a campaign needs a budget)");

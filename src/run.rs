@@ -297,6 +297,24 @@ impl Checked {
     pub fn hazards(&self) -> HazardCounts {
         self.rendered.result.report.hazards
     }
+    /// Hazards of the occupancy-culling stage's passes (none without culling).
+    pub fn stage_hazards(&self) -> HazardCounts {
+        self.rendered
+            .result
+            .culling
+            .as_ref()
+            .map(|c| c.stage_hazards)
+            .unwrap_or_default()
+    }
+    /// Hazards of the algorithm's own passes: all of them less the culling stage's.
+    pub fn algorithm_hazards(&self) -> HazardCounts {
+        let (all, stage) = (self.hazards(), self.stage_hazards());
+        HazardCounts {
+            lost_updates: all.lost_updates - stage.lost_updates,
+            races: all.races - stage.races,
+            torn: all.torn - stage.torn,
+        }
+    }
     /// Invariants that failed.
     pub fn failed_checks(&self) -> Vec<&fragrace_kernels::Check> {
         self.rendered

@@ -8,6 +8,7 @@
 use fragrace::run::{self, Loaded, RunSpec, SceneSpec};
 use fragrace::scene::Camera;
 use fragrace_emu::{Binning, ExecConfig, ExecMode, Policy, ScheduleConfig};
+use fragrace_kernels::occupancy::{FillMode, Occupancy, RangeSource};
 use fragrace_kernels::{AlgoResult, Capacity, HazardClass};
 
 fn env_or(name: &str, default: u64) -> u64 {
@@ -114,6 +115,24 @@ fn verdict(
     None
 }
 
+/// The occupancy-culling variant each scene runs (every algorithm that takes it runs once
+/// plain and once culled): the three range sources spread over the scenes, the smallest map
+/// (d = 1, 32 sub-intervals) on the scenes of many layers, where the bound is coarsest.
+fn occupancy_for(scene: &str) -> Occupancy {
+    let (d, range) = match scene {
+        "cubes" => (1, RangeSource::Exact),
+        "coplanar-stack" => (2, RangeSource::Bbox),
+        "spheres" => (4, RangeSource::Hull),
+        "hairball" => (1, RangeSource::Exact),
+        _ => (32, RangeSource::Hull),
+    };
+    Occupancy {
+        d,
+        range,
+        fill: FillMode::Atomic,
+    }
+}
+
 fn sweep(scene: &str, size: u32, azimuths: &[f32], seeds: u64) {
     let mut failures = Vec::new();
     let mut prone_seen: std::collections::HashMap<&'static str, (u64, u64)> = Default::default();
@@ -121,18 +140,25 @@ fn sweep(scene: &str, size: u32, azimuths: &[f32], seeds: u64) {
         let base = spec(scene, "truth", size, az);
         let loaded: Loaded = run::load(&base).unwrap();
         let truth: AlgoResult = run::truth(&base, &loaded).unwrap();
-        for algo in fragrace_kernels::algorithms() {
-            let info = algo.info();
+        let variants = fragrace_kernels::algorithms().into_iter().flat_map(|a| {
+            let culled = a.takes_occupancy().then(|| Some(occupancy_for(scene)));
+            [Some(None), culled].into_iter().flatten().map(move |o| (a.info(), o))
+        });
+        for (info, occupancy) in variants {
             let mut baseline = None;
             for exec in executors(seeds) {
                 let mut s = spec(scene, info.name, size, az);
                 s.exec = exec;
+                s.params.occupancy = occupancy;
                 let c = run::check_with(&s, &loaded, &truth)
                     .unwrap_or_else(|e| panic!("{}: {e}", s.command("check")));
                 if let Some(why) = verdict(&c, info.hazard, baseline.as_ref()) {
                     failures.push(format!("{why}\n    {}", s.command("check")));
                 }
-                if info.hazard == HazardClass::HazardProne && s.schedule().is_some() {
+                if info.hazard == HazardClass::HazardProne
+                    && s.schedule().is_some()
+                    && occupancy.is_none()
+                {
                     let e = prone_seen.entry(info.name).or_default();
                     e.0 += (c.metrics.error_pixels > 0) as u64;
                     e.1 += (c.hazards().total() > 0) as u64;

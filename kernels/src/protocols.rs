@@ -12,7 +12,9 @@
 //! - count-scan-store A-buffers: [`CountKernel`], [`DfbStore`], [`SparseAllocate`], [`SbStore`];
 //! - k-buffers: [`RmwStore`] (racy by design), [`Depth32`] + [`Claim32`] and [`Store64`] (the
 //!   atomic-min chains, with their [`Census`]), [`SpinStore`] (spinlock), [`InterlockStore`]
-//!   (pixel interlock), all on [`SplitSlots`] or key buffers.
+//!   (pixel interlock), all on [`SplitSlots`] or key buffers;
+//! - occupancy culling: [`OccupancyFill`] (atomic or plain OR into a pixel's map) and
+//!   [`OccupancyCount`] (Kernighan's count, whose arithmetic is `occupancy::bits`).
 
 pub use crate::abuffer::dfb::DfbStore;
 pub use crate::abuffer::ll::{ListPool, LlInsert, NODE_WORDS};
@@ -22,3 +24,4 @@ pub use crate::kbuffer::atomic::{Census, Claim32, Depth32, Store64};
 pub use crate::kbuffer::interlock::InterlockStore;
 pub use crate::kbuffer::rmw::{RmwStore, SplitSlots};
 pub use crate::kbuffer::spinlock::SpinStore;
+pub use crate::occupancy::passes::{Count as OccupancyCount, Fill as OccupancyFill};

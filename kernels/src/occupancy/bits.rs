@@ -48,16 +48,27 @@ pub fn bucket(z: f32, zn: f32, zf: f32, s: u32) -> u32 {
 /// Kernighan's loop, or `None` when fewer than `k` bits are set (no culling for the pixel).
 /// `k` must be at least 1.
 pub fn kth_bucket(words: &[u32], k: u32) -> Option<u32> {
-    let mut left = k;
+    let mut counter = 0;
     for (w, &word) in words.iter().enumerate() {
-        let mut b = word;
-        while b != 0 {
-            left -= 1;
-            if left == 0 {
-                return Some(w as u32 * BITS_PER_WORD + b.trailing_zeros());
-            }
-            b &= b - 1;
+        if let Some(j) = count_word(word, k, &mut counter) {
+            return Some(w as u32 * BITS_PER_WORD + j);
         }
+    }
+    None
+}
+
+/// One word of the count pass: Kernighan's loop (`b & (b - 1)` clears the lowest set bit)
+/// adds the word's set bits to `counter` one by one; when it reaches `k`, the position of
+/// that bit within the word. The count kernel runs it word by word as it loads them.
+#[inline(always)]
+pub fn count_word(word: u32, k: u32, counter: &mut u32) -> Option<u32> {
+    let mut b = word;
+    while b != 0 {
+        *counter += 1;
+        if *counter == k {
+            return Some(b.trailing_zeros());
+        }
+        b &= b - 1;
     }
     None
 }

@@ -35,7 +35,7 @@
 
 pub mod bits;
 pub mod hull;
-mod passes;
+pub(crate) mod passes;
 pub mod range;
 
 use fragrace_emu::{
@@ -199,6 +199,9 @@ pub struct CullSummary {
     /// The stage's own passes (range, fill, count) merged: what culling costs.
     #[serde(skip)]
     pub stage: fragrace_emu::Stats,
+    /// Hazards the detector saw in the stage's passes (none with the atomic fill; the lost
+    /// bits of the plain one), apart from the algorithm's own.
+    pub stage_hazards: fragrace_emu::HazardCounts,
 }
 
 impl CullSummary {
@@ -340,6 +343,7 @@ impl Culling {
     /// The stage's passes (to merge into the run's report) and its summary.
     pub fn finish(mut self) -> (PassReport, CullSummary) {
         self.summary.stage = self.report.stats.clone();
+        self.summary.stage_hazards = self.report.hazards;
         (self.report, self.summary)
     }
 }

@@ -1,17 +1,17 @@
 //! The fill and count kernels of occupancy culling ("Improving k-buffer methods via
 //! occupancy maps", section 2): each reads like the paper's description, the arithmetic is
-//! [`super::bits`].
+//! [`super::bits`]. Public for the loom models only (`crate::protocols`).
 
 use fragrace_emu::{
     Buf, CompareFunc, DepthState, Fragment, FragmentKernel, FragmentState, KernelInfo,
 };
 
-use super::bits::{bucket, bucket_bound, BITS_PER_WORD, NO_CULLING};
+use super::bits::{bucket, bucket_bound, count_word, BITS_PER_WORD, NO_CULLING};
 use super::FillMode;
 
 /// The fill pass: "the j-th bit of the occupancy map is set to 1 for each arriving fragment
 /// f falling within the corresponding sub-interval, via blending or atomic operations".
-pub(super) struct Fill {
+pub struct Fill {
     /// `d` words per pixel, pixel-major.
     pub map: Buf<u32>,
     pub near: Buf<f32>,
@@ -52,7 +52,7 @@ impl FragmentKernel for Fill {
 /// Brian Kernighan's algorithm: count the number of times p.b & (p.b - 1) is performed in a
 /// loop. When the counter reaches k, the algorithm halts and the current bucket's depth is
 /// returned to the Z-buffer (O(k) time)". Fewer than k bits: nothing is culled.
-pub(super) struct Count {
+pub struct Count {
     pub map: Buf<u32>,
     pub near: Buf<f32>,
     pub far: Buf<f32>,
@@ -84,15 +84,10 @@ impl FragmentKernel for Count {
         let s = self.d * BITS_PER_WORD;
         let mut counter = 0;
         for w in 0..self.d {
-            let mut b = f.load(self.map, p * self.d + w).await;
-            while b != 0 {
-                counter += 1;
-                if counter == self.k {
-                    let j = w * BITS_PER_WORD + b.trailing_zeros();
-                    f.write_depth(bucket_bound(j, zn, zf, s));
-                    return;
-                }
-                b &= b - 1;
+            let word = f.load(self.map, p * self.d + w).await;
+            if let Some(j) = count_word(word, self.k, &mut counter) {
+                f.write_depth(bucket_bound(w * BITS_PER_WORD + j, zn, zf, s));
+                return;
             }
         }
         f.write_depth(NO_CULLING);
