@@ -71,12 +71,15 @@ pub fn baseline(spec: &RunSpec, loaded: &Loaded) -> Result<Option<Rendered>, Run
     Ok(Some(run::render(&plain, loaded)?))
 }
 
-/// The hottest address outside the occupancy stage's own buffers: (buffer, index,
-/// accesses, peak concurrent accessors).
+/// The hottest address of the algorithm's passes (with culling, the peel pass's), outside
+/// the stage's own buffers: buffer, index, accesses, peak concurrent accessors. Hotspots are
+/// measured by the scheduled executor, and by the parallel one with `ExecConfig::contention`.
 fn hottest(r: &AlgoResult) -> serde_json::Value {
-    r.report
-        .stats
-        .hotspots
+    let spots = match &r.culling {
+        Some(c) => &c.peel_hotspots,
+        None => &r.report.stats.hotspots,
+    };
+    spots
         .iter()
         .filter(|h| !h.buffer.starts_with("occupancy-"))
         .max_by_key(|h| (h.peak_concurrent, h.accesses))
@@ -105,10 +108,11 @@ fn ops(r: &AlgoResult, stage: Option<&fragrace_emu::Stats>) -> (u64, u64) {
 /// culling saved in invocations, memory accesses and atomics, and the contention on the
 /// hottest word with and without it.
 pub fn summary(
-    r: &AlgoResult,
+    rendered: &Rendered,
     metrics: Option<&Metrics>,
     baseline: Option<&Rendered>,
 ) -> serde_json::Value {
+    let (r, wall_ms) = (&rendered.result, rendered.wall_ms);
     let Some(c) = &r.culling else {
         return serde_json::Value::Null;
     };
@@ -129,6 +133,7 @@ pub fn summary(
                         the paper's (d - k + 3) words assume k map words reused for the k-buffer's colours",
         "lemma_2_1_violations": metrics.and_then(|m| m.lemma_2_1_violations),
         "hottest_word": hottest(r),
+        "stage_hazards": c.stage_hazards,
     });
     if let Some(b) = baseline {
         let (ops_with, atomics_with) = ops(r, Some(&c.stage));
@@ -136,7 +141,12 @@ pub fn summary(
         // k-buffer invocations: every rasterized fragment of the capture passes without
         // culling (nothing tests them before the shader); the peel passes' shaded ones with.
         let shaded_without = b.result.report.stats.fragments_generated;
-        let shaded_with: u64 = c.passes.iter().filter(|p| p.name == "peel").map(|p| p.shaded).sum();
+        let shaded_with: u64 = c
+            .passes
+            .iter()
+            .filter(|p| p.name == "peel")
+            .map(|p| p.shaded)
+            .sum();
         v["without"] = json!({
             "kbuffer_invocations": shaded_without,
             "memory_ops": ops_without,
@@ -149,6 +159,8 @@ pub fn summary(
             "memory_ops": ops_with,
             "atomics": atomics_with,
             "stage_memory_ops": c.stage.ops.0.iter().sum::<u64>(),
+            "hottest_word": hottest(r),
+            "wall_ms": wall_ms,
         });
         v["saved"] = json!({
             "kbuffer_invocations": shaded_without as i64 - shaded_with as i64,

@@ -356,9 +356,10 @@ fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool)> {
     // The plain occupancy fill races by design (it loses bits, which only moves the bound
     // farther): its hazards are expected whatever the algorithm behind it; the atomic one's
     // would be a violation.
-    let plain_fill = spec.params.occupancy.is_some_and(|o| {
-        o.fill == fragrace_kernels::occupancy::FillMode::Plain
-    });
+    let plain_fill = spec
+        .params
+        .occupancy
+        .is_some_and(|o| o.fill == fragrace_kernels::occupancy::FillMode::Plain);
     let stage_hazard = c.stage_hazards().total() > 0;
     let hazard = c.algorithm_hazards().total() > 0 || (stage_hazard && !plain_fill);
     let errors = c.metrics.error_pixels > 0 && !approximate;

@@ -326,7 +326,11 @@ fn fuzz_occupancy(a: &FuzzArgs) -> Result<Option<fragrace_kernels::occupancy::Oc
     };
     occ.validate(16)?;
     let all = fragrace_kernels::algorithms();
-    let takers: Vec<&str> = all.iter().filter(|x| x.takes_occupancy()).map(|x| x.info().name).collect();
+    let takers: Vec<&str> = all
+        .iter()
+        .filter(|x| x.takes_occupancy())
+        .map(|x| x.info().name)
+        .collect();
     if !a.algo.is_empty() && !a.algo.iter().any(|n| takers.contains(&n.as_str())) {
         bail!(
             "--occupancy: none of {} runs behind occupancy culling; the algorithms that do: {}",
@@ -366,7 +370,7 @@ fn cmd_render(a: &RunArgs) -> Result<()> {
     write_outputs(a, &spec, &rendered, None)?;
     let mut summary = run::summary_json(&spec, &loaded, None, &rendered);
     if let Some(base) = fragrace::culling::baseline(&spec, &loaded)? {
-        summary["occupancy"] = fragrace::culling::summary(&rendered.result, None, Some(&base));
+        summary["occupancy"] = fragrace::culling::summary(&rendered, None, Some(&base));
     }
     if a.json {
         println!("{summary}");
@@ -543,7 +547,7 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
     if let Some(base) = fragrace::culling::baseline(&wspec, &loaded)? {
         summary["occupancy"] =
-            fragrace::culling::summary(&w.rendered.result, Some(&w.metrics), Some(&base));
+            fragrace::culling::summary(&w.rendered, Some(&w.metrics), Some(&base));
     }
     summary["schedules"] = serde_json::json!(n);
     summary["anomalous_runs"] = serde_json::json!(anomalous_runs);

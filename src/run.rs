@@ -413,7 +413,7 @@ pub fn summary_json(
         v["first_error"] = serde_json::json!(c.metrics.first_error);
     }
     if r.culling.is_some() {
-        v["occupancy"] = crate::culling::summary(r, checked.map(|c| &c.metrics), None);
+        v["occupancy"] = crate::culling::summary(rendered, checked.map(|c| &c.metrics), None);
     }
     v
 }

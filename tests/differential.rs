@@ -142,7 +142,10 @@ fn sweep(scene: &str, size: u32, azimuths: &[f32], seeds: u64) {
         let truth: AlgoResult = run::truth(&base, &loaded).unwrap();
         let variants = fragrace_kernels::algorithms().into_iter().flat_map(|a| {
             let culled = a.takes_occupancy().then(|| Some(occupancy_for(scene)));
-            [Some(None), culled].into_iter().flatten().map(move |o| (a.info(), o))
+            [Some(None), culled]
+                .into_iter()
+                .flatten()
+                .map(move |o| (a.info(), o))
         });
         for (info, occupancy) in variants {
             let mut baseline = None;

@@ -77,8 +77,15 @@ pub fn compare(
             // The peel pass keeps `z <= bound` (early LEQUAL test); truth is sorted, so the
             // culled ones are a suffix and a violation is one among the first k.
             let bound = b.get(p).copied().unwrap_or(f32::NAN);
-            let culled = tp.iter().filter(|f| !(f.depth <= bound)).count();
-            let violations = tp.iter().take(k).filter(|f| !(f.depth <= bound)).count();
+            // Passes iff `depth <= bound`; a NaN on either side fails, as the test does.
+            let fails = |f: &&CapturedFrag| {
+                !matches!(
+                    f.depth.partial_cmp(&bound),
+                    Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+                )
+            };
+            let culled = tp.iter().filter(fails).count();
+            let violations = tp.iter().take(k).filter(fails).count();
             m.culled_heat[p] = culled as u32;
             *m.culled_truth.as_mut().expect("set above") += culled as u64;
             *m.lemma_2_1_violations.as_mut().expect("set above") += violations as u64;

@@ -30,12 +30,12 @@ pub const NO_CULLING: f32 = 1.0;
 #[inline(always)]
 pub fn bucket(z: f32, zn: f32, zf: f32, s: u32) -> u32 {
     let width = zf - zn;
-    // `!(width > 0.0)` also takes NaN.
-    if !(width > 0.0) {
+    // NaN compares as not greater: an empty, inverted or NaN range is one sub-interval.
+    if width.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return 0;
     }
     let t = (z - zn) / width * s as f32;
-    if !(t > 0.0) {
+    if t.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         0
     } else if t >= (s - 1) as f32 {
         s - 1
@@ -166,9 +166,15 @@ mod tests {
         let (zn, zf, s) = (0.1f32, 0.9f32, 96);
         for i in 0..s - 1 {
             let b = bucket_bound(i, zn, zf, s);
-            assert!(bucket(b, zn, zf, s) <= i, "bucket {i}: bound {b} is past it");
+            assert!(
+                bucket(b, zn, zf, s) <= i,
+                "bucket {i}: bound {b} is past it"
+            );
             let next = f32::from_bits(b.to_bits() + 1);
-            assert!(bucket(next, zn, zf, s) > i, "bucket {i}: bound {b} is not the last");
+            assert!(
+                bucket(next, zn, zf, s) > i,
+                "bucket {i}: bound {b} is not the last"
+            );
         }
         assert_eq!(bucket_bound(s - 1, zn, zf, s), NO_CULLING);
     }
@@ -208,7 +214,10 @@ mod tests {
             let bound = pixel_bound(&words, k, zn, zf);
             zs.sort_by(f32::total_cmp);
             for z in zs.iter().take(k as usize) {
-                assert!(*z <= bound, "case {case}: a k-nearest depth {z} is culled by {bound}");
+                assert!(
+                    *z <= bound,
+                    "case {case}: a k-nearest depth {z} is culled by {bound}"
+                );
             }
             // Lose a random subset of the bits.
             let lossy: Vec<u32> = words.iter().map(|w| w & rnd()).collect();

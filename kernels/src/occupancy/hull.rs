@@ -143,7 +143,10 @@ fn thin(points: &[Vec3]) -> Vec<Vec3> {
             Some((n, n.dot(a)))
         })
         .collect();
-    let scale = points.iter().map(|p| p.abs().max_element()).fold(0.0, f32::max);
+    let scale = points
+        .iter()
+        .map(|p| p.abs().max_element())
+        .fold(0.0, f32::max);
     let margin = 1e-4 * scale.max(1e-6);
     points
         .iter()

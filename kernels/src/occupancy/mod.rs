@@ -202,6 +202,9 @@ pub struct CullSummary {
     /// Hazards the detector saw in the stage's passes (none with the atomic fill; the lost
     /// bits of the plain one), apart from the algorithm's own.
     pub stage_hazards: fragrace_emu::HazardCounts,
+    /// The hottest addresses of the (first) peel pass: the k-buffer's contention behind
+    /// the culling, apart from the stage's own map words.
+    pub peel_hotspots: Vec<fragrace_emu::stats::Hotspot>,
 }
 
 impl CullSummary {
@@ -330,6 +333,7 @@ impl Culling {
         if self.summary.peel_passes == 0 {
             self.summary.culled_fragments = peel.stats.early_culled;
             self.summary.peel_fragments = peel.stats.fragments_generated;
+            self.summary.peel_hotspots = peel.stats.hotspots.clone();
         }
         self.summary.peel_passes += 1;
         self.summary.passes.push(StagePass {
