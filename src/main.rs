@@ -118,6 +118,13 @@ struct ReportArgs {
     views: Option<u32>,
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Occupancy culling with D words per pixel for the algorithms that take it (their
+    /// rows are named `NAME+occ`); the others run as they are.
+    #[arg(long, value_name = "D")]
+    occupancy: Option<u32>,
+    /// With --occupancy: exact, bbox or hull.
+    #[arg(long)]
+    range: Option<fragrace_kernels::occupancy::RangeSource>,
 }
 
 #[derive(Args, Clone)]
@@ -945,6 +952,29 @@ fn cmd_report(a: &ReportArgs) -> Result<()> {
     };
     let exec =
         run::exec_config(&a.exec, &a.policy, a.seed, a.threads, 64).map_err(anyhow::Error::msg)?;
+    let occupancy = match a.occupancy {
+        Some(d) => {
+            let o = fragrace_kernels::occupancy::Occupancy {
+                d,
+                range: a.range.unwrap_or_default(),
+                fill: Default::default(),
+            };
+            o.validate(a.k)?;
+            Some(o)
+        }
+        None if a.range.is_some() => {
+            bail!("--range configures occupancy culling: add --occupancy D (1 to 64)")
+        }
+        None => None,
+    };
+    // The occupancy culling of one algorithm's runs, and its row name.
+    let culled = |name: &str| {
+        let takes = fragrace_kernels::algorithm(name).is_some_and(|x| x.takes_occupancy());
+        match occupancy {
+            Some(o) if takes => (Some(o), format!("{name}+occ")),
+            _ => (None, name.to_string()),
+        }
+    };
     let scene_spec = |s: &str| {
         if s.contains(".obj") {
             SceneSpec::Obj {
@@ -971,6 +1001,7 @@ fn cmd_report(a: &ReportArgs) -> Result<()> {
             for (name, eprs) in &mut series {
                 let mut s = spec.clone();
                 s.algo = name.clone();
+                s.params.occupancy = culled(name).0;
                 eprs.push(run::check_with(&s, &loaded, &truth)?.metrics.epr);
             }
             eprintln!("view {}/{views}", v + 1);
@@ -998,12 +1029,14 @@ fn cmd_report(a: &ReportArgs) -> Result<()> {
         for name in &algos {
             let mut s = spec.clone();
             s.algo = name.clone();
+            let (occ, row) = culled(name);
+            s.params.occupancy = occ;
             let c = run::check_with(&s, &loaded, &truth)?;
             let r = &c.rendered.result;
             let hz = r.report.hazards;
             println!(
                 "| {} | {} | {:.6} | {:.4} | {:.1} | {} | {}/{}/{} | {:.1} |",
-                name,
+                row,
                 scene,
                 c.metrics.epr,
                 c.metrics.robustness,
