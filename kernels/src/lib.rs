@@ -1,6 +1,6 @@
 //! # fragrace-kernels: multi-fragment rendering algorithms as fragrace kernels
 //!
-//! Every algorithm of DESIGN.md section 3 is an [`Algorithm`]: its passes (geometry and
+//! Every algorithm is an [`Algorithm`]: its passes (geometry and
 //! full-screen kernels over `fragrace_emu`'s public kernel API), its resolve, its declared
 //! properties ([`AlgoInfo`]: passes, memory per pixel, hazard class, source), and its
 //! invariants, checked on every run ([`AlgoResult::checks`]).

@@ -509,7 +509,7 @@ fn loom_finds_a_spinlock_dropping_a_fragment_at_its_cap() {
 /// `kb-spinlock`'s protocol with the release written as a plain (relaxed) store instead of
 /// a release store: the next holder's compare-exchange reads the 0 but does not
 /// synchronise with the previous holder's writes, so its plain loads may see stale values
-/// (DESIGN.md 7, "release by a plain store with no barrier"). Not one of the algorithms: the
+/// (a known hazard, docs/hazards.md: "release by a plain store with no barrier"). Not one of the algorithms: the
 /// bug, written out for loom (the counter inside the lock is `kb-spinlock`'s `entries`).
 struct PlainReleaseSpin {
     s: Spin,

@@ -4,7 +4,7 @@
 //! This module knows nothing of shading, memory or executors: it turns clip-space
 //! triangles into [`Fragment`]s, tile by tile, in API order.
 //!
-//! Rules (DESIGN.md 2.1):
+//! Rules:
 //! - viewport transform `x = (x_ndc + 1) / 2 * W`, `y = (1 - y_ndc) / 2 * H`: screen space has
 //!   y pointing down (row 0 is the top row of the image); NDC +y is up;
 //! - 8 sub-pixel bits of fixed point ([`SUBPIXEL_BITS`], round to nearest), pixel centres at

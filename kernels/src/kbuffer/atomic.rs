@@ -1,6 +1,6 @@
 //! The atomic-min k-buffers: each slot is updated only by `atomicMin`, so no fragment is ever
 //! lost to a race (the "atomic operations" k-buffer variants \[MCTB13\] of the occupancy paper,
-//! section 1, and DESIGN.md 7; the llvmpipe peer's `kbuf-atomic`).
+//! section 1, and the known 64-bit key hazards of docs/hazards.md; the llvmpipe peer's `kbuf-atomic`).
 //!
 //! **The insertion chain.** A fragment carries its key `v` down the pixel's k slots:
 //! `old = atomicMin(slot[i], v); if old == EMPTY: done; v = max(old, v)`. Each step keeps the
@@ -16,7 +16,7 @@
 //!   holding its key. Equal depths are kept as separate slots by the chain (the carried
 //!   value equals the old one and moves on), so `m` coplanar fragments with `c <= m` slots of
 //!   their depth claim exactly `c` slots, one each: the depth multiset is exact and which
-//!   coplanar fragment got which slot is the only racy part (DESIGN.md 7: "equal depths
+//!   coplanar fragment got which slot is the only racy part (known hazard, docs/hazards.md: "equal depths
 //!   deduplicate to one slot and the colour pass then races on it" is the bug this avoids).
 //! - `kb-atomic64`: one pass on 64-bit keys `depth bits << 32 | primitive id`; keys are unique
 //!   per pixel, so the kept set is exactly the k nearest in the truth's order.
@@ -65,7 +65,7 @@ impl Census {
         let by_prim = matches!(slots, Slots::Key64 { .. });
         let shape = Shape::of(&slots.read(&run.device, run.k)?, by_prim, Some(&counts));
         Ok(vec![
-            // DESIGN.md 3: "atomic-min k-buffer: final slots are the k smallest keys under
+            // The design rule: "atomic-min k-buffer: final slots are the k smallest keys under
             // every interleaving". That they are the k smallest of the truth is the oracle's
             // job; here: sorted, and exactly min(k, n) of them.
             shape.check(run.frame.width, true),
@@ -204,7 +204,7 @@ impl Algorithm for KbAtomic32 {
             family: "k-buffer",
             summary: "atomic-min insertion chain on 32-bit depth keys, then a second pass where each of the k \
                       claims a slot of its depth by compare-exchange",
-            source: "atomic k-buffer variants [MCTB13] (occupancy paper, section 1); DESIGN.md 7; llvmpipe peer \
+            source: "atomic k-buffer variants [MCTB13] (occupancy paper, section 1); known hazards (docs/hazards.md); llvmpipe peer \
                      `kbuf-atomic`",
             passes: "2 geometry + 1 full-screen (resolve)",
             memory: "8 k + 4 bytes: k keys + k primitive ids (Table 1, KB: 2K + 2 words) + the fragment count \
@@ -274,7 +274,7 @@ impl Algorithm for KbAtomic64 {
             name: "kb-atomic64",
             family: "k-buffer",
             summary: "atomic-min insertion chain on 64-bit keys (depth bits << 32 | primitive id), one pass",
-            source: "atomic k-buffer variants [MCTB13] (occupancy paper, section 1); DESIGN.md 7 (64-bit keys)",
+            source: "atomic k-buffer variants [MCTB13] (occupancy paper, section 1); 64-bit keys (docs/hazards.md)",
             passes: "1 geometry + 1 full-screen (resolve)",
             memory: "8 k + 4 bytes: k 64-bit keys (Table 1, KB: 2K + 2 words, packed) + the fragment count of the \
                      invariant; + 16-byte resolve target",

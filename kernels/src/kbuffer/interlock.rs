@@ -8,7 +8,7 @@
 //! - `kb-interlock`: ordered interlock (`pixel_interlock_ordered`): critical sections of one
 //!   pixel are entered in API order, which for one draw is primitive order.
 //! - `kb-interlock-unordered`: mutual exclusion only; the entry order is whatever the
-//!   executor produced (DESIGN.md 7: "mutual exclusion but nondeterministic order"). The kept
+//!   executor produced (known hazard, docs/hazards.md: "mutual exclusion but nondeterministic order"). The kept
 //!   set does not depend on the order (insertion is by `(depth, primitive)`), so both are
 //!   exact; only order-dependent quantities would differ.
 //!

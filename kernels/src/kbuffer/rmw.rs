@@ -190,7 +190,7 @@ fn unpack64(k: u64) -> CapturedFrag {
 
 /// The f32 bits of a depth as an unsigned key. For depth >= 0 the unsigned order of the bits
 /// is the float order (IEEE 754 sign-magnitude with a biased exponent), which is what lets
-/// `atomicMin` on uint order depths (DESIGN.md 7: "keys compared as uint assume depth >= 0").
+/// `atomicMin` on uint order depths (known hazard, docs/hazards.md: "keys compared as uint assume depth >= 0").
 /// `-0.0` is canonicalised to `+0.0` (its bits would sort last); it compares equal to `+0.0`
 /// for the oracle. Negative depths cannot come out of the [0, 1] window transform; the
 /// atomic k-buffers count any that do and fail a check.

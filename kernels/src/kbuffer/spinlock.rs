@@ -1,6 +1,6 @@
 //! `kb-spinlock`: Bavoil's read-modify-write k-buffer (see [`super::rmw`]) inside a per-pixel
 //! spinlock, as it is written where pixel interlock is missing (the "pixel synchronization"
-//! k-buffers the occupancy paper, section 1, cites, emulated in software; DESIGN.md 7,
+//! k-buffers the occupancy paper, section 1, cites, emulated in software; the known hazards of docs/hazards.md,
 //! "spinlock k-buffer").
 //!
 //! Acquire: compare-exchange of the pixel's lock word 0 -> 1 (acquire), retried; each attempt
@@ -8,7 +8,7 @@
 //! After `params.spin_cap` failed attempts (at least 1) the fragment gives up: it is **dropped
 //! and counted** (per pixel, reported in [`AlgoResult::dropped`] and a check), never silently.
 //!
-//! Why it is declared hazard-prone (DESIGN.md 7): a spinlock gives no forward progress
+//! Why it is declared hazard-prone (docs/hazards.md): a spinlock gives no forward progress
 //! guarantee. A lock holder that the scheduler does not run (a PCT priority drop, an
 //! OS-descheduled thread) makes every other fragment of its pixel burn its cap and give up,
 //! so with any finite cap some schedules drop fragments (EPR > 0; with the default cap of
@@ -171,7 +171,7 @@ impl Algorithm for KbSpinlock {
             summary: "read-modify-write k-buffer inside a per-pixel spinlock (compare-exchange acquire, atomic-store \
                       release); fragments that reach the spin cap are dropped and counted",
             source: "pixel synchronization k-buffers (occupancy paper, section 1) without hardware interlock; \
-                     DESIGN.md 7 (spinlock k-buffer); Bavoil et al. 2007 (I3D)",
+                     spinlock k-buffer (docs/hazards.md); Bavoil et al. 2007 (I3D)",
             passes: "1 geometry + 1 full-screen (resolve)",
             memory: "8 k + 12 bytes: k depths + k primitive ids (Table 1, KB: 2K + 2 words) + the lock + the entry \
                      and give-up counts of the invariants; + 16-byte resolve target",
