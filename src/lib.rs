@@ -13,6 +13,7 @@ pub mod output;
 pub mod run;
 pub mod scene;
 pub mod shrink;
+pub mod validate;
 
 pub use fragrace_emu as emu;
 pub use fragrace_kernels as kernels;

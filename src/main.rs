@@ -4,7 +4,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use clap::{Args, Parser, Subcommand};
+use clap::parser::ValueSource;
+use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use fragrace::run::{self, RunSpec, SceneSpec};
 use fragrace::scene::Camera;
 use fragrace_emu::HazardKind;
@@ -222,7 +223,18 @@ struct BenchArgs {
     floor: bool,
 }
 
-fn spec_of(a: &RunArgs) -> Result<RunSpec> {
+/// The options given on the command line (not defaulted), named as typed without `--`.
+fn given(m: &ArgMatches) -> Vec<String> {
+    m.ids()
+        .filter(|id| m.value_source(id.as_str()) == Some(ValueSource::CommandLine))
+        .map(|id| id.as_str().replace('_', "-"))
+        .collect()
+}
+
+/// The run the options describe, every value checked ([`RunSpec::validate`]) and every
+/// option that the executor would ignore refused, before anything is loaded.
+fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
+    fragrace::validate::options_for_exec(&a.exec, given.iter().map(String::as_str))?;
     let scene = match &a.obj {
         Some(p) => {
             if !p.exists() {
@@ -237,14 +249,13 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
         }
         None => SceneSpec::Builtin(a.scene.clone()),
     };
-    let mut exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)
-        .map_err(anyhow::Error::msg)?;
-    exec.block = a.block.max(1);
+    let mut exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)?;
+    exec.block = a.block;
     exec.reduce = a.reduce;
-    exec.spurious_cas_per_mille = a.spurious_cas.min(1000);
-    exec.batch = a.lanes.max(1);
+    exec.spurious_cas_per_mille = a.spurious_cas;
+    exec.batch = a.lanes;
     exec.lockstep = !a.no_lockstep;
-    exec.segment = a.segment.max(1);
+    exec.segment = a.segment;
     exec.binning = a.binning;
     exec.simt = a.simt;
     if fragrace_kernels::algorithm(&a.algo).is_none() {
@@ -254,20 +265,22 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
             fragrace_kernels::names().join(", ")
         );
     }
-    Ok(RunSpec {
+    let spec = RunSpec {
         scene,
         camera: Camera::new(a.azimuth, a.elevation),
         width: a.width,
         height: a.height,
         algo: a.algo.clone(),
         params: Params {
-            k: a.k.max(1),
+            k: a.k,
             alpha: a.alpha,
-            spin_cap: a.spin_cap.max(1),
+            spin_cap: a.spin_cap,
             ..Params::default()
         },
         exec,
-    })
+    };
+    spec.validate()?;
+    Ok(spec)
 }
 
 fn main() {
@@ -278,22 +291,27 @@ fn main() {
 }
 
 fn real_main() -> Result<()> {
-    let cli = Cli::parse();
+    let matches = Cli::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    let given = matches
+        .subcommand()
+        .map(|(_, m)| given(m))
+        .unwrap_or_default();
     // A kernel panic is a reported fault, not a crash: keep the default hook's noise out.
     std::panic::set_hook(Box::new(|_| {}));
     match cli.command {
-        Command::Render(a) => cmd_render(&a),
-        Command::Check(a) => cmd_check(&a),
+        Command::Render(a) => cmd_render(&a, &given),
+        Command::Check(a) => cmd_check(&a, &given),
         Command::List { json } => cmd_list(json),
-        Command::Bench(a) => cmd_bench(&a),
+        Command::Bench(a) => cmd_bench(&a, &given),
         Command::Fuzz(a) => cmd_fuzz(&a),
         Command::Replay { case, json } => cmd_replay(&case, json),
-        Command::Report(a) => cmd_report(&a),
+        Command::Report(a) => cmd_report(&a, &given),
     }
 }
 
-fn cmd_render(a: &RunArgs) -> Result<()> {
-    let spec = spec_of(a)?;
+fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
+    let spec = spec_of(a, given)?;
     let loaded = run::load(&spec)?;
     let rendered = run::render(&spec, &loaded)?;
     write_outputs(a, &spec, &rendered, None)?;
@@ -413,15 +431,14 @@ fn print_summary(v: &serde_json::Value) {
     }
 }
 
-fn cmd_check(a: &CheckArgs) -> Result<()> {
-    let spec = spec_of(&a.run)?;
+fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
+    let spec = spec_of(&a.run, given)?;
+    fragrace::validate::schedules(a.schedules)?;
     let loaded = run::load(&spec)?;
     let truth = run::truth(&spec, &loaded)?;
-    let n = if spec.schedule().is_some() {
-        a.schedules.max(1)
-    } else {
-        1
-    };
+    // More than one schedule only under the scheduled executor (`spec_of` refuses
+    // --schedules elsewhere).
+    let n = a.schedules;
     let base_seed = spec.schedule().map(|s| s.seed).unwrap_or(0);
     let mut worst: Option<(RunSpec, run::Checked)> = None;
     let mut totals = fragrace_emu::HazardCounts::default();
@@ -541,8 +558,8 @@ fn cmd_list(json: bool) -> Result<()> {
     Ok(())
 }
 
-fn cmd_bench(a: &BenchArgs) -> Result<()> {
-    let spec = spec_of(&a.run)?;
+fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
+    let spec = spec_of(&a.run, given)?;
     // The floor replays `count`'s operation (one atomic add per fragment); other
     // algorithms do other things per fragment.
     if a.floor && spec.algo != "count" {
@@ -815,7 +832,8 @@ fn cmd_replay(path: &Path, json: bool) -> Result<()> {
     Ok(())
 }
 
-fn cmd_report(a: &ReportArgs) -> Result<()> {
+fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
+    fragrace::validate::options_for_exec(&a.exec, given.iter().map(String::as_str))?;
     let algos: Vec<String> = if a.algo.is_empty() {
         fragrace_kernels::names()
             .into_iter()
@@ -824,8 +842,7 @@ fn cmd_report(a: &ReportArgs) -> Result<()> {
     } else {
         a.algo.clone()
     };
-    let exec =
-        run::exec_config(&a.exec, &a.policy, a.seed, a.threads, 64).map_err(anyhow::Error::msg)?;
+    let exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, 64)?;
     let scene_spec = |s: &str| {
         if s.contains(".obj") {
             SceneSpec::Obj {

@@ -209,8 +209,8 @@ pub enum RunError {
         want: String,
         got: String,
     },
-    #[error("viewport {0}x{1}: width and height must be between 1 and {max}", max = fragrace_emu::framebuffer::MAX_DIMENSION)]
-    Viewport(u32, u32),
+    #[error(transparent)]
+    Spec(#[from] crate::validate::SpecError),
 }
 
 /// A loaded scene plus its frame.
@@ -230,12 +230,9 @@ impl Loaded {
     }
 }
 
-/// Loads the scene of a spec and checks its viewport.
+/// Checks the spec ([`RunSpec::validate`]) and loads its scene.
 pub fn load(spec: &RunSpec) -> Result<Loaded, RunError> {
-    let max = fragrace_emu::framebuffer::MAX_DIMENSION;
-    if spec.width == 0 || spec.height == 0 || spec.width > max || spec.height > max {
-        return Err(RunError::Viewport(spec.width, spec.height));
-    }
+    spec.validate()?;
     let scene = spec.scene.load()?;
     let view_proj = scene.view_proj(&spec.camera, spec.width, spec.height);
     Ok(Loaded { scene, view_proj })
@@ -420,36 +417,29 @@ pub fn digest(r: &AlgoResult) -> String {
     h.finalize().iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// Parses an executor description from CLI-style parts.
+/// Parses an executor description from CLI-style parts (the values are checked by
+/// [`RunSpec::validate`], not clamped here).
 pub fn exec_config(
     exec: &str,
     policy: &str,
     seed: u64,
     threads: Option<usize>,
     window: usize,
-) -> Result<ExecConfig, String> {
-    let threads = threads
-        .unwrap_or_else(fragrace_emu::exec::default_threads)
-        .max(1);
+) -> Result<ExecConfig, crate::validate::SpecError> {
+    let threads = threads.unwrap_or_else(fragrace_emu::exec::default_threads);
     let mode = match exec {
         "ordered" => ExecMode::Ordered,
         "parallel" => ExecMode::Parallel,
         "scheduled" => {
-            let policy: Policy = policy
-                .parse()
-                .map_err(|e: fragrace_emu::exec::PolicyParseError| e.to_string())?;
+            let policy: Policy = policy.parse()?;
             ExecMode::Scheduled(ScheduleConfig {
                 policy,
                 seed,
-                window: window.max(1),
+                window,
                 record: false,
             })
         }
-        other => {
-            return Err(format!(
-                "unknown executor `{other}`: expected ordered, parallel or scheduled"
-            ))
-        }
+        other => return Err(crate::validate::SpecError::UnknownExec(other.to_string())),
     };
     Ok(ExecConfig {
         mode,
