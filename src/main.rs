@@ -42,6 +42,10 @@ enum Command {
         case: PathBuf,
         #[arg(long)]
         json: bool,
+        /// Refuse a case whose estimated peak memory is above this (default: half of the
+        /// physical memory).
+        #[arg(long, value_name = "SIZE")]
+        memory_limit: Option<String>,
     },
     /// Tables of measured EPR, R_h, bytes per pixel and time (markdown), and EPR over views.
     Report(ReportArgs),
@@ -109,6 +113,10 @@ struct ReportArgs {
     views: Option<u32>,
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Refuse a report whose largest run is estimated above this much memory (default: half
+    /// of the physical memory).
+    #[arg(long, value_name = "SIZE")]
+    memory_limit: Option<String>,
 }
 
 #[derive(Args, Clone)]
@@ -197,6 +205,10 @@ struct RunArgs {
     /// Print one JSON object on stdout.
     #[arg(long)]
     json: bool,
+    /// Refuse runs whose estimated peak memory is above this (e.g. 8G, 512M; default: half
+    /// of the physical memory).
+    #[arg(long, value_name = "SIZE")]
+    memory_limit: Option<String>,
 }
 
 #[derive(Args)]
@@ -305,17 +317,49 @@ fn real_main() -> Result<()> {
         Command::List { json } => cmd_list(json),
         Command::Bench(a) => cmd_bench(&a, &given),
         Command::Fuzz(a) => cmd_fuzz(&a),
-        Command::Replay { case, json } => cmd_replay(&case, json),
+        Command::Replay {
+            case,
+            json,
+            memory_limit,
+        } => cmd_replay(&case, json, memory_limit.as_deref()),
         Command::Report(a) => cmd_report(&a, &given),
+    }
+}
+
+/// The estimated peak memory of a run, refused when above the budget (`--memory-limit`);
+/// as JSON fields for the summary.
+fn within_budget(
+    spec: &RunSpec,
+    loaded: &run::Loaded,
+    with_truth: bool,
+    limit: Option<&str>,
+) -> Result<serde_json::Value> {
+    let (limit, source) = fragrace::budget::limit(limit)?;
+    let est = fragrace::budget::estimate(spec, loaded, with_truth);
+    fragrace::budget::check(&est, limit, &source)?;
+    Ok(serde_json::json!({
+        "memory_estimate_bytes": est.bytes,
+        "memory_limit_bytes": limit,
+        "fragments_estimate": est.fragments,
+    }))
+}
+
+/// Adds the fields of `extra` (an object) to `v`.
+fn merge(v: &mut serde_json::Value, extra: &serde_json::Value) {
+    if let (Some(v), Some(e)) = (v.as_object_mut(), extra.as_object()) {
+        v.extend(e.iter().map(|(k, x)| (k.clone(), x.clone())));
     }
 }
 
 fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
     let spec = spec_of(a, given)?;
     let loaded = run::load(&spec)?;
+    let memory = within_budget(&spec, &loaded, false, a.memory_limit.as_deref())?;
     let rendered = run::render(&spec, &loaded)?;
     write_outputs(a, &spec, &rendered, None)?;
-    let summary = run::summary_json(&spec, &loaded, None, &rendered);
+    let mut summary = run::summary_json(&spec, &loaded, None, &rendered);
+    merge(&mut summary, &memory);
+    summary["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
     if a.json {
         println!("{summary}");
     } else {
@@ -435,6 +479,7 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     let spec = spec_of(&a.run, given)?;
     fragrace::validate::schedules(a.schedules)?;
     let loaded = run::load(&spec)?;
+    let memory = within_budget(&spec, &loaded, true, a.run.memory_limit.as_deref())?;
     let truth = run::truth(&spec, &loaded)?;
     // More than one schedule only under the scheduled executor (`spec_of` refuses
     // --schedules elsewhere).
@@ -460,6 +505,8 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     let (wspec, w) = worst.expect("at least one run");
     write_outputs(&a.run, &wspec, &w.rendered, Some(&w))?;
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
+    merge(&mut summary, &memory);
+    summary["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
     summary["schedules"] = serde_json::json!(n);
     summary["anomalous_runs"] = serde_json::json!(anomalous_runs);
     summary["hazards_total"] = serde_json::json!({"lost_updates": totals.lost_updates, "races": totals.races, "torn": totals.torn});
@@ -569,6 +616,7 @@ fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
         );
     }
     let loaded = run::load(&spec)?;
+    let memory = within_budget(&spec, &loaded, false, a.run.memory_limit.as_deref())?;
     for _ in 0..a.warmup {
         run::render(&spec, &loaded)?;
     }
@@ -651,6 +699,8 @@ fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
         "steps": stats.steps,
         "steps_per_s": stats.steps as f64 / (ms / 1e3),
     });
+    merge(&mut v, &memory);
+    v["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
     if let Some(f) = floor {
         v["floor_atomics_ms"] = f.atomics_ms.into();
         v["floor_frame_ms"] = f.frame_ms.into();
@@ -792,8 +842,11 @@ fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
     Ok(())
 }
 
-fn cmd_replay(path: &Path, json: bool) -> Result<()> {
+fn cmd_replay(path: &Path, json: bool, memory_limit: Option<&str>) -> Result<()> {
     let case = fragrace::case::read(path)?;
+    let loaded = run::load(&case.spec).with_context(|| format!("{}", path.display()))?;
+    within_budget(&case.spec, &loaded, true, memory_limit)?;
+    drop(loaded);
     let r = fragrace::case::replay(&case)?;
     if json {
         println!(
@@ -865,6 +918,7 @@ fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
             spec.exec = exec.clone();
             spec.params.k = a.k;
             let loaded = run::load(&spec)?;
+            report_budget(&spec, &loaded, &algos, a.memory_limit.as_deref())?;
             let truth = run::truth(&spec, &loaded)?;
             for (name, eprs) in &mut series {
                 let mut s = spec.clone();
@@ -892,6 +946,7 @@ fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         spec.exec = exec.clone();
         spec.params.k = a.k;
         let loaded = run::load(&spec)?;
+        report_budget(&spec, &loaded, &algos, a.memory_limit.as_deref())?;
         let truth = run::truth(&spec, &loaded)?;
         for name in &algos {
             let mut s = spec.clone();
@@ -913,6 +968,23 @@ fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
                 c.rendered.wall_ms
             );
         }
+    }
+    Ok(())
+}
+
+/// Checks every algorithm of a report against the budget before its scene's truth is
+/// computed (each is checked against the truth, one after the other).
+fn report_budget(
+    spec: &RunSpec,
+    loaded: &run::Loaded,
+    algos: &[String],
+    limit: Option<&str>,
+) -> Result<()> {
+    for name in algos {
+        let mut s = spec.clone();
+        s.algo = name.clone();
+        s.validate()?;
+        within_budget(&s, loaded, true, limit).with_context(|| format!("algorithm {name}"))?;
     }
     Ok(())
 }
