@@ -353,10 +353,11 @@ fn merge(v: &mut serde_json::Value, extra: &serde_json::Value) {
 
 fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
     let spec = spec_of(a, given)?;
+    check_outputs(a, &spec.algo)?;
     let loaded = run::load(&spec)?;
     let memory = within_budget(&spec, &loaded, false, a.memory_limit.as_deref())?;
     let rendered = run::render(&spec, &loaded)?;
-    write_outputs(a, &spec, &rendered, None)?;
+    let written = write_outputs(a, &spec, &rendered, None)?;
     let mut summary = run::summary_json(&spec, &loaded, None, &rendered);
     merge(&mut summary, &memory);
     summary["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
@@ -365,61 +366,99 @@ fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
     } else {
         print_summary(&summary);
     }
+    list_written(&written, a.json);
     Ok(())
 }
 
+/// Checks that the outputs asked for can be written, before any computation.
+fn check_outputs(a: &RunArgs, algo: &str) -> Result<()> {
+    use fragrace::output::{check_dir, check_writable};
+    if let Some(p) = &a.out {
+        check_writable(p, "the image (--out)")?;
+    }
+    if let Some(p) = &a.raw_out {
+        if !matches!(algo, "count" | "count-plain") {
+            bail!("--raw-out needs a counting algorithm (count, count-plain), not `{algo}`");
+        }
+        check_writable(p, "the counts (--raw-out)")?;
+    }
+    if let Some(d) = &a.heatmap {
+        check_dir(d, "heatmaps (--heatmap)")?;
+    }
+    Ok(())
+}
+
+/// Writes the outputs asked for; returns the files written.
 fn write_outputs(
     a: &RunArgs,
     spec: &RunSpec,
     r: &run::Rendered,
     checked: Option<&run::Checked>,
-) -> Result<()> {
+) -> Result<Vec<PathBuf>> {
     let res = &r.result;
+    let mut written = Vec::new();
+    let named = |p: &Path| format!("{}: cannot write", p.display());
     if let Some(path) = &a.out {
         if let Some(img) = &res.image {
-            fragrace::output::write_rgba(path, spec.width, spec.height, img)?;
+            fragrace::output::write_rgba(path, spec.width, spec.height, img)
+                .with_context(|| named(path))?;
         } else if let Some(c) = &res.counts {
-            fragrace::output::write_heatmap(path, spec.width, spec.height, c)?;
+            fragrace::output::write_heatmap(path, spec.width, spec.height, c)
+                .with_context(|| named(path))?;
         } else {
             bail!("algorithm `{}` produces no image", spec.algo);
         }
+        written.push(path.clone());
     }
     if let Some(path) = &a.raw_out {
         let Some(c) = &res.counts else {
             bail!("--raw-out needs a counting algorithm (count, count-plain)")
         };
         let bytes: Vec<u8> = c.iter().flat_map(|v| v.to_le_bytes()).collect();
-        fragrace::output::write_atomic(path, &bytes)?;
+        fragrace::output::write_atomic(path, &bytes).with_context(|| named(path))?;
+        written.push(path.clone());
     }
     if let Some(dir) = &a.heatmap {
-        std::fs::create_dir_all(dir)?;
+        std::fs::create_dir_all(dir).with_context(|| named(dir))?;
+        let mut heat = |name: &str, values: &[u32]| -> Result<()> {
+            let p = dir.join(name);
+            fragrace::output::write_heatmap(&p, spec.width, spec.height, values)
+                .with_context(|| named(&p))?;
+            written.push(p);
+            Ok(())
+        };
         if let Some(c) = &res.counts {
-            fragrace::output::write_heatmap(
-                &dir.join("depth-complexity.png"),
-                spec.width,
-                spec.height,
-                c,
-            )?;
+            heat("depth-complexity.png", c)?;
         }
         if !res.report.hazard_heat.is_empty() {
-            fragrace::output::write_heatmap(
-                &dir.join("hazards.png"),
-                spec.width,
-                spec.height,
-                &res.report.hazard_heat,
-            )?;
+            heat("hazards.png", &res.report.hazard_heat)?;
         }
         if let Some(c) = checked {
             let errs: Vec<u32> = c.metrics.error_mask.iter().map(|&e| e as u32).collect();
-            fragrace::output::write_heatmap(
-                &dir.join("errors.png"),
-                spec.width,
-                spec.height,
-                &errs,
-            )?;
+            heat("errors.png", &errs)?;
+        }
+        if !written.iter().any(|p| p.starts_with(dir)) {
+            eprintln!(
+                "note: --heatmap {}: no heatmap written. Depth complexity comes from counting algorithms (count, count-plain), hazards from the scheduled executor, errors from `check`; `{}` under `{}` with `{}` has none of them.",
+                dir.display(),
+                spec.algo,
+                spec.exec.mode.name(),
+                if checked.is_some() { "check" } else { "render" }
+            );
         }
     }
-    Ok(())
+    Ok(written)
+}
+
+/// Lists the files written (on stderr under --json, to keep stdout one JSON object).
+fn list_written(written: &[PathBuf], json: bool) {
+    for p in written {
+        if json {
+            eprintln!("wrote {}", p.display());
+        } else {
+            println!("  wrote {}", p.display());
+        }
+    }
 }
 
 fn print_summary(v: &serde_json::Value) {
@@ -478,6 +517,7 @@ fn print_summary(v: &serde_json::Value) {
 fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     let spec = spec_of(&a.run, given)?;
     fragrace::validate::schedules(a.schedules)?;
+    check_outputs(&a.run, &spec.algo)?;
     let loaded = run::load(&spec)?;
     let memory = within_budget(&spec, &loaded, true, a.run.memory_limit.as_deref())?;
     let truth = run::truth(&spec, &loaded)?;
@@ -503,7 +543,7 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
         }
     }
     let (wspec, w) = worst.expect("at least one run");
-    write_outputs(&a.run, &wspec, &w.rendered, Some(&w))?;
+    let written = write_outputs(&a.run, &wspec, &w.rendered, Some(&w))?;
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
     merge(&mut summary, &memory);
     summary["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
@@ -530,6 +570,17 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
         .collect::<Vec<_>>());
     let replay = wspec.command("check");
     summary["replay"] = serde_json::json!(replay);
+    // Threads race for real under `parallel`: a rerun gives other numbers. The scheduled
+    // executor reproduces a run bit for bit.
+    let reproducible =
+        spec.schedule().is_some() || spec.exec.mode == fragrace_emu::ExecMode::Ordered;
+    summary["reproducible"] = serde_json::json!(reproducible);
+    let scheduled = (!reproducible).then(|| {
+        let mut s = wspec.clone();
+        s.exec.mode = fragrace_emu::ExecMode::Scheduled(fragrace_emu::ScheduleConfig::default());
+        format!("{} --schedules 8", s.command("check"))
+    });
+    summary["reproduce_with"] = serde_json::json!(scheduled.as_ref().unwrap_or(&replay));
     if a.run.json {
         println!("{summary}");
     } else {
@@ -567,10 +618,15 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
                 f.invocation.x, f.invocation.y, f.invocation.primitive, f.kind
             );
         }
-        if w.anomalous() {
+        if let Some(sched) = &scheduled {
+            println!(
+                "  parallel runs are not reproducible (threads race for real; a rerun gives other numbers).\n  To reproduce hazards exactly, run the scheduled executor (same seed, same bits):\n    {sched}"
+            );
+        } else if w.anomalous() {
             println!("  worst case replays with:\n    {replay}");
         }
     }
+    list_written(&written, a.run.json);
     Ok(())
 }
 
@@ -720,7 +776,10 @@ fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
             );
         }
         if failed_checks > 0 {
-            println!("  {failed_checks} failed checks over the frames (see `fragrace render`)");
+            println!(
+                "  {failed_checks} failed checks over the frames (see `{} render`)",
+                run::CLI
+            );
         }
         if let Some(f) = floor {
             println!(
@@ -834,8 +893,9 @@ fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
     );
     for c in &state.cases {
         println!(
-            "  case: {}  (fragrace replay {})",
+            "  case: {}  ({} replay {})",
             c,
+            run::CLI,
             a.out.join(c).display()
         );
     }
@@ -855,7 +915,13 @@ fn cmd_replay(path: &Path, json: bool, memory_limit: Option<&str>) -> Result<()>
         );
     } else {
         println!("{}: {}", path.display(), case.verdict);
-        println!("  {}", case.spec.command("check"));
+        match &case.spec.scene {
+            // Its triangles are in the case file only.
+            SceneSpec::Inline { .. } => {
+                println!("  rerun with: {} replay {}", run::CLI, path.display())
+            }
+            _ => println!("  rerun with: {}", case.spec.command("check")),
+        }
         if let (Some(b), Some(a)) = (&case.original_size, &case.shrunk_size) {
             println!(
                 "  shrunk from {} triangles, {} pixels, window {} to {} triangles, {} pixels, window {}, {} schedule steps",

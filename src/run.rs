@@ -144,15 +144,17 @@ impl RunSpec {
         s
     }
 
-    /// A command line that reproduces this run (for built-in and OBJ scenes).
+    /// A command line that reproduces this run, in the README's form (`cargo run --release
+    /// -- VERB ...`, from the repository). An inline scene (fuzz and shrunk cases) has no
+    /// command-line form: its case file replays it (`replay CASE.json`).
     pub fn command(&self, verb: &str) -> String {
         let scene = match &self.scene {
             SceneSpec::Builtin(n) => format!("--scene {n}"),
             SceneSpec::Obj { path, .. } => format!("--obj {}", path.display()),
-            SceneSpec::Inline { .. } => "--case CASE.json".into(),
+            SceneSpec::Inline { .. } => return format!("{CLI} replay CASE.json"),
         };
         let mut c = format!(
-            "fragrace {verb} {scene} --algo {} --width {} --height {} --azimuth {} --elevation {} --k {} --exec {}",
+            "{CLI} {verb} {scene} --algo {} --width {} --height {} --azimuth {} --elevation {} --k {} --exec {}",
             self.algo, self.width, self.height, self.camera.azimuth, self.camera.elevation, self.params.k,
             self.exec.mode.name()
         );
@@ -188,6 +190,10 @@ impl RunSpec {
         c
     }
 }
+
+/// How printed commands start: the README's way to run fragrace from the repository (after
+/// `cargo install --path .`, `fragrace` alone does the same).
+pub const CLI: &str = "cargo run --release --";
 
 /// Why a run could not happen.
 #[derive(Debug, thiserror::Error)]

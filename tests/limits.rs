@@ -440,3 +440,17 @@ fn runs_beyond_the_memory_budget_are_refused_before_they_allocate() {
         &["--memory-limit `0`"],
     );
 }
+
+#[test]
+fn replay_prints_a_command_that_exists() {
+    let d = tmp("replay-cmd");
+    let p = case_with(&d, "case.json", |_| {});
+    let o = fragrace(&["replay", &p]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{text}");
+    assert!(!text.contains("--case"), "{text}");
+    assert!(
+        text.contains(&format!("rerun with: cargo run --release -- replay {p}")),
+        "{text}"
+    );
+}
