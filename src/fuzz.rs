@@ -79,6 +79,43 @@ pub enum FuzzError {
     },
     #[error("unknown algorithm `{0}`")]
     UnknownAlgo(String),
+    #[error("{name} = {value} is out of range: it must be from {min} to {max}")]
+    OutOfRange {
+        name: &'static str,
+        value: u64,
+        min: u64,
+        max: u64,
+    },
+}
+
+impl FuzzConfig {
+    /// Checks the workers and the viewport size against their ranges (never clamped).
+    pub fn validate(&self) -> Result<(), FuzzError> {
+        let range = |name, value: u64, min: u64, max: u64| {
+            if (min..=max).contains(&value) {
+                Ok(())
+            } else {
+                Err(FuzzError::OutOfRange {
+                    name,
+                    value,
+                    min,
+                    max,
+                })
+            }
+        };
+        range(
+            "jobs (--jobs)",
+            self.jobs as u64,
+            1,
+            fragrace_emu::exec::max_threads() as u64,
+        )?;
+        range(
+            "max_size (--max-size)",
+            self.max_size.into(),
+            8,
+            fragrace_emu::framebuffer::MAX_DIMENSION.into(),
+        )
+    }
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> FuzzError + '_ {
@@ -113,7 +150,7 @@ pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i:
         }
     };
     let algo = algos[rng.gen_range(0..algos.len())].clone();
-    let size = rng.gen_range(8..=cfg.max_size.max(8));
+    let size = rng.gen_range(8..=cfg.max_size);
     let policies = Policy::all();
     let exec = if rng.gen_bool(0.85) {
         let policy = if rng.gen_bool(0.15) {
@@ -186,6 +223,7 @@ pub fn campaign(
     stop: &AtomicBool,
     progress: &Progress,
 ) -> Result<CampaignState, FuzzError> {
+    cfg.validate()?;
     std::fs::create_dir_all(&cfg.out).map_err(io(&cfg.out))?;
     let state_path = cfg.out.join("campaign.json");
     let state = if cfg.resume && state_path.exists() {
@@ -242,7 +280,7 @@ pub fn campaign(
         let json = serde_json::to_vec_pretty(st).expect("state serialises");
         crate::output::write_atomic(&state_path, &json).map_err(io(&state_path))
     };
-    let jobs = cfg.jobs.max(1);
+    let jobs = cfg.jobs;
     let result: Result<(), FuzzError> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..jobs)
             .map(|_| {

@@ -131,6 +131,28 @@ fn values_out_of_range_are_refused_not_clamped() {
         &with_small(&["render", "--exec", "scheduled", "--policy", "nope"]),
         &["unknown policy `nope`"],
     );
+    let out = tmp("fuzz-limits");
+    let out = out.to_str().unwrap();
+    refused(
+        &["fuzz", "--iterations", "1", "--jobs", "0", "--out", out],
+        &["jobs (--jobs) = 0", "from 1 to"],
+    );
+    refused(
+        &[
+            "fuzz",
+            "--iterations",
+            "1",
+            "--jobs",
+            "100000",
+            "--out",
+            out,
+        ],
+        &["jobs (--jobs) = 100000"],
+    );
+    refused(
+        &["fuzz", "--iterations", "1", "--max-size", "4", "--out", out],
+        &["max_size (--max-size) = 4", "from 8 to 16384"],
+    );
 }
 
 #[test]
