@@ -132,7 +132,7 @@ pub fn parse_size(s: &str) -> Result<u64, BudgetError> {
         _ => return Err(bad()),
     };
     let bytes = v * mult;
-    if !(bytes >= 1.0 && bytes < 1.8e19) {
+    if !(1.0..1.8e19).contains(&bytes) {
         return Err(bad());
     }
     Ok(bytes as u64)
@@ -302,7 +302,7 @@ pub fn check(est: &MemoryEstimate, limit: u64, source: &str) -> Result<(), Budge
         return Ok(());
     }
     let mut parts = est.parts.clone();
-    parts.sort_by(|x, y| y.1.cmp(&x.1));
+    parts.sort_by_key(|p| std::cmp::Reverse(p.1));
     let parts = parts
         .iter()
         .take(2)

@@ -94,7 +94,7 @@ fn peak_memory_stays_within_one_and_a_half_times_the_estimate() {
             peak / 1e6,
             est / 1e6
         );
-        if !(ratio <= 1.5 && ratio >= 1.0 / 3.0) {
+        if !(1.0 / 3.0..=1.5).contains(&ratio) {
             failures.push(format!("{args:?}: peak/estimate {ratio:.2}"));
         }
     }
