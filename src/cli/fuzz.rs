@@ -1,0 +1,114 @@
+//! `fragrace fuzz`: a campaign with a progress line.
+
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use fragrace::run;
+
+use crate::FuzzArgs;
+
+fn parse_duration(s: &str) -> Result<std::time::Duration> {
+    let (num, unit) = s.split_at(
+        s.find(|c: char| !c.is_ascii_digit() && c != '.')
+            .unwrap_or(s.len()),
+    );
+    let v: f64 = num.parse().with_context(|| format!("bad duration `{s}`"))?;
+    let secs = match unit {
+        "" | "s" => v,
+        "ms" => v / 1e3,
+        "m" | "min" => v * 60.0,
+        "h" => v * 3600.0,
+        _ => bail!("bad duration unit in `{s}` (use s, m or h)"),
+    };
+    Ok(std::time::Duration::from_secs_f64(secs))
+}
+
+pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
+    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+    use std::sync::Arc;
+    let cfg = fragrace::fuzz::FuzzConfig {
+        out: a.out.clone(),
+        time: a.time.as_deref().map(parse_duration).transpose()?,
+        iterations: a.iterations,
+        algos: a.algo.clone(),
+        jobs: a.jobs,
+        seed: a.seed,
+        resume: a.resume,
+        meshes: a.meshes.clone(),
+        shrink_budget: std::time::Duration::from_secs(a.shrink_secs),
+        max_size: a.max_size,
+        scenes: a.scene.clone(),
+    };
+    if cfg.time.is_none() && cfg.iterations.is_none() {
+        bail!("give --time or --iterations (a campaign needs a budget)");
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        // Ctrl-C: finish the runs in flight, save the state, exit cleanly.
+        let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
+    }
+    let progress = fragrace::fuzz::Progress {
+        executions: AtomicU64::new(0),
+        cases: AtomicU64::new(0),
+        violations: AtomicU64::new(0),
+    };
+    let bar = indicatif::ProgressBar::new_spinner();
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {elapsed_precise} {msg}")
+            .expect("valid template"),
+    );
+    let start = Instant::now();
+    let state = std::thread::scope(|s| {
+        let h = s.spawn(|| fragrace::fuzz::campaign(&cfg, &stop, &progress));
+        while !h.is_finished() {
+            let e = progress.executions.load(Ordering::Relaxed);
+            bar.set_message(format!(
+                "{e} executions ({:.1}/s), {} cases, {} violations",
+                e as f64 / start.elapsed().as_secs_f64().max(1e-3),
+                progress.cases.load(Ordering::Relaxed),
+                progress.violations.load(Ordering::Relaxed)
+            ));
+            bar.tick();
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+        h.join().expect("campaign thread")
+    })?;
+    bar.finish_and_clear();
+    if a.json {
+        println!("{}", serde_json::to_string(&state)?);
+        return Ok(());
+    }
+    println!(
+        "{} executions in {:.1} s ({:.1}/s): {} violations, {} expected findings, {} case files in {}",
+        state.executions,
+        state.elapsed_s,
+        state.executions as f64 / state.elapsed_s.max(1e-3),
+        state.violations,
+        state.expected_findings,
+        state.cases.len(),
+        a.out.display()
+    );
+    for (sig, n) in &state.signatures {
+        println!("  {n:>6}  {sig}");
+    }
+    let algos = state
+        .coverage
+        .keys()
+        .map(|k| k.split(" x ").next().unwrap_or(""))
+        .collect::<std::collections::BTreeSet<_>>()
+        .len();
+    println!(
+        "  coverage: {} algorithm x policy pairs over {algos} algorithms",
+        state.coverage.len()
+    );
+    for c in &state.cases {
+        println!(
+            "  case: {}  ({} replay {})",
+            c,
+            run::CLI,
+            a.out.join(c).display()
+        );
+    }
+    Ok(())
+}
