@@ -15,6 +15,7 @@ pub mod run;
 pub mod scene;
 pub mod shrink;
 pub mod validate;
+pub mod verdict;
 
 pub use fragrace_emu as emu;
 pub use fragrace_kernels as kernels;

@@ -403,10 +403,16 @@ fn print_summary(v: &serde_json::Value) {
     );
     if !v["epr"].is_null() {
         println!(
-            "  EPR {:.6}  ({} error pixels)   R_h {:.6}   C_p {:.4}",
+            "  EPR {:.6} ({} error pixels): error pixel rate, covered pixels whose result differs from the truth",
             v["epr"].as_f64().unwrap_or(0.0),
             v["error_pixels"],
+        );
+        println!(
+            "  R_h {:.6}: robustness, fragments kept over fragments the algorithm should keep",
             v["robustness"].as_f64().unwrap_or(0.0),
+        );
+        println!(
+            "  C_p {:.4}: coplanarity, covered pixels with two fragments at exactly the same depth",
             v["coplanarity"].as_f64().unwrap_or(0.0)
         );
     }
@@ -415,11 +421,12 @@ fn print_summary(v: &serde_json::Value) {
         v["bytes_per_pixel"].as_f64().unwrap_or(0.0),
         v["wall_ms"].as_f64().unwrap_or(0.0)
     );
-    if let Some(checks) = v["checks"].as_array() {
+    if let Some(checks) = v["checks"].as_array().filter(|c| !c.is_empty()) {
+        println!("  the algorithm's own invariants:");
         for c in checks {
             let ok = c["passed"].as_bool().unwrap_or(false);
             println!(
-                "  [{}] {}: {}",
+                "    [{}] {}: {}",
                 if ok { "ok" } else { "FAIL" },
                 c["name"].as_str().unwrap_or(""),
                 c["detail"].as_str().unwrap_or("")
@@ -461,6 +468,8 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
     merge(&mut summary, &memory);
     summary["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
+    let verdict = fragrace::verdict::verdict(&w, &totals);
+    summary["verdict"] = serde_json::json!(verdict);
     summary["schedules"] = serde_json::json!(n);
     summary["anomalous_runs"] = serde_json::json!(anomalous_runs);
     summary["hazards_total"] = serde_json::json!({"lost_updates": totals.lost_updates, "races": totals.races, "torn": totals.torn});
@@ -498,6 +507,7 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     if a.run.json {
         println!("{summary}");
     } else {
+        println!("{}", verdict.text);
         print_summary(&summary);
         if n > 1 {
             println!(

@@ -240,3 +240,49 @@ fn heatmaps_are_listed_and_an_empty_heatmap_directory_is_explained() {
         assert!(d.join(f).exists());
     }
 }
+
+#[test]
+fn checks_give_a_verdict_in_words_first_and_explain_their_metrics() {
+    let small = ["--width", "48", "--height", "48"];
+    for (args, kind, first) in [
+        (
+            vec!["--scene", "cubes", "--algo", "ll"],
+            "exact",
+            "exact: ll matches the truth",
+        ),
+        (
+            vec![
+                "--scene",
+                "cubes",
+                "--algo",
+                "kb-rmw",
+                "--exec",
+                "scheduled",
+            ],
+            "hazard-found",
+            "hazard found: kb-rmw is hazard-prone",
+        ),
+        (
+            vec!["--scene", "coplanar-stack", "--algo", "f2b", "--k", "16"],
+            "within-promise",
+            "errors within what f2b promises: it drops, and counts, fragments it cannot keep",
+        ),
+    ] {
+        let mut a = vec!["check"];
+        a.extend(&args);
+        a.extend(small);
+        let text = ok(&fragrace(&a));
+        assert!(text.lines().next().unwrap().starts_with(first), "{text}");
+        for line in [
+            "error pixel rate, covered pixels whose result differs from the truth",
+            "robustness, fragments kept over fragments the algorithm should keep",
+            "coplanarity, covered pixels with two fragments at exactly the same depth",
+        ] {
+            assert!(text.contains(line), "{text}");
+        }
+        a.push("--json");
+        let out = ok(&fragrace(&a));
+        let v: serde_json::Value = serde_json::from_str(out.lines().last().unwrap()).unwrap();
+        assert_eq!(v["verdict"]["kind"], kind, "{v}");
+    }
+}
