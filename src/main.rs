@@ -349,6 +349,26 @@ fn within_budget(
     }))
 }
 
+/// A progress bar of `len` steps (a spinner when 0) with the elapsed time, on stderr when it
+/// is a terminal; nothing otherwise, so that piped output stays clean.
+fn progress(len: u64, msg: &str) -> indicatif::ProgressBar {
+    let (bar, template) = if len == 0 {
+        (
+            indicatif::ProgressBar::new_spinner(),
+            "{spinner} {elapsed} {msg}",
+        )
+    } else {
+        (
+            indicatif::ProgressBar::new(len),
+            "{spinner} {elapsed} [{bar:30}] {pos}/{len} {msg}",
+        )
+    };
+    bar.set_style(indicatif::ProgressStyle::with_template(template).expect("valid template"));
+    bar.set_message(msg.to_string());
+    bar.enable_steady_tick(std::time::Duration::from_millis(100));
+    bar
+}
+
 /// Adds the fields of `extra` (an object) to `v`.
 fn merge(v: &mut serde_json::Value, extra: &serde_json::Value) {
     if let (Some(v), Some(e)) = (v.as_object_mut(), extra.as_object()) {
@@ -361,7 +381,9 @@ fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
     check_outputs(a, &spec.algo)?;
     let loaded = run::load(&spec)?;
     let memory = within_budget(&spec, &loaded, false, a.memory_limit.as_deref())?;
+    let bar = progress(0, "rendering");
     let rendered = run::render(&spec, &loaded)?;
+    bar.finish_and_clear();
     let written = write_outputs(a, &spec, &rendered, None)?;
     let mut summary = run::summary_json(&spec, &loaded, None, &rendered);
     merge(&mut summary, &memory);
@@ -441,18 +463,26 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     check_outputs(&a.run, &spec.algo)?;
     let loaded = run::load(&spec)?;
     let memory = within_budget(&spec, &loaded, true, a.run.memory_limit.as_deref())?;
-    let truth = run::truth(&spec, &loaded)?;
     // More than one schedule only under the scheduled executor (`spec_of` refuses
     // --schedules elsewhere).
     let n = a.schedules;
+    let bar = progress(n + 1, "computing the truth");
+    let truth = run::truth(&spec, &loaded)?;
+    bar.inc(1);
     let base_seed = spec.schedule().map(|s| s.seed).unwrap_or(0);
     let mut worst: Option<(RunSpec, run::Checked)> = None;
     let mut totals = fragrace_emu::HazardCounts::default();
     let mut anomalous_runs = 0u64;
     let mut eprs = Vec::new();
     for i in 0..n {
+        bar.set_message(if n > 1 {
+            format!("running schedule {} of {n}", i + 1)
+        } else {
+            "running the algorithm".to_string()
+        });
         let s = spec.with_seed(base_seed + i);
         let c = run::check_with(&s, &loaded, &truth)?;
+        bar.inc(1);
         totals.add(&c.hazards());
         eprs.push(c.metrics.epr);
         if c.anomalous() {
@@ -463,6 +493,7 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
             worst = Some((s, c));
         }
     }
+    bar.finish_and_clear();
     let (wspec, w) = worst.expect("at least one run");
     let written = write_outputs(&a.run, &wspec, &w.rendered, Some(&w))?;
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);

@@ -286,3 +286,39 @@ fn checks_give_a_verdict_in_words_first_and_explain_their_metrics() {
         assert_eq!(v["verdict"]["kind"], kind, "{v}");
     }
 }
+
+#[test]
+fn piped_output_has_no_progress_bar() {
+    // The bar is drawn on a terminal only: piped, stdout is the report and stderr is empty.
+    for args in [
+        vec![
+            "check",
+            "--scene",
+            "cubes",
+            "--algo",
+            "kb-rmw",
+            "--exec",
+            "scheduled",
+            "--schedules",
+            "2",
+            "--width",
+            "32",
+            "--height",
+            "32",
+        ],
+        vec![
+            "render", "--scene", "cubes", "--algo", "ll", "--width", "32", "--height", "32",
+        ],
+        vec![
+            "report", "--scenes", "cubes", "--algo", "ll", "--size", "32",
+        ],
+    ] {
+        let o = fragrace(&args);
+        ok(&o);
+        assert!(
+            o.stderr.is_empty(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+}

@@ -27,8 +27,12 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
             SceneSpec::Builtin(s.into())
         }
     };
+    if let Some(out) = &a.out {
+        fragrace::output::check_writable(out, "the plot (--out)")?;
+    }
     if let Some(views) = a.views {
         let scene = a.scenes.first().context("one scene for --views")?;
+        let bar = crate::progress(u64::from(views) * (algos.len() as u64 + 1), "views");
         let mut series: Vec<(String, Vec<f64>)> =
             algos.iter().map(|n| (n.clone(), Vec::new())).collect();
         for v in 0..views {
@@ -40,14 +44,18 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
             spec.params.k = a.k;
             let loaded = run::load(&spec)?;
             report_budget(&spec, &loaded, &algos, a.memory_limit.as_deref())?;
+            bar.set_message(format!("view {} of {views}: the truth", v + 1));
             let truth = run::truth(&spec, &loaded)?;
+            bar.inc(1);
             for (name, eprs) in &mut series {
                 let mut s = spec.clone();
                 s.algo = name.clone();
+                bar.set_message(format!("view {} of {views}: {name}", v + 1));
                 eprs.push(run::check_with(&s, &loaded, &truth)?.metrics.epr);
+                bar.inc(1);
             }
-            eprintln!("view {}/{views}", v + 1);
         }
+        bar.finish_and_clear();
         println!("azimuth,{}", algos.join(","));
         for v in 0..views as usize {
             let row: Vec<String> = series.iter().map(|(_, e)| format!("{:.6}", e[v])).collect();
@@ -60,6 +68,7 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
     }
     println!("| algorithm | scene | EPR | R_h | bytes/pixel | dropped | hazards (lost/race/torn) | time ms |");
     println!("|---|---|---|---|---|---|---|---|");
+    let bar = crate::progress(a.scenes.len() as u64 * (algos.len() as u64 + 1), "");
     for scene in &a.scenes {
         let mut spec = RunSpec::new(scene_spec(scene), "truth");
         spec.width = a.size;
@@ -68,28 +77,36 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         spec.params.k = a.k;
         let loaded = run::load(&spec)?;
         report_budget(&spec, &loaded, &algos, a.memory_limit.as_deref())?;
+        bar.set_message(format!("{scene}: the truth"));
         let truth = run::truth(&spec, &loaded)?;
+        bar.inc(1);
         for name in &algos {
             let mut s = spec.clone();
             s.algo = name.clone();
+            bar.set_message(format!("{scene}: {name}"));
             let c = run::check_with(&s, &loaded, &truth)?;
+            bar.inc(1);
             let r = &c.rendered.result;
             let hz = r.report.hazards;
-            println!(
-                "| {} | {} | {:.6} | {:.4} | {:.1} | {} | {}/{}/{} | {:.1} |",
-                name,
-                scene,
-                c.metrics.epr,
-                c.metrics.robustness,
-                r.storage_bytes as f64 / (a.size as f64 * a.size as f64),
-                r.dropped,
-                hz.lost_updates,
-                hz.races,
-                hz.torn,
-                c.rendered.wall_ms
-            );
+            // Rows as they come (above the progress bar on a terminal).
+            bar.suspend(|| {
+                println!(
+                    "| {} | {} | {:.6} | {:.4} | {:.1} | {} | {}/{}/{} | {:.1} |",
+                    name,
+                    scene,
+                    c.metrics.epr,
+                    c.metrics.robustness,
+                    r.storage_bytes as f64 / (a.size as f64 * a.size as f64),
+                    r.dropped,
+                    hz.lost_updates,
+                    hz.races,
+                    hz.torn,
+                    c.rendered.wall_ms
+                )
+            });
         }
     }
+    bar.finish_and_clear();
     Ok(())
 }
 
