@@ -22,7 +22,7 @@ use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use crate::case::{self, Case, Observation};
-use crate::run::{self, RunSpec, SceneSpec};
+use crate::run::{self, Checked, RunSpec, SceneSpec};
 use crate::scene::Camera;
 
 /// What a campaign runs.
@@ -56,11 +56,16 @@ pub struct CampaignState {
     pub executions: u64,
     pub violations: u64,
     pub expected_findings: u64,
-    /// Runs per anomaly signature.
+    /// Runs per finding signature ([`signature`]: algorithm, hazard class, kinds of hazard
+    /// and their buffers); one case file per signature.
     pub signatures: BTreeMap<String, u64>,
     /// Runs per "algorithm x policy".
     pub coverage: BTreeMap<String, u64>,
     pub cases: Vec<String>,
+    /// The case file of each signature (campaigns saved before signatures named their
+    /// case have none).
+    #[serde(default)]
+    pub case_of: BTreeMap<String, String>,
     pub elapsed_s: f64,
 }
 
@@ -315,15 +320,9 @@ pub fn campaign(
                         while done.remove(&st.next_iteration) {
                             st.next_iteration += 1;
                         }
-                        let Some((obs, verdict, violation)) = outcome else {
+                        let Some((obs, verdict, violation, key)) = outcome else {
                             continue;
                         };
-                        let key = format!(
-                            "{} / {} / {}",
-                            spec.algo,
-                            policy_name(&spec),
-                            obs.signature().join("+")
-                        );
                         let first = !st.signatures.contains_key(&key);
                         *st.signatures.entry(key.clone()).or_default() += 1;
                         if violation {
@@ -339,6 +338,7 @@ pub fn campaign(
                         // Shrink outside the lock, then write the case atomically.
                         let written = write_case(&cfg, &spec, &obs, &verdict, i)?;
                         let mut guard = shared.lock().unwrap_or_else(|e| e.into_inner());
+                        guard.0.case_of.insert(key, written.clone());
                         guard.0.cases.push(written);
                         progress.cases.fetch_add(1, Ordering::Relaxed);
                         guard.0.elapsed_s = elapsed_before + start.elapsed().as_secs_f64();
@@ -366,8 +366,29 @@ pub fn campaign(
     Ok(state)
 }
 
-/// Runs one spec; `Some((observation, verdict, is_violation))` when anything is anomalous.
-fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool)> {
+/// The signature a finding is deduplicated by: the algorithm, its hazard class and what
+/// was seen, whatever policy or seed found it. With hazards, the access pattern: the most
+/// telling kind of hazard seen (a lost update, else a torn record, else a race) and the
+/// buffer of its first occurrence (`lost-update on kb-depth`); the other hazards of the
+/// same run are its consequences more often than not. Without hazards, the kinds of anomaly
+/// (error pixels, faults, failed invariants).
+pub fn signature(c: &Checked, obs: &Observation) -> String {
+    use fragrace_emu::HazardKind;
+    let info = &c.rendered.info;
+    let list = &c.rendered.result.report.hazard_list;
+    let principal = [HazardKind::LostUpdate, HazardKind::Torn, HazardKind::Race]
+        .into_iter()
+        .find_map(|k| list.iter().find(|h| h.kind == k));
+    let what = match principal {
+        Some(h) => format!("{} on {}", h.kind.name(), h.buffer),
+        None => obs.signature().join("+"),
+    };
+    format!("{} ({}): {what}", info.name, info.hazard.name())
+}
+
+/// Runs one spec; `Some((observation, verdict, is_violation, signature))` when anything is
+/// anomalous.
+fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool, String)> {
     let loaded = run::load(spec).ok()?;
     let truth = run::truth(spec, &loaded).ok()?;
     let c = run::check_with(spec, &loaded, &truth).ok()?;
@@ -386,10 +407,12 @@ fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool)> {
             || broken
             || c.rendered.result.dropped > 0)
             .then(|| {
+                let sig = signature(&c, &obs);
                 (
                     obs,
                     format!("{} shows its hazard (expected: hazard-prone)", spec.algo),
                     faults || broken,
+                    sig,
                 )
             }),
         _ => (hazard || errors || faults || broken).then(|| {
@@ -402,10 +425,12 @@ fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool)> {
             } else {
                 "hazard detected"
             };
+            let sig = signature(&c, &obs);
             (
                 obs,
                 format!("VIOLATION: {} is {} but {why}", spec.algo, class.name()),
                 true,
+                sig,
             )
         }),
     }

@@ -89,8 +89,15 @@ pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
         state.cases.len(),
         a.out.display()
     );
+    println!(
+        "  violations: runs where an algorithm broke what its class promises (a hazard-free one raced or differed, a fault, a failed invariant): bugs\n  expected findings: hazard-prone algorithms showing the race they are known for: not bugs, the hazards this tool exists to show"
+    );
+    println!("  runs per finding (algorithm, hazard class, the principal hazard and its buffer), one shrunk case file each:");
     for (sig, n) in &state.signatures {
         println!("  {n:>6}  {sig}");
+        if let Some(c) = state.case_of.get(sig) {
+            println!("          {} replay {}", run::CLI, a.out.join(c).display());
+        }
     }
     let algos = state
         .coverage
@@ -102,7 +109,9 @@ pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
         "  coverage: {} algorithm x policy pairs over {algos} algorithms",
         state.coverage.len()
     );
-    for c in &state.cases {
+    // Cases of an earlier campaign resumed here, whose signature is not recorded.
+    let named: std::collections::BTreeSet<&String> = state.case_of.values().collect();
+    for c in state.cases.iter().filter(|c| !named.contains(c)) {
         println!(
             "  case: {}  ({} replay {})",
             c,
