@@ -322,3 +322,43 @@ fn piped_output_has_no_progress_bar() {
         );
     }
 }
+
+#[test]
+fn fuzz_findings_are_deduplicated_by_signature_with_one_case_each() {
+    let d = tmp("fuzz-dedup");
+    let out = d.join("cases");
+    let o = fragrace(&[
+        "fuzz",
+        "--iterations",
+        "150",
+        "--algo",
+        "kb-rmw",
+        "--shrink-secs",
+        "1",
+        "--seed",
+        "7",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    let text = ok(&o);
+    let v: serde_json::Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+    let sigs = v["signatures"].as_object().unwrap();
+    let runs: u64 = sigs.values().map(|n| n.as_u64().unwrap()).sum();
+    assert_eq!(
+        runs,
+        v["expected_findings"].as_u64().unwrap() + v["violations"].as_u64().unwrap()
+    );
+    // Many runs, whatever their policies, come down to a few signatures: the principal
+    // hazard and its buffer (or, without hazards, the kind of anomaly).
+    assert!(runs >= 10, "{v}");
+    assert!(sigs.len() <= 5, "{:#?}", sigs.keys().collect::<Vec<_>>());
+    for sig in sigs.keys() {
+        assert!(sig.starts_with("kb-rmw (hazard-prone): "), "{sig}");
+        let case = v["case_of"][sig]
+            .as_str()
+            .unwrap_or_else(|| panic!("no case for {sig}"));
+        assert!(out.join(case).exists(), "{case}");
+    }
+    assert_eq!(v["cases"].as_array().unwrap().len(), sigs.len());
+}
