@@ -84,8 +84,12 @@ pub struct MemoryEstimate {
 /// A run that does not fit the budget, or a budget that does not parse.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
 pub enum BudgetError {
-    #[error("this run needs an estimated {} ({}), more than the memory limit of {} ({limit_source}); use fewer pixels, a smaller k, window or --lanes, or raise --memory-limit", human(*estimate), parts, human(*limit))]
+    #[error("{subject} needs an estimated {} ({}), more than the memory limit of {} ({limit_source}); {advice}, or raise --memory-limit", human(*estimate), parts, human(*limit))]
     OverLimit {
+        /// "this run", "this campaign".
+        subject: &'static str,
+        /// What would make it smaller.
+        advice: &'static str,
         estimate: u64,
         limit: u64,
         /// Where the limit comes from.
@@ -242,8 +246,22 @@ fn model(algo: &str, scheduled: bool) -> [f64; 3] {
 /// The estimated peak memory of running `spec` on `loaded` (and, with `with_truth`, of
 /// computing the truth and comparing with it first, as `check` and `replay` do).
 pub fn estimate(spec: &RunSpec, loaded: &Loaded, with_truth: bool) -> MemoryEstimate {
+    estimate_for(
+        spec,
+        estimate_fragments(spec, loaded),
+        loaded.scene.mesh.indices.len(),
+        with_truth,
+    )
+}
+
+/// [`estimate`] for a scene of `triangles` that makes `fragments` per geometry pass.
+pub fn estimate_for(
+    spec: &RunSpec,
+    fragments: u64,
+    triangles: usize,
+    with_truth: bool,
+) -> MemoryEstimate {
     let pixels = f64::from(spec.width) * f64::from(spec.height);
-    let fragments = estimate_fragments(spec, loaded);
     let frags = fragments as f64;
     let k = f64::from(spec.params.k);
     let scheduled = matches!(spec.exec.mode, ExecMode::Scheduled(_));
@@ -265,8 +283,8 @@ pub fn estimate(spec: &RunSpec, loaded: &Loaded, with_truth: bool) -> MemoryEsti
     let mut parts = vec![
         ("process".to_string(), BASE),
         (
-            format!("mesh ({} triangles)", loaded.scene.mesh.indices.len()),
-            loaded.scene.mesh.indices.len() as f64 * PER_TRIANGLE,
+            format!("mesh ({triangles} triangles)"),
+            triangles as f64 * PER_TRIANGLE,
         ),
         (
             format!(
@@ -296,8 +314,35 @@ pub fn estimate(spec: &RunSpec, loaded: &Loaded, with_truth: bool) -> MemoryEsti
     }
 }
 
-/// Refuses an estimate above `limit` (from `source`), naming its largest parts.
+/// Refuses a run whose estimate is above `limit` (from `source`), naming its largest parts.
 pub fn check(est: &MemoryEstimate, limit: u64, source: &str) -> Result<(), BudgetError> {
+    check_subject(
+        est,
+        limit,
+        source,
+        "this run",
+        "use fewer pixels, a smaller k, window or --lanes",
+    )
+}
+
+/// [`check`] of a fuzz campaign's runs in flight.
+pub fn check_campaign(est: &MemoryEstimate, limit: u64, source: &str) -> Result<(), BudgetError> {
+    check_subject(
+        est,
+        limit,
+        source,
+        "this campaign",
+        "use fewer --jobs or a smaller --max-size",
+    )
+}
+
+fn check_subject(
+    est: &MemoryEstimate,
+    limit: u64,
+    source: &str,
+    subject: &'static str,
+    advice: &'static str,
+) -> Result<(), BudgetError> {
     if est.bytes <= limit {
         return Ok(());
     }
@@ -306,10 +351,15 @@ pub fn check(est: &MemoryEstimate, limit: u64, source: &str) -> Result<(), Budge
     let parts = parts
         .iter()
         .take(2)
-        .map(|(n, v)| format!("{} {n}", human(*v)))
+        .map(|(n, v)| match est.parts.len() {
+            1 => n.clone(),
+            _ => format!("{} {n}", human(*v)),
+        })
         .collect::<Vec<_>>()
         .join(", ");
     Err(BudgetError::OverLimit {
+        subject,
+        advice,
         estimate: est.bytes,
         limit,
         limit_source: source.to_string(),

@@ -93,7 +93,55 @@ pub enum FuzzError {
     },
 }
 
+/// Most triangles of a fuzz scene (the hairball, the largest built-in), for the memory
+/// estimate of a campaign.
+const FUZZ_TRIANGLES: usize = 115_200;
+/// Fragments per pixel assumed for the memory estimate of a campaign (the random scenes'
+/// depth complexity is lower on average; the hairball's centre is deeper).
+const FUZZ_FRAGMENTS_PER_PIXEL: u64 = 16;
+
 impl FuzzConfig {
+    /// The estimated peak memory of the campaign: `jobs` runs at once, each at most as large
+    /// as the largest algorithm's run at `max_size` under the scheduled executor with
+    /// k = 16, checked against the truth.
+    pub fn memory_estimate(&self) -> crate::budget::MemoryEstimate {
+        let algos: Vec<String> = if self.algos.is_empty() {
+            fragrace_kernels::names()
+                .into_iter()
+                .map(String::from)
+                .collect()
+        } else {
+            self.algos.clone()
+        };
+        let worst = algos
+            .iter()
+            .map(|a| {
+                let mut spec = RunSpec::new(SceneSpec::Builtin("hairball".into()), a);
+                spec.width = self.max_size;
+                spec.height = self.max_size;
+                spec.params.k = 16;
+                spec.exec = ExecConfig::scheduled(Policy::Random, 0);
+                let frags = u64::from(self.max_size).pow(2) * FUZZ_FRAGMENTS_PER_PIXEL;
+                crate::budget::estimate_for(&spec, frags, FUZZ_TRIANGLES, true)
+            })
+            .max_by_key(|e| e.bytes)
+            .expect("at least one algorithm");
+        let jobs = self.jobs as u64;
+        crate::budget::MemoryEstimate {
+            bytes: worst.bytes.saturating_mul(jobs),
+            fragments: worst.fragments,
+            parts: vec![(
+                format!(
+                    "{} jobs x {} for the largest run at --max-size {}",
+                    self.jobs,
+                    crate::budget::human(worst.bytes),
+                    self.max_size
+                ),
+                worst.bytes.saturating_mul(jobs),
+            )],
+        }
+    }
+
     /// Checks the workers and the viewport size against their ranges (never clamped).
     pub fn validate(&self) -> Result<(), FuzzError> {
         let range = |name, value: u64, min: u64, max: u64| {

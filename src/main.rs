@@ -90,6 +90,10 @@ struct FuzzArgs {
     scene: Vec<String>,
     #[arg(long)]
     json: bool,
+    /// Refuse a campaign whose runs in flight are estimated above this much memory (default:
+    /// half of the physical memory).
+    #[arg(long, value_name = "SIZE")]
+    memory_limit: Option<String>,
 }
 
 #[derive(Args)]

@@ -453,6 +453,30 @@ fn runs_beyond_the_memory_budget_are_refused_before_they_allocate() {
         &["executor slots (--lanes 65536 x 16 threads)"],
         10,
     );
+    // A fuzz campaign: its jobs run at once.
+    let out = tmp("fuzz-budget");
+    refused_within(
+        &[
+            "fuzz",
+            "--iterations",
+            "1",
+            "--jobs",
+            "32",
+            "--max-size",
+            "256",
+            "--memory-limit",
+            "8G",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &[
+            "this campaign needs an estimated",
+            "32 jobs x",
+            "--max-size 256",
+            "use fewer --jobs or a smaller --max-size",
+        ],
+        10,
+    );
     refused(
         &with_small(&["render", "--memory-limit", "lots"]),
         &["--memory-limit `lots`: expected a size"],

@@ -42,6 +42,9 @@ pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
     if cfg.time.is_none() && cfg.iterations.is_none() {
         bail!("give --time or --iterations (a campaign needs a budget)");
     }
+    cfg.validate()?;
+    let (limit, source) = fragrace::budget::limit(a.memory_limit.as_deref())?;
+    fragrace::budget::check_campaign(&cfg.memory_estimate(), limit, &source)?;
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
