@@ -463,7 +463,7 @@ fn print_summary(v: &serde_json::Value) {
 
 fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     let spec = spec_of(&a.run, given)?;
-    fragrace::validate::schedules(a.schedules)?;
+    fragrace::validate::at_least_one("schedules", a.schedules)?;
     check_outputs(&a.run, &spec.algo)?;
     let loaded = run::load(&spec)?;
     let memory = within_budget(&spec, &loaded, true, a.run.memory_limit.as_deref())?;

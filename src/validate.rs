@@ -25,8 +25,8 @@ pub enum SpecError {
     UnknownExec(String),
     #[error(transparent)]
     Policy(#[from] fragrace_emu::exec::PolicyParseError),
-    #[error("--schedules {0} is out of range: it must be at least 1")]
-    Schedules(u64),
+    #[error("--{0} {1} is out of range: it must be at least 1")]
+    AtLeastOne(&'static str, u64),
     #[error("unknown algorithm `{0}`; `fragrace list` shows them all")]
     UnknownAlgo(String),
 }
@@ -58,10 +58,11 @@ impl RunSpec {
     }
 }
 
-/// Checks the number of schedules `check` runs.
-pub fn schedules(n: u64) -> Result<(), SpecError> {
+/// Checks a count that must be at least one (`--schedules` of `check`, `--frames` of
+/// `bench`).
+pub fn at_least_one(option: &'static str, n: u64) -> Result<(), SpecError> {
     if n == 0 {
-        return Err(SpecError::Schedules(n));
+        return Err(SpecError::AtLeastOne(option, n));
     }
     Ok(())
 }

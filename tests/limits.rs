@@ -76,6 +76,10 @@ fn values_out_of_range_are_refused_not_clamped() {
         &["threads (--threads) = 100000", "from 1 to"],
     );
     refused(
+        &with_small(&["bench", "--frames", "0"]),
+        &["--frames 0 is out of range: it must be at least 1"],
+    );
+    refused(
         &with_small(&["render", "--lanes", "0"]),
         &["--lanes", "= 0", "from 1 to 65536"],
     );

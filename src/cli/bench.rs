@@ -7,6 +7,7 @@ use crate::{merge, spec_of, within_budget, BenchArgs};
 
 pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
     let spec = spec_of(&a.run, given)?;
+    fragrace::validate::at_least_one("frames", a.frames as u64)?;
     // The floor replays `count`'s operation (one atomic add per fragment); other
     // algorithms do other things per fragment.
     if a.floor && spec.algo != "count" {
@@ -31,7 +32,7 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
     // Hazard-prone algorithms may fail a check under real races: reported, not fatal.
     let mut failed_checks = 0;
     let mut last = None;
-    for _ in 0..a.frames.max(1) {
+    for _ in 0..a.frames {
         // The previous frame's buffers are freed first, so that the allocator hands the
         // same memory to this frame, as a renderer reuses its buffers from frame to frame
         // (and as the llvmpipe peer clears and reuses one storage buffer).
@@ -71,7 +72,7 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
                 fragrace::emu::raster::RasterState::default().tile_size,
             ),
             threads: spec.exec.threads,
-            frames: a.frames.max(1),
+            frames: a.frames,
         };
         Some(fragrace::floor::count_floor(&cfg).context("the floor's replay did not add up")?)
     } else {
