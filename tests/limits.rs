@@ -154,6 +154,14 @@ fn values_out_of_range_are_refused_not_clamped() {
         &["jobs (--jobs) = 100000"],
     );
     refused(
+        &["fuzz", "--iterations", "0", "--out", out],
+        &["--iterations 0 is out of range: it must be at least 1"],
+    );
+    refused(
+        &["fuzz", "--time", "0s", "--out", out],
+        &["--time 0s: a campaign needs a positive time"],
+    );
+    refused(
         &["fuzz", "--iterations", "1", "--max-size", "4", "--out", out],
         &["max_size (--max-size) = 4", "from 8 to 16384"],
     );

@@ -42,6 +42,15 @@ pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
     if cfg.time.is_none() && cfg.iterations.is_none() {
         bail!("give --time or --iterations (a campaign needs a budget)");
     }
+    if let Some(n) = cfg.iterations {
+        fragrace::validate::at_least_one("iterations", n)?;
+    }
+    if cfg.time.is_some_and(|t| t.is_zero()) {
+        bail!(
+            "--time {}: a campaign needs a positive time",
+            a.time.as_deref().unwrap_or("")
+        );
+    }
     cfg.validate()?;
     let (limit, source) = fragrace::budget::limit(a.memory_limit.as_deref())?;
     fragrace::budget::check_campaign(&cfg.memory_estimate(), limit, &source)?;
