@@ -13,7 +13,10 @@
 //! base + triangles x T + pixels x (a + b k) + fragments x c + executor slots
 //! ```
 //!
-//! with the fitted coefficients rounded up by a tenth. `fragments` is estimated from the
+//! with the fitted coefficients rounded up by a tenth. `bash ci/memory.sh VERB SCENE SIZE
+//! EXEC` prints peak, estimate and their ratio for every algorithm (on this machine, over
+//! 140 runs of 5 scenes, sizes 96 to 640 and the three executors: 0.44 to 1.06; at
+//! 1024x1024 and 2048x2048: 0.63 to 0.88). `fragments` is estimated from the
 //! projected area of every triangle ([`estimate_fragments`]); executor slots are the
 //! scheduled window, or the lanes of every thread's warp. `tests/memory.rs` checks that
 //! the measured peak stays within 1.5x of the estimate for several algorithms and
