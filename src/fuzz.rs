@@ -22,7 +22,7 @@ use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use crate::case::{self, Case, Observation};
-use crate::run::{self, RunSpec, SceneSpec};
+use crate::run::{self, Checked, RunSpec, SceneSpec};
 use crate::scene::Camera;
 
 /// What a campaign runs.
@@ -59,11 +59,16 @@ pub struct CampaignState {
     pub executions: u64,
     pub violations: u64,
     pub expected_findings: u64,
-    /// Runs per anomaly signature.
+    /// Runs per finding signature ([`signature`]: algorithm, hazard class, kinds of hazard
+    /// and their buffers); one case file per signature.
     pub signatures: BTreeMap<String, u64>,
     /// Runs per "algorithm x policy".
     pub coverage: BTreeMap<String, u64>,
     pub cases: Vec<String>,
+    /// The case file of each signature (campaigns saved before signatures named their
+    /// case have none).
+    #[serde(default)]
+    pub case_of: BTreeMap<String, String>,
     pub elapsed_s: f64,
 }
 
@@ -82,6 +87,91 @@ pub enum FuzzError {
     },
     #[error("unknown algorithm `{0}`")]
     UnknownAlgo(String),
+    #[error("{name} = {value} is out of range: it must be from {min} to {max}")]
+    OutOfRange {
+        name: &'static str,
+        value: u64,
+        min: u64,
+        max: u64,
+    },
+}
+
+/// Most triangles of a fuzz scene (the hairball, the largest built-in), for the memory
+/// estimate of a campaign.
+const FUZZ_TRIANGLES: usize = 115_200;
+/// Fragments per pixel assumed for the memory estimate of a campaign (the random scenes'
+/// depth complexity is lower on average; the hairball's centre is deeper).
+const FUZZ_FRAGMENTS_PER_PIXEL: u64 = 16;
+
+impl FuzzConfig {
+    /// The estimated peak memory of the campaign: `jobs` runs at once, each at most as large
+    /// as the largest algorithm's run at `max_size` under the scheduled executor with
+    /// k = 16, checked against the truth.
+    pub fn memory_estimate(&self) -> crate::budget::MemoryEstimate {
+        let algos: Vec<String> = if self.algos.is_empty() {
+            fragrace_kernels::names()
+                .into_iter()
+                .map(String::from)
+                .collect()
+        } else {
+            self.algos.clone()
+        };
+        let worst = algos
+            .iter()
+            .map(|a| {
+                let mut spec = RunSpec::new(SceneSpec::Builtin("hairball".into()), a);
+                spec.width = self.max_size;
+                spec.height = self.max_size;
+                spec.params.k = 16;
+                spec.exec = ExecConfig::scheduled(Policy::Random, 0);
+                let frags = u64::from(self.max_size).pow(2) * FUZZ_FRAGMENTS_PER_PIXEL;
+                crate::budget::estimate_for(&spec, frags, FUZZ_TRIANGLES, true)
+            })
+            .max_by_key(|e| e.bytes)
+            .expect("at least one algorithm");
+        let jobs = self.jobs as u64;
+        crate::budget::MemoryEstimate {
+            bytes: worst.bytes.saturating_mul(jobs),
+            fragments: worst.fragments,
+            parts: vec![(
+                format!(
+                    "{} jobs x {} for the largest run at --max-size {}",
+                    self.jobs,
+                    crate::budget::human(worst.bytes),
+                    self.max_size
+                ),
+                worst.bytes.saturating_mul(jobs),
+            )],
+        }
+    }
+
+    /// Checks the workers and the viewport size against their ranges (never clamped).
+    pub fn validate(&self) -> Result<(), FuzzError> {
+        let range = |name, value: u64, min: u64, max: u64| {
+            if (min..=max).contains(&value) {
+                Ok(())
+            } else {
+                Err(FuzzError::OutOfRange {
+                    name,
+                    value,
+                    min,
+                    max,
+                })
+            }
+        };
+        range(
+            "jobs (--jobs)",
+            self.jobs as u64,
+            1,
+            fragrace_emu::exec::max_threads() as u64,
+        )?;
+        range(
+            "max_size (--max-size)",
+            self.max_size.into(),
+            8,
+            fragrace_emu::framebuffer::MAX_DIMENSION.into(),
+        )
+    }
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> FuzzError + '_ {
@@ -116,7 +206,7 @@ pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i:
         }
     };
     let algo = algos[rng.gen_range(0..algos.len())].clone();
-    let size = rng.gen_range(8..=cfg.max_size.max(8));
+    let size = rng.gen_range(8..=cfg.max_size);
     let policies = Policy::all();
     let exec = if rng.gen_bool(0.85) {
         let policy = if rng.gen_bool(0.15) {
@@ -202,6 +292,7 @@ pub fn campaign(
     stop: &AtomicBool,
     progress: &Progress,
 ) -> Result<CampaignState, FuzzError> {
+    cfg.validate()?;
     std::fs::create_dir_all(&cfg.out).map_err(io(&cfg.out))?;
     let state_path = cfg.out.join("campaign.json");
     let state = if cfg.resume && state_path.exists() {
@@ -258,7 +349,7 @@ pub fn campaign(
         let json = serde_json::to_vec_pretty(st).expect("state serialises");
         crate::output::write_atomic(&state_path, &json).map_err(io(&state_path))
     };
-    let jobs = cfg.jobs.max(1);
+    let jobs = cfg.jobs;
     let result: Result<(), FuzzError> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..jobs)
             .map(|_| {
@@ -293,15 +384,9 @@ pub fn campaign(
                         while done.remove(&st.next_iteration) {
                             st.next_iteration += 1;
                         }
-                        let Some((obs, verdict, violation)) = outcome else {
+                        let Some((obs, verdict, violation, key)) = outcome else {
                             continue;
                         };
-                        let key = format!(
-                            "{} / {} / {}",
-                            spec.algo,
-                            policy_name(&spec),
-                            obs.signature().join("+")
-                        );
                         let first = !st.signatures.contains_key(&key);
                         *st.signatures.entry(key.clone()).or_default() += 1;
                         if violation {
@@ -317,6 +402,7 @@ pub fn campaign(
                         // Shrink outside the lock, then write the case atomically.
                         let written = write_case(&cfg, &spec, &obs, &verdict, i)?;
                         let mut guard = shared.lock().unwrap_or_else(|e| e.into_inner());
+                        guard.0.case_of.insert(key, written.clone());
                         guard.0.cases.push(written);
                         progress.cases.fetch_add(1, Ordering::Relaxed);
                         guard.0.elapsed_s = elapsed_before + start.elapsed().as_secs_f64();
@@ -344,8 +430,35 @@ pub fn campaign(
     Ok(state)
 }
 
-/// Runs one spec; `Some((observation, verdict, is_violation))` when anything is anomalous.
-fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool)> {
+/// The signature a finding is deduplicated by: the algorithm, its hazard class and what
+/// was seen, whatever policy or seed found it. With hazards, the access pattern: the most
+/// telling kind of hazard seen (a lost update, else a torn record, else a race) and the
+/// buffer of its first occurrence (`lost-update on kb-depth`); the other hazards of the
+/// same run are its consequences more often than not. Without hazards, the kinds of anomaly
+/// (error pixels, faults, failed invariants).
+pub fn signature(c: &Checked, obs: &Observation) -> String {
+    use fragrace_emu::HazardKind;
+    let info = &c.rendered.info;
+    let list = &c.rendered.result.report.hazard_list;
+    let principal = [HazardKind::LostUpdate, HazardKind::Torn, HazardKind::Race]
+        .into_iter()
+        .find_map(|k| list.iter().find(|h| h.kind == k));
+    let what = match principal {
+        Some(h) => format!("{} on {}", h.kind.name(), h.buffer),
+        None => obs.signature().join("+"),
+    };
+    // A culled run is its own variant (`NAME+occupancy`): the stage can add hazards.
+    let culled = if c.rendered.result.culling.is_some() {
+        "+occupancy"
+    } else {
+        ""
+    };
+    format!("{}{culled} ({}): {what}", info.name, info.hazard.name())
+}
+
+/// Runs one spec; `Some((observation, verdict, is_violation, signature))` when anything is
+/// anomalous.
+fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool, String)> {
     let loaded = run::load(spec).ok()?;
     let truth = run::truth(spec, &loaded).ok()?;
     let c = run::check_with(spec, &loaded, &truth).ok()?;
@@ -372,21 +485,27 @@ fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool)> {
             || broken
             || c.rendered.result.dropped > 0)
             .then(|| {
+                let sig = signature(&c, &obs);
                 (
                     obs,
                     format!("{} shows its hazard (expected: hazard-prone)", spec.algo),
                     faults || broken,
+                    sig,
                 )
             }),
-        _ if !(hazard || errors || faults || broken) && stage_hazard => Some((
-            obs,
-            format!(
-                "{} behind the plain occupancy fill: the fill loses bits (expected: racy by \
-                 design; Lemma 2.1 held)",
-                spec.algo
-            ),
-            false,
-        )),
+        _ if !(hazard || errors || faults || broken) && stage_hazard => {
+            let sig = signature(&c, &obs);
+            Some((
+                obs,
+                format!(
+                    "{} behind the plain occupancy fill: the fill loses bits (expected: racy \
+                     by design; Lemma 2.1 held)",
+                    spec.algo
+                ),
+                false,
+                sig,
+            ))
+        }
         _ => (hazard || errors || faults || broken).then(|| {
             let why = if broken {
                 "invariant violated"
@@ -397,10 +516,12 @@ fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool)> {
             } else {
                 "hazard detected"
             };
+            let sig = signature(&c, &obs);
             (
                 obs,
                 format!("VIOLATION: {} is {} but {why}", spec.algo, class.name()),
                 true,
+                sig,
             )
         }),
     }

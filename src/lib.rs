@@ -5,6 +5,7 @@
 //! checks ([`run`]), images and heatmaps ([`output`]), case files, fuzzing and the CLI.
 //! The GPU itself is [`fragrace_emu`]; the algorithms are [`fragrace_kernels`].
 
+pub mod budget;
 pub mod case;
 pub mod culling;
 pub mod floor;
@@ -14,6 +15,8 @@ pub mod output;
 pub mod run;
 pub mod scene;
 pub mod shrink;
+pub mod validate;
+pub mod verdict;
 
 pub use fragrace_emu as emu;
 pub use fragrace_kernels as kernels;

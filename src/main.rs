@@ -1,14 +1,20 @@
 //! The `fragrace` command line.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use clap::{Args, Parser, Subcommand};
+use clap::parser::ValueSource;
+use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use fragrace::run::{self, RunSpec, SceneSpec};
 use fragrace::scene::Camera;
 use fragrace_emu::HazardKind;
 use fragrace_kernels::Params;
+
+mod cli;
+use cli::bench::cmd_bench;
+use cli::fuzz::cmd_fuzz;
+use cli::outputs::{check_outputs, list_written, write_outputs};
+use cli::report::cmd_report;
 
 #[derive(Parser)]
 #[command(
@@ -41,6 +47,10 @@ enum Command {
         case: PathBuf,
         #[arg(long)]
         json: bool,
+        /// Refuse a case whose estimated peak memory is above this (default: half of the
+        /// physical memory).
+        #[arg(long, value_name = "SIZE")]
+        memory_limit: Option<String>,
     },
     /// Tables of measured EPR, R_h, bytes per pixel and time (markdown), and EPR over views.
     Report(ReportArgs),
@@ -90,6 +100,10 @@ struct FuzzArgs {
     occupancy_fill: Option<fragrace_kernels::occupancy::FillMode>,
     #[arg(long)]
     json: bool,
+    /// Refuse a campaign whose runs in flight are estimated above this much memory (default:
+    /// half of the physical memory).
+    #[arg(long, value_name = "SIZE")]
+    memory_limit: Option<String>,
 }
 
 #[derive(Args)]
@@ -125,6 +139,10 @@ struct ReportArgs {
     /// With --occupancy: exact, bbox or hull.
     #[arg(long)]
     range: Option<fragrace_kernels::occupancy::RangeSource>,
+    /// Refuse a report whose largest run is estimated above this much memory (default: half
+    /// of the physical memory).
+    #[arg(long, value_name = "SIZE")]
+    memory_limit: Option<String>,
 }
 
 #[derive(Args, Clone)]
@@ -226,6 +244,10 @@ struct RunArgs {
     /// Print one JSON object on stdout.
     #[arg(long)]
     json: bool,
+    /// Refuse runs whose estimated peak memory is above this (e.g. 8G, 512M; default: half
+    /// of the physical memory).
+    #[arg(long, value_name = "SIZE")]
+    memory_limit: Option<String>,
 }
 
 #[derive(Args)]
@@ -252,7 +274,18 @@ struct BenchArgs {
     floor: bool,
 }
 
-fn spec_of(a: &RunArgs) -> Result<RunSpec> {
+/// The options given on the command line (not defaulted), named as typed without `--`.
+fn given(m: &ArgMatches) -> Vec<String> {
+    m.ids()
+        .filter(|id| m.value_source(id.as_str()) == Some(ValueSource::CommandLine))
+        .map(|id| id.as_str().replace('_', "-"))
+        .collect()
+}
+
+/// The run the options describe, every value checked ([`RunSpec::validate`]) and every
+/// option that the executor would ignore refused, before anything is loaded.
+fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
+    fragrace::validate::options_for_exec(&a.exec, given.iter().map(String::as_str))?;
     let scene = match &a.obj {
         Some(p) => {
             if !p.exists() {
@@ -267,14 +300,13 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
         }
         None => SceneSpec::Builtin(a.scene.clone()),
     };
-    let mut exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)
-        .map_err(anyhow::Error::msg)?;
-    exec.block = a.block.max(1);
+    let mut exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)?;
+    exec.block = a.block;
     exec.reduce = a.reduce;
-    exec.spurious_cas_per_mille = a.spurious_cas.min(1000);
-    exec.batch = a.lanes.max(1);
+    exec.spurious_cas_per_mille = a.spurious_cas;
+    exec.batch = a.lanes;
     exec.lockstep = !a.no_lockstep;
-    exec.segment = a.segment.max(1);
+    exec.segment = a.segment;
     exec.binning = a.binning;
     exec.simt = a.simt;
     if fragrace_kernels::algorithm(&a.algo).is_none() {
@@ -284,21 +316,23 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
             fragrace_kernels::names().join(", ")
         );
     }
-    Ok(RunSpec {
+    let spec = RunSpec {
         scene,
         camera: Camera::new(a.azimuth, a.elevation),
         width: a.width,
         height: a.height,
         algo: a.algo.clone(),
         params: Params {
-            k: a.k.max(1),
+            k: a.k,
             alpha: a.alpha,
-            spin_cap: a.spin_cap.max(1),
+            spin_cap: a.spin_cap,
             occupancy: occupancy_of(a)?,
             ..Params::default()
         },
         exec,
-    })
+    };
+    spec.validate()?;
+    Ok(spec)
 }
 
 /// The occupancy-culling parameters of a run; `--range` and `--occupancy-fill` mean
@@ -317,37 +351,6 @@ fn occupancy_of(a: &RunArgs) -> Result<Option<fragrace_kernels::occupancy::Occup
     }
 }
 
-/// The occupancy culling a fuzz campaign forces, checked against its algorithms: at
-/// least one of them must take it, and `d` must hold the largest k the campaign draws (16).
-fn fuzz_occupancy(a: &FuzzArgs) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
-    let Some(d) = a.occupancy else {
-        if a.range.is_some() || a.occupancy_fill.is_some() {
-            bail!("--range and --occupancy-fill configure occupancy culling: add --occupancy D (1 to 64)");
-        }
-        return Ok(None);
-    };
-    let occ = fragrace_kernels::occupancy::Occupancy {
-        d,
-        range: a.range.unwrap_or_default(),
-        fill: a.occupancy_fill.unwrap_or_default(),
-    };
-    occ.validate(16)?;
-    let all = fragrace_kernels::algorithms();
-    let takers: Vec<&str> = all
-        .iter()
-        .filter(|x| x.takes_occupancy())
-        .map(|x| x.info().name)
-        .collect();
-    if !a.algo.is_empty() && !a.algo.iter().any(|n| takers.contains(&n.as_str())) {
-        bail!(
-            "--occupancy: none of {} runs behind occupancy culling; the algorithms that do: {}",
-            a.algo.join(", "),
-            takers.join(", ")
-        );
-    }
-    Ok(Some(occ))
-}
-
 fn main() {
     if let Err(e) = real_main() {
         eprintln!("error: {e:#}");
@@ -356,96 +359,95 @@ fn main() {
 }
 
 fn real_main() -> Result<()> {
-    let cli = Cli::parse();
+    let matches = Cli::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    let given = matches
+        .subcommand()
+        .map(|(_, m)| given(m))
+        .unwrap_or_default();
     // A kernel panic is a reported fault, not a crash: keep the default hook's noise out.
     std::panic::set_hook(Box::new(|_| {}));
     match cli.command {
-        Command::Render(a) => cmd_render(&a),
-        Command::Check(a) => cmd_check(&a),
+        Command::Render(a) => cmd_render(&a, &given),
+        Command::Check(a) => cmd_check(&a, &given),
         Command::List { json } => cmd_list(json),
-        Command::Bench(a) => cmd_bench(&a),
+        Command::Bench(a) => cmd_bench(&a, &given),
         Command::Fuzz(a) => cmd_fuzz(&a),
-        Command::Replay { case, json } => cmd_replay(&case, json),
-        Command::Report(a) => cmd_report(&a),
+        Command::Replay {
+            case,
+            json,
+            memory_limit,
+        } => cmd_replay(&case, json, memory_limit.as_deref()),
+        Command::Report(a) => cmd_report(&a, &given),
     }
 }
 
-fn cmd_render(a: &RunArgs) -> Result<()> {
-    let spec = spec_of(a)?;
+/// The estimated peak memory of a run, refused when above the budget (`--memory-limit`);
+/// as JSON fields for the summary.
+fn within_budget(
+    spec: &RunSpec,
+    loaded: &run::Loaded,
+    with_truth: bool,
+    limit: Option<&str>,
+) -> Result<serde_json::Value> {
+    let (limit, source) = fragrace::budget::limit(limit)?;
+    let est = fragrace::budget::estimate(spec, loaded, with_truth);
+    fragrace::budget::check(&est, limit, &source)?;
+    Ok(serde_json::json!({
+        "memory_estimate_bytes": est.bytes,
+        "memory_limit_bytes": limit,
+        "fragments_estimate": est.fragments,
+    }))
+}
+
+/// A progress bar of `len` steps (a spinner when 0) with the elapsed time, on stderr when it
+/// is a terminal; nothing otherwise, so that piped output stays clean.
+fn progress(len: u64, msg: &str) -> indicatif::ProgressBar {
+    let (bar, template) = if len == 0 {
+        (
+            indicatif::ProgressBar::new_spinner(),
+            "{spinner} {elapsed} {msg}",
+        )
+    } else {
+        (
+            indicatif::ProgressBar::new(len),
+            "{spinner} {elapsed} [{bar:30}] {pos}/{len} {msg}",
+        )
+    };
+    bar.set_style(indicatif::ProgressStyle::with_template(template).expect("valid template"));
+    bar.set_message(msg.to_string());
+    bar.enable_steady_tick(std::time::Duration::from_millis(100));
+    bar
+}
+
+/// Adds the fields of `extra` (an object) to `v`.
+fn merge(v: &mut serde_json::Value, extra: &serde_json::Value) {
+    if let (Some(v), Some(e)) = (v.as_object_mut(), extra.as_object()) {
+        v.extend(e.iter().map(|(k, x)| (k.clone(), x.clone())));
+    }
+}
+
+fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
+    let spec = spec_of(a, given)?;
+    check_outputs(a, &spec.algo)?;
     let loaded = run::load(&spec)?;
+    let memory = within_budget(&spec, &loaded, false, a.memory_limit.as_deref())?;
+    let bar = progress(0, "rendering");
     let rendered = run::render(&spec, &loaded)?;
-    write_outputs(a, &spec, &rendered, None)?;
+    bar.finish_and_clear();
+    let written = write_outputs(a, &spec, &rendered, None)?;
     let mut summary = run::summary_json(&spec, &loaded, None, &rendered);
     if let Some(base) = fragrace::culling::baseline(&spec, &loaded)? {
         summary["occupancy"] = fragrace::culling::summary(&rendered, None, Some(&base));
     }
+    merge(&mut summary, &memory);
+    summary["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
     if a.json {
         println!("{summary}");
     } else {
         print_summary(&summary);
     }
-    Ok(())
-}
-
-fn write_outputs(
-    a: &RunArgs,
-    spec: &RunSpec,
-    r: &run::Rendered,
-    checked: Option<&run::Checked>,
-) -> Result<()> {
-    let res = &r.result;
-    if let Some(path) = &a.out {
-        if let Some(img) = &res.image {
-            fragrace::output::write_rgba(path, spec.width, spec.height, img)?;
-        } else if let Some(c) = &res.counts {
-            fragrace::output::write_heatmap(path, spec.width, spec.height, c)?;
-        } else {
-            bail!("algorithm `{}` produces no image", spec.algo);
-        }
-    }
-    if let Some(path) = &a.raw_out {
-        let Some(c) = &res.counts else {
-            bail!("--raw-out needs a counting algorithm (count, count-plain)")
-        };
-        let bytes: Vec<u8> = c.iter().flat_map(|v| v.to_le_bytes()).collect();
-        fragrace::output::write_atomic(path, &bytes)?;
-    }
-    if let Some(dir) = &a.heatmap {
-        std::fs::create_dir_all(dir)?;
-        if let Some(c) = &res.counts {
-            fragrace::output::write_heatmap(
-                &dir.join("depth-complexity.png"),
-                spec.width,
-                spec.height,
-                c,
-            )?;
-        }
-        if !res.report.hazard_heat.is_empty() {
-            fragrace::output::write_heatmap(
-                &dir.join("hazards.png"),
-                spec.width,
-                spec.height,
-                &res.report.hazard_heat,
-            )?;
-        }
-        if let Some(c) = checked {
-            let errs: Vec<u32> = c.metrics.error_mask.iter().map(|&e| e as u32).collect();
-            fragrace::output::write_heatmap(
-                &dir.join("errors.png"),
-                spec.width,
-                spec.height,
-                &errs,
-            )?;
-            if !c.metrics.culled_heat.is_empty() {
-                fragrace::output::write_heatmap(
-                    &dir.join("culled.png"),
-                    spec.width,
-                    spec.height,
-                    &c.metrics.culled_heat,
-                )?;
-            }
-        }
-    }
+    list_written(&written, a.json);
     Ok(())
 }
 
@@ -477,10 +479,16 @@ fn print_summary(v: &serde_json::Value) {
     );
     if !v["epr"].is_null() {
         println!(
-            "  EPR {:.6}  ({} error pixels)   R_h {:.6}   C_p {:.4}",
+            "  EPR {:.6} ({} error pixels): error pixel rate, covered pixels whose result differs from the truth",
             v["epr"].as_f64().unwrap_or(0.0),
             v["error_pixels"],
+        );
+        println!(
+            "  R_h {:.6}: robustness, fragments kept over fragments the algorithm should keep",
             v["robustness"].as_f64().unwrap_or(0.0),
+        );
+        println!(
+            "  C_p {:.4}: coplanarity, covered pixels with two fragments at exactly the same depth",
             v["coplanarity"].as_f64().unwrap_or(0.0)
         );
     }
@@ -509,11 +517,12 @@ fn print_summary(v: &serde_json::Value) {
             }
         );
     }
-    if let Some(checks) = v["checks"].as_array() {
+    if let Some(checks) = v["checks"].as_array().filter(|c| !c.is_empty()) {
+        println!("  the algorithm's own invariants:");
         for c in checks {
             let ok = c["passed"].as_bool().unwrap_or(false);
             println!(
-                "  [{}] {}: {}",
+                "    [{}] {}: {}",
                 if ok { "ok" } else { "FAIL" },
                 c["name"].as_str().unwrap_or(""),
                 c["detail"].as_str().unwrap_or("")
@@ -522,23 +531,32 @@ fn print_summary(v: &serde_json::Value) {
     }
 }
 
-fn cmd_check(a: &CheckArgs) -> Result<()> {
-    let spec = spec_of(&a.run)?;
+fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
+    let spec = spec_of(&a.run, given)?;
+    fragrace::validate::at_least_one("schedules", a.schedules)?;
+    check_outputs(&a.run, &spec.algo)?;
     let loaded = run::load(&spec)?;
+    let memory = within_budget(&spec, &loaded, true, a.run.memory_limit.as_deref())?;
+    // More than one schedule only under the scheduled executor (`spec_of` refuses
+    // --schedules elsewhere).
+    let n = a.schedules;
+    let bar = progress(n + 1, "computing the truth");
     let truth = run::truth(&spec, &loaded)?;
-    let n = if spec.schedule().is_some() {
-        a.schedules.max(1)
-    } else {
-        1
-    };
+    bar.inc(1);
     let base_seed = spec.schedule().map(|s| s.seed).unwrap_or(0);
     let mut worst: Option<(RunSpec, run::Checked)> = None;
     let mut totals = fragrace_emu::HazardCounts::default();
     let mut anomalous_runs = 0u64;
     let mut eprs = Vec::new();
     for i in 0..n {
+        bar.set_message(if n > 1 {
+            format!("running schedule {} of {n}", i + 1)
+        } else {
+            "running the algorithm".to_string()
+        });
         let s = spec.with_seed(base_seed + i);
         let c = run::check_with(&s, &loaded, &truth)?;
+        bar.inc(1);
         totals.add(&c.hazards());
         eprs.push(c.metrics.epr);
         if c.anomalous() {
@@ -549,13 +567,18 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
             worst = Some((s, c));
         }
     }
+    bar.finish_and_clear();
     let (wspec, w) = worst.expect("at least one run");
-    write_outputs(&a.run, &wspec, &w.rendered, Some(&w))?;
+    let written = write_outputs(&a.run, &wspec, &w.rendered, Some(&w))?;
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
     if let Some(base) = fragrace::culling::baseline(&wspec, &loaded)? {
         summary["occupancy"] =
             fragrace::culling::summary(&w.rendered, Some(&w.metrics), Some(&base));
     }
+    merge(&mut summary, &memory);
+    summary["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
+    let verdict = fragrace::verdict::verdict(&w, &totals);
+    summary["verdict"] = serde_json::json!(verdict);
     summary["schedules"] = serde_json::json!(n);
     summary["anomalous_runs"] = serde_json::json!(anomalous_runs);
     summary["hazards_total"] = serde_json::json!({"lost_updates": totals.lost_updates, "races": totals.races, "torn": totals.torn});
@@ -579,9 +602,21 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
         .collect::<Vec<_>>());
     let replay = wspec.command("check");
     summary["replay"] = serde_json::json!(replay);
+    // Threads race for real under `parallel`: a rerun gives other numbers. The scheduled
+    // executor reproduces a run bit for bit.
+    let reproducible =
+        spec.schedule().is_some() || spec.exec.mode == fragrace_emu::ExecMode::Ordered;
+    summary["reproducible"] = serde_json::json!(reproducible);
+    let scheduled = (!reproducible).then(|| {
+        let mut s = wspec.clone();
+        s.exec.mode = fragrace_emu::ExecMode::Scheduled(fragrace_emu::ScheduleConfig::default());
+        format!("{} --schedules 8", s.command("check"))
+    });
+    summary["reproduce_with"] = serde_json::json!(scheduled.as_ref().unwrap_or(&replay));
     if a.run.json {
         println!("{summary}");
     } else {
+        println!("{}", verdict.text);
         print_summary(&summary);
         if n > 1 {
             println!(
@@ -616,10 +651,15 @@ fn cmd_check(a: &CheckArgs) -> Result<()> {
                 f.invocation.x, f.invocation.y, f.invocation.primitive, f.kind
             );
         }
-        if w.anomalous() {
+        if let Some(sched) = &scheduled {
+            println!(
+                "  parallel runs are not reproducible (threads race for real; a rerun gives other numbers).\n  To reproduce hazards exactly, run the scheduled executor (same seed, same bits):\n    {sched}"
+            );
+        } else if w.anomalous() {
             println!("  worst case replays with:\n    {replay}");
         }
     }
+    list_written(&written, a.run.json);
     Ok(())
 }
 
@@ -666,243 +706,16 @@ fn cmd_list(json: bool) -> Result<()> {
     Ok(())
 }
 
-fn cmd_bench(a: &BenchArgs) -> Result<()> {
-    let spec = spec_of(&a.run)?;
-    // The floor replays `count`'s operation (one atomic add per fragment); other
-    // algorithms do other things per fragment.
-    if a.floor && spec.algo != "count" {
-        bail!(
-            "--floor measures the floor of `count` (its atomic adds alone), not of `{}`",
-            spec.algo
-        );
-    }
-    let loaded = run::load(&spec)?;
-    for _ in 0..a.warmup {
-        run::render(&spec, &loaded)?;
-    }
-    // A frame is what the llvmpipe peer times as one (clears, passes, resolve); the
-    // self-checks that read whole buffers back run after it, timed apart (the peer checks
-    // untimed). Every frame is checked.
-    let mut times = Vec::new();
-    let mut pass_times = Vec::new();
-    let mut check_times = Vec::new();
-    let mut checked_times = Vec::new();
-    let mut imbalance_times = Vec::new();
-    // Hazard-prone algorithms may fail a check under real races: reported, not fatal.
-    let mut failed_checks = 0;
-    let mut last = None;
-    for _ in 0..a.frames.max(1) {
-        // The previous frame's buffers are freed first, so that the allocator hands the
-        // same memory to this frame, as a renderer reuses its buffers from frame to frame
-        // (and as the llvmpipe peer clears and reuses one storage buffer).
-        drop(last.take());
-        let r = run::render(&spec, &loaded)?;
-        failed_checks += r.result.checks.iter().filter(|c| !c.passed).count();
-        times.push(r.wall_ms);
-        check_times.push(r.check_ms);
-        checked_times.push(r.wall_ms + r.check_ms);
-        pass_times.push(r.result.report.wall.as_secs_f64() * 1e3);
-        imbalance_times.push(r.result.report.imbalance.as_secs_f64() * 1e3);
-        last = Some(r);
-    }
-    let r = last.expect("one frame");
-    let ms = fragrace::floor::median(&mut times);
-    let check_ms = fragrace::floor::median(&mut check_times);
-    let checked_ms = fragrace::floor::median(&mut checked_times);
-    // The passes alone (transform, binning, shading, fixed function), without buffer
-    // allocation and clears.
-    let pass_ms = fragrace::floor::median(&mut pass_times);
-    // Threads waiting for the last one at the end of shading, summed over threads.
-    let imbalance_ms = fragrace::floor::median(&mut imbalance_times);
-    let stats = &r.result.report.stats;
-    let tris = loaded.scene.mesh.triangle_count() as f64 * stats.geometry_passes.max(1) as f64;
-    let floor = if a.floor {
-        let counts = r.result.counts.as_deref().with_context(|| {
-            format!(
-                "--floor replays the per-pixel counts of `count`; `{}` has none",
-                spec.algo
-            )
-        })?;
-        let cfg = fragrace::floor::FloorConfig {
-            counts,
-            width: spec.width,
-            height: spec.height,
-            tile: fragrace::emu::raster::effective_tile_size(
-                fragrace::emu::raster::RasterState::default().tile_size,
-            ),
-            threads: spec.exec.threads,
-            frames: a.frames.max(1),
-        };
-        Some(fragrace::floor::count_floor(&cfg).context("the floor's replay did not add up")?)
-    } else {
-        None
-    };
-    let mut v = serde_json::json!({
-        "algo": spec.algo,
-        "scene": spec.scene.name(),
-        "triangles": loaded.scene.mesh.triangle_count(),
-        "width": spec.width, "height": spec.height,
-        "exec": spec.exec.mode.name(),
-        "threads": spec.exec.threads,
-        "frames": times.len(),
-        "median_ms": ms,
-        "passes_median_ms": pass_ms,
-        "imbalance_median_ms": imbalance_ms,
-        "check_median_ms": check_ms,
-        "checked_median_ms": checked_ms,
-        "failed_checks": failed_checks,
-        "min_ms": times.first(),
-        "max_ms": times.last(),
-        "fragments": stats.fragments_generated,
-        "fragments_per_s": stats.fragments_generated as f64 / (ms / 1e3),
-        "triangles_per_s": tris / (ms / 1e3),
-        "steps": stats.steps,
-        "steps_per_s": stats.steps as f64 / (ms / 1e3),
-    });
-    if let Some(f) = floor {
-        v["floor_atomics_ms"] = f.atomics_ms.into();
-        v["floor_frame_ms"] = f.frame_ms.into();
-    }
-    if a.run.json {
-        println!("{v}");
-    } else {
-        println!(
-            "{} on {} ({} triangles) {}x{}, {} with {} threads: median {:.2} ms over {} frames (min {:.2}, max {:.2}); passes alone {:.2} ms; self-checks after it {:.2} ms (frame and checks {:.2} ms)\n  {:.1} M fragments/s, {:.1} M triangles/s, {:.2} M steps/s",
-            spec.algo, spec.scene.name(), loaded.scene.mesh.triangle_count(), spec.width, spec.height, spec.exec.mode.name(), spec.exec.threads,
-            ms, times.len(), times[0], times[times.len() - 1], pass_ms, check_ms, checked_ms,
-            stats.fragments_generated as f64 / (ms / 1e3) / 1e6, tris / (ms / 1e3) / 1e6, stats.steps as f64 / (ms / 1e3) / 1e6
-        );
-        if spec.exec.threads > 1 {
-            println!(
-                "  threads idle at the end of shading, waiting for the last one: {imbalance_ms:.3} ms (median, summed over threads)"
-            );
-        }
-        if failed_checks > 0 {
-            println!("  {failed_checks} failed checks over the frames (see `fragrace render`)");
-        }
-        if let Some(f) = floor {
-            println!(
-                "  floor: the frame's {} atomic adds alone {:.2} ms; with a fresh zeroed buffer {:.2} ms",
-                stats.fragments_generated, f.atomics_ms, f.frame_ms
-            );
-        }
-    }
-    Ok(())
-}
-
 fn parse_binning(s: &str) -> Result<fragrace::emu::Binning, String> {
     fragrace::emu::Binning::from_name(s)
         .ok_or_else(|| format!("`{s}`: expected `auto` or `always`"))
 }
 
-fn parse_duration(s: &str) -> Result<std::time::Duration> {
-    let (num, unit) = s.split_at(
-        s.find(|c: char| !c.is_ascii_digit() && c != '.')
-            .unwrap_or(s.len()),
-    );
-    let v: f64 = num.parse().with_context(|| format!("bad duration `{s}`"))?;
-    let secs = match unit {
-        "" | "s" => v,
-        "ms" => v / 1e3,
-        "m" | "min" => v * 60.0,
-        "h" => v * 3600.0,
-        _ => bail!("bad duration unit in `{s}` (use s, m or h)"),
-    };
-    Ok(std::time::Duration::from_secs_f64(secs))
-}
-
-fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
-    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-    use std::sync::Arc;
-    let cfg = fragrace::fuzz::FuzzConfig {
-        out: a.out.clone(),
-        time: a.time.as_deref().map(parse_duration).transpose()?,
-        iterations: a.iterations,
-        algos: a.algo.clone(),
-        jobs: a.jobs,
-        seed: a.seed,
-        resume: a.resume,
-        meshes: a.meshes.clone(),
-        shrink_budget: std::time::Duration::from_secs(a.shrink_secs),
-        max_size: a.max_size,
-        scenes: a.scene.clone(),
-        occupancy: fuzz_occupancy(a)?,
-    };
-    if cfg.time.is_none() && cfg.iterations.is_none() {
-        bail!("give --time or --iterations (a campaign needs a budget)");
-    }
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // Ctrl-C: finish the runs in flight, save the state, exit cleanly.
-        let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
-    }
-    let progress = fragrace::fuzz::Progress {
-        executions: AtomicU64::new(0),
-        cases: AtomicU64::new(0),
-        violations: AtomicU64::new(0),
-    };
-    let bar = indicatif::ProgressBar::new_spinner();
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{spinner} {elapsed_precise} {msg}")
-            .expect("valid template"),
-    );
-    let start = Instant::now();
-    let state = std::thread::scope(|s| {
-        let h = s.spawn(|| fragrace::fuzz::campaign(&cfg, &stop, &progress));
-        while !h.is_finished() {
-            let e = progress.executions.load(Ordering::Relaxed);
-            bar.set_message(format!(
-                "{e} executions ({:.1}/s), {} cases, {} violations",
-                e as f64 / start.elapsed().as_secs_f64().max(1e-3),
-                progress.cases.load(Ordering::Relaxed),
-                progress.violations.load(Ordering::Relaxed)
-            ));
-            bar.tick();
-            std::thread::sleep(std::time::Duration::from_millis(100));
-        }
-        h.join().expect("campaign thread")
-    })?;
-    bar.finish_and_clear();
-    if a.json {
-        println!("{}", serde_json::to_string(&state)?);
-        return Ok(());
-    }
-    println!(
-        "{} executions in {:.1} s ({:.1}/s): {} violations, {} expected findings, {} case files in {}",
-        state.executions,
-        state.elapsed_s,
-        state.executions as f64 / state.elapsed_s.max(1e-3),
-        state.violations,
-        state.expected_findings,
-        state.cases.len(),
-        a.out.display()
-    );
-    for (sig, n) in &state.signatures {
-        println!("  {n:>6}  {sig}");
-    }
-    let algos = state
-        .coverage
-        .keys()
-        .map(|k| k.split(" x ").next().unwrap_or(""))
-        .collect::<std::collections::BTreeSet<_>>()
-        .len();
-    println!(
-        "  coverage: {} algorithm x policy pairs over {algos} algorithms",
-        state.coverage.len()
-    );
-    for c in &state.cases {
-        println!(
-            "  case: {}  (fragrace replay {})",
-            c,
-            a.out.join(c).display()
-        );
-    }
-    Ok(())
-}
-
-fn cmd_replay(path: &Path, json: bool) -> Result<()> {
+fn cmd_replay(path: &Path, json: bool, memory_limit: Option<&str>) -> Result<()> {
     let case = fragrace::case::read(path)?;
+    let loaded = run::load(&case.spec).with_context(|| format!("{}", path.display()))?;
+    within_budget(&case.spec, &loaded, true, memory_limit)?;
+    drop(loaded);
     let r = fragrace::case::replay(&case)?;
     if json {
         println!(
@@ -911,7 +724,13 @@ fn cmd_replay(path: &Path, json: bool) -> Result<()> {
         );
     } else {
         println!("{}: {}", path.display(), case.verdict);
-        println!("  {}", case.spec.command("check"));
+        match &case.spec.scene {
+            // Its triangles are in the case file only.
+            SceneSpec::Inline { .. } => {
+                println!("  rerun with: {} replay {}", run::CLI, path.display())
+            }
+            _ => println!("  rerun with: {}", case.spec.command("check")),
+        }
         if let (Some(b), Some(a)) = (&case.original_size, &case.shrunk_size) {
             println!(
                 "  shrunk from {} triangles, {} pixels, window {} to {} triangles, {} pixels, window {}, {} schedule steps",
@@ -937,117 +756,6 @@ fn cmd_replay(path: &Path, json: bool) -> Result<()> {
     }
     if !r.holds {
         std::process::exit(1);
-    }
-    Ok(())
-}
-
-fn cmd_report(a: &ReportArgs) -> Result<()> {
-    let algos: Vec<String> = if a.algo.is_empty() {
-        fragrace_kernels::names()
-            .into_iter()
-            .map(String::from)
-            .collect()
-    } else {
-        a.algo.clone()
-    };
-    let exec =
-        run::exec_config(&a.exec, &a.policy, a.seed, a.threads, 64).map_err(anyhow::Error::msg)?;
-    let occupancy = match a.occupancy {
-        Some(d) => {
-            let o = fragrace_kernels::occupancy::Occupancy {
-                d,
-                range: a.range.unwrap_or_default(),
-                fill: Default::default(),
-            };
-            o.validate(a.k)?;
-            Some(o)
-        }
-        None if a.range.is_some() => {
-            bail!("--range configures occupancy culling: add --occupancy D (1 to 64)")
-        }
-        None => None,
-    };
-    // The occupancy culling of one algorithm's runs, and its row name.
-    let culled = |name: &str| {
-        let takes = fragrace_kernels::algorithm(name).is_some_and(|x| x.takes_occupancy());
-        match occupancy {
-            Some(o) if takes => (Some(o), format!("{name}+occ")),
-            _ => (None, name.to_string()),
-        }
-    };
-    let scene_spec = |s: &str| {
-        if s.contains(".obj") {
-            SceneSpec::Obj {
-                path: s.into(),
-                sha256: None,
-            }
-        } else {
-            SceneSpec::Builtin(s.into())
-        }
-    };
-    if let Some(views) = a.views {
-        let scene = a.scenes.first().context("one scene for --views")?;
-        let mut series: Vec<(String, Vec<f64>)> =
-            algos.iter().map(|n| (n.clone(), Vec::new())).collect();
-        for v in 0..views {
-            let mut spec = RunSpec::new(scene_spec(scene), "truth");
-            spec.width = a.size;
-            spec.height = a.size;
-            spec.camera = Camera::new(360.0 * v as f32 / views as f32, 0.0);
-            spec.exec = exec.clone();
-            spec.params.k = a.k;
-            let loaded = run::load(&spec)?;
-            let truth = run::truth(&spec, &loaded)?;
-            for (name, eprs) in &mut series {
-                let mut s = spec.clone();
-                s.algo = name.clone();
-                s.params.occupancy = culled(name).0;
-                eprs.push(run::check_with(&s, &loaded, &truth)?.metrics.epr);
-            }
-            eprintln!("view {}/{views}", v + 1);
-        }
-        println!("azimuth,{}", algos.join(","));
-        for v in 0..views as usize {
-            let row: Vec<String> = series.iter().map(|(_, e)| format!("{:.6}", e[v])).collect();
-            println!("{:.1},{}", 360.0 * v as f32 / views as f32, row.join(","));
-        }
-        if let Some(out) = &a.out {
-            fragrace::output::write_plot(out, "EPR over azimuth", &series)?;
-        }
-        return Ok(());
-    }
-    println!("| algorithm | scene | EPR | R_h | bytes/pixel | dropped | hazards (lost/race/torn) | time ms |");
-    println!("|---|---|---|---|---|---|---|---|");
-    for scene in &a.scenes {
-        let mut spec = RunSpec::new(scene_spec(scene), "truth");
-        spec.width = a.size;
-        spec.height = a.size;
-        spec.exec = exec.clone();
-        spec.params.k = a.k;
-        let loaded = run::load(&spec)?;
-        let truth = run::truth(&spec, &loaded)?;
-        for name in &algos {
-            let mut s = spec.clone();
-            s.algo = name.clone();
-            let (occ, row) = culled(name);
-            s.params.occupancy = occ;
-            let c = run::check_with(&s, &loaded, &truth)?;
-            let r = &c.rendered.result;
-            let hz = r.report.hazards;
-            println!(
-                "| {} | {} | {:.6} | {:.4} | {:.1} | {} | {}/{}/{} | {:.1} |",
-                row,
-                scene,
-                c.metrics.epr,
-                c.metrics.robustness,
-                r.storage_bytes as f64 / (a.size as f64 * a.size as f64),
-                r.dropped,
-                hz.lost_updates,
-                hz.races,
-                hz.torn,
-                c.rendered.wall_ms
-            );
-        }
     }
     Ok(())
 }

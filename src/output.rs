@@ -136,3 +136,48 @@ pub fn write_plot(path: &Path, _title: &str, series: &[(String, Vec<f64>)]) -> s
     }
     write_png(path, w, h, buf)
 }
+
+/// An output that cannot be written, named.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: cannot write {what} there: {cause}", path.display())]
+pub struct OutputError {
+    pub path: std::path::PathBuf,
+    pub what: &'static str,
+    pub cause: std::io::Error,
+}
+
+/// Checks, before any computation, that a file can be written at `path` (its directory
+/// exists and takes a new file), by creating and removing a probe file beside it.
+pub fn check_writable(path: &Path, what: &'static str) -> Result<(), OutputError> {
+    let err = |cause| OutputError {
+        path: path.to_path_buf(),
+        what,
+        cause,
+    };
+    if path.is_dir() {
+        return Err(err(std::io::Error::other("it is a directory")));
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    probe(dir).map_err(err)
+}
+
+/// Checks, before any computation, that files can be written in directory `dir` (created
+/// if missing).
+pub fn check_dir(dir: &Path, what: &'static str) -> Result<(), OutputError> {
+    let err = |cause| OutputError {
+        path: dir.to_path_buf(),
+        what,
+        cause,
+    };
+    std::fs::create_dir_all(dir).map_err(err)?;
+    probe(dir).map_err(err)
+}
+
+fn probe(dir: &Path) -> std::io::Result<()> {
+    let p = dir.join(format!(".fragrace-probe-{}", std::process::id()));
+    std::fs::File::create(&p)?;
+    std::fs::remove_file(&p)
+}

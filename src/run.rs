@@ -144,15 +144,17 @@ impl RunSpec {
         s
     }
 
-    /// A command line that reproduces this run (for built-in and OBJ scenes).
+    /// A command line that reproduces this run, in the README's form (`cargo run --release
+    /// -- VERB ...`, from the repository). An inline scene (fuzz and shrunk cases) has no
+    /// command-line form: its case file replays it (`replay CASE.json`).
     pub fn command(&self, verb: &str) -> String {
         let scene = match &self.scene {
             SceneSpec::Builtin(n) => format!("--scene {n}"),
             SceneSpec::Obj { path, .. } => format!("--obj {}", path.display()),
-            SceneSpec::Inline { .. } => "--case CASE.json".into(),
+            SceneSpec::Inline { .. } => return format!("{CLI} replay CASE.json"),
         };
         let mut c = format!(
-            "fragrace {verb} {scene} --algo {} --width {} --height {} --azimuth {} --elevation {} --k {} --exec {}",
+            "{CLI} {verb} {scene} --algo {} --width {} --height {} --azimuth {} --elevation {} --k {} --exec {}",
             self.algo, self.width, self.height, self.camera.azimuth, self.camera.elevation, self.params.k,
             self.exec.mode.name()
         );
@@ -197,6 +199,10 @@ impl RunSpec {
     }
 }
 
+/// How printed commands start: the README's way to run fragrace from the repository (after
+/// `cargo install --path .`, `fragrace` alone does the same).
+pub const CLI: &str = "cargo run --release --";
+
 /// Why a run could not happen.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -217,8 +223,8 @@ pub enum RunError {
         want: String,
         got: String,
     },
-    #[error("viewport {0}x{1}: width and height must be between 1 and {max}", max = fragrace_emu::framebuffer::MAX_DIMENSION)]
-    Viewport(u32, u32),
+    #[error(transparent)]
+    Spec(#[from] crate::validate::SpecError),
 }
 
 /// A loaded scene plus its frame.
@@ -238,12 +244,9 @@ impl Loaded {
     }
 }
 
-/// Loads the scene of a spec and checks its viewport.
+/// Checks the spec ([`RunSpec::validate`]) and loads its scene.
 pub fn load(spec: &RunSpec) -> Result<Loaded, RunError> {
-    let max = fragrace_emu::framebuffer::MAX_DIMENSION;
-    if spec.width == 0 || spec.height == 0 || spec.width > max || spec.height > max {
-        return Err(RunError::Viewport(spec.width, spec.height));
-    }
+    spec.validate()?;
     let scene = spec.scene.load()?;
     let view_proj = scene.view_proj(&spec.camera, spec.width, spec.height);
     Ok(Loaded { scene, view_proj })
@@ -452,36 +455,29 @@ pub fn digest(r: &AlgoResult) -> String {
     h.finalize().iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// Parses an executor description from CLI-style parts.
+/// Parses an executor description from CLI-style parts (the values are checked by
+/// [`RunSpec::validate`], not clamped here).
 pub fn exec_config(
     exec: &str,
     policy: &str,
     seed: u64,
     threads: Option<usize>,
     window: usize,
-) -> Result<ExecConfig, String> {
-    let threads = threads
-        .unwrap_or_else(fragrace_emu::exec::default_threads)
-        .max(1);
+) -> Result<ExecConfig, crate::validate::SpecError> {
+    let threads = threads.unwrap_or_else(fragrace_emu::exec::default_threads);
     let mode = match exec {
         "ordered" => ExecMode::Ordered,
         "parallel" => ExecMode::Parallel,
         "scheduled" => {
-            let policy: Policy = policy
-                .parse()
-                .map_err(|e: fragrace_emu::exec::PolicyParseError| e.to_string())?;
+            let policy: Policy = policy.parse()?;
             ExecMode::Scheduled(ScheduleConfig {
                 policy,
                 seed,
-                window: window.max(1),
+                window,
                 record: false,
             })
         }
-        other => {
-            return Err(format!(
-                "unknown executor `{other}`: expected ordered, parallel or scheduled"
-            ))
-        }
+        other => return Err(crate::validate::SpecError::UnknownExec(other.to_string())),
     };
     Ok(ExecConfig {
         mode,

@@ -276,7 +276,7 @@ fn bad_input_gets_a_clear_error() {
     fails_with(&["render", "--algo", "nope"], "unknown algorithm");
     fails_with(
         &["render", "--exec", "scheduled", "--policy", "pct:0"],
-        "unknown policy",
+        "policy `pct:0`: depth `0` must be an integer from 1",
     );
     fails_with(
         &["replay", &obj("case.json", b"{\"version\": 1}")],

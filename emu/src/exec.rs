@@ -15,11 +15,13 @@
 //! This module knows nothing of rasterization or algorithms: it is handed fragment inputs
 //! in API order and a kernel, and returns each fragment's outputs.
 
+mod limits;
 mod policy;
 mod run;
 mod simt;
 mod threads;
 
+pub use limits::{max_threads, ExecConfigError, MAX_LANES, MAX_SIMT, MAX_WINDOW};
 pub use policy::{Policy, PolicyParseError};
 pub use run::Execution;
 pub use run::Fault;

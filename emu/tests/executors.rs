@@ -151,9 +151,76 @@ fn policies_parse_and_print() {
         let p: Policy = s.parse().unwrap();
         assert_eq!(p.to_string(), s);
     }
-    assert!("pct:0".parse::<Policy>().is_err());
-    assert!("bytes:0".parse::<Policy>().is_err());
-    assert!("nope".parse::<Policy>().is_err());
+    use fragrace_emu::exec::PolicyParseError;
+    // A known policy with a bad value is a bad value, not an unknown policy.
+    assert!(matches!(
+        "pct:0".parse::<Policy>(),
+        Err(PolicyParseError::BadValue {
+            name: "depth",
+            min: 1,
+            ..
+        })
+    ));
+    assert!(matches!(
+        "bytes:0".parse::<Policy>(),
+        Err(PolicyParseError::BadHex(_))
+    ));
+    // Not a char boundary at an even offset: an error, not a panic.
+    assert!(matches!(
+        "bytes:\u{e9}1".parse::<Policy>(),
+        Err(PolicyParseError::BadHex(_))
+    ));
+    assert!(matches!(
+        "nope".parse::<Policy>(),
+        Err(PolicyParseError::Unknown(_))
+    ));
+}
+
+#[test]
+fn exec_settings_out_of_range_are_refused_by_name() {
+    use fragrace_emu::exec::{ExecConfigError, MAX_WINDOW};
+    use fragrace_emu::{ExecMode, ScheduleConfig};
+    let name_of = |c: &ExecConfig| match c.validate() {
+        Err(ExecConfigError::OutOfRange { name, .. }) => name,
+        Ok(()) => "ok",
+    };
+    let sched = |window, policy| ExecConfig {
+        mode: ExecMode::Scheduled(ScheduleConfig {
+            policy,
+            window,
+            ..ScheduleConfig::default()
+        }),
+        ..ExecConfig::default()
+    };
+    assert_eq!(name_of(&ExecConfig::default()), "ok");
+    assert_eq!(name_of(&sched(MAX_WINDOW, Policy::Random)), "ok");
+    assert_eq!(name_of(&sched(0, Policy::Random)), "window (--window)");
+    assert_eq!(
+        name_of(&sched(MAX_WINDOW + 1, Policy::Random)),
+        "window (--window)"
+    );
+    assert_eq!(
+        name_of(&sched(8, Policy::Pct { depth: 0 })),
+        "pct depth (--policy pct:D)"
+    );
+    let threads = ExecConfig {
+        threads: fragrace_emu::exec::max_threads() + 1,
+        ..ExecConfig::default()
+    };
+    assert_eq!(name_of(&threads), "threads (--threads)");
+    let lanes = ExecConfig {
+        batch: 0,
+        ..ExecConfig::default()
+    };
+    assert_eq!(
+        name_of(&lanes),
+        "lanes per warp (--lanes, `batch` in case files)"
+    );
+    let steps = ExecConfig {
+        max_steps: 0,
+        ..ExecConfig::default()
+    };
+    assert_eq!(name_of(&steps), "max_steps");
 }
 
 struct OutOfBounds {

@@ -14,6 +14,7 @@ pub mod algo;
 pub mod basic;
 pub mod common;
 pub mod kbuffer;
+pub mod limits;
 pub mod occupancy;
 pub mod oracle;
 pub mod peeling;

@@ -53,45 +53,74 @@ impl fmt::Display for Policy {
 
 /// A policy string that does not parse.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
-#[error(
-    "unknown policy `{0}`: expected random, pct:D, warp:N, reverse, fifo, far-first or bytes:HEX"
-)]
-pub struct PolicyParseError(pub String);
+pub enum PolicyParseError {
+    /// No policy has this name.
+    #[error(
+        "unknown policy `{0}`: expected random, pct:D, warp:N, reverse, fifo, far-first or bytes:HEX"
+    )]
+    Unknown(String),
+    /// A known policy with a value out of its range (`pct:0`, `warp:x`).
+    #[error("policy `{policy}`: {name} `{value}` must be an integer from {min} to {max}")]
+    BadValue {
+        policy: String,
+        name: &'static str,
+        value: String,
+        min: u32,
+        max: u32,
+    },
+    /// `bytes:` with something other than pairs of hexadecimal digits.
+    #[error(
+        "policy `{0}`: bytes:HEX takes an even number of hexadecimal digits (00 to ff per step)"
+    )]
+    BadHex(String),
+}
 
 impl FromStr for Policy {
     type Err = PolicyParseError;
     fn from_str(s: &str) -> Result<Policy, PolicyParseError> {
-        let err = || PolicyParseError(s.to_string());
         let (name, arg) = match s.split_once(':') {
             Some((n, a)) => (n, Some(a)),
             None => (s, None),
         };
-        let num = |d: u32| -> Result<u32, PolicyParseError> {
+        let num = |d: u32, what: &'static str| -> Result<u32, PolicyParseError> {
             match arg {
                 None => Ok(d),
-                Some(a) => a.parse::<u32>().ok().filter(|&v| v >= 1).ok_or_else(err),
+                Some(a) => a.parse::<u32>().ok().filter(|&v| v >= 1).ok_or_else(|| {
+                    PolicyParseError::BadValue {
+                        policy: s.to_string(),
+                        name: what,
+                        value: a.to_string(),
+                        min: 1,
+                        max: u32::MAX,
+                    }
+                }),
             }
         };
         Ok(match name {
             "random" => Policy::Random,
-            "pct" => Policy::Pct { depth: num(3)? },
-            "warp" => Policy::Warp { lanes: num(32)? },
+            "pct" => Policy::Pct {
+                depth: num(3, "depth")?,
+            },
+            "warp" => Policy::Warp {
+                lanes: num(32, "lanes")?,
+            },
             "reverse" => Policy::Reverse,
             "fifo" => Policy::Fifo,
             "far-first" => Policy::FarFirst,
             "bytes" => {
+                let bad = || PolicyParseError::BadHex(s.to_string());
                 let a = arg.unwrap_or("");
-                if a.len() % 2 != 0 {
-                    return Err(err());
+                if a.len() % 2 != 0 || !a.is_ascii() {
+                    return Err(bad());
                 }
                 let bytes = (0..a.len())
                     .step_by(2)
                     .map(|i| u8::from_str_radix(&a[i..i + 2], 16))
                     .collect::<Result<Vec<u8>, _>>()
-                    .map_err(|_| err())?;
+                    .map_err(|_| bad())?;
                 Policy::Bytes(bytes)
             }
-            _ => return Err(err()),
+            _ => return Err(PolicyParseError::Unknown(s.to_string())),
         })
     }
 }

@@ -1,0 +1,137 @@
+//! `fragrace bench`: frames timed as the llvmpipe peer times them.
+
+use anyhow::{bail, Context, Result};
+use fragrace::run;
+
+use crate::{merge, spec_of, within_budget, BenchArgs};
+
+pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
+    let spec = spec_of(&a.run, given)?;
+    fragrace::validate::at_least_one("frames", a.frames as u64)?;
+    // The floor replays `count`'s operation (one atomic add per fragment); other
+    // algorithms do other things per fragment.
+    if a.floor && spec.algo != "count" {
+        bail!(
+            "--floor measures the floor of `count` (its atomic adds alone), not of `{}`",
+            spec.algo
+        );
+    }
+    let loaded = run::load(&spec)?;
+    let memory = within_budget(&spec, &loaded, false, a.run.memory_limit.as_deref())?;
+    for _ in 0..a.warmup {
+        run::render(&spec, &loaded)?;
+    }
+    // A frame is what the llvmpipe peer times as one (clears, passes, resolve); the
+    // self-checks that read whole buffers back run after it, timed apart (the peer checks
+    // untimed). Every frame is checked.
+    let mut times = Vec::new();
+    let mut pass_times = Vec::new();
+    let mut check_times = Vec::new();
+    let mut checked_times = Vec::new();
+    let mut imbalance_times = Vec::new();
+    // Hazard-prone algorithms may fail a check under real races: reported, not fatal.
+    let mut failed_checks = 0;
+    let mut last = None;
+    for _ in 0..a.frames {
+        // The previous frame's buffers are freed first, so that the allocator hands the
+        // same memory to this frame, as a renderer reuses its buffers from frame to frame
+        // (and as the llvmpipe peer clears and reuses one storage buffer).
+        drop(last.take());
+        let r = run::render(&spec, &loaded)?;
+        failed_checks += r.result.checks.iter().filter(|c| !c.passed).count();
+        times.push(r.wall_ms);
+        check_times.push(r.check_ms);
+        checked_times.push(r.wall_ms + r.check_ms);
+        pass_times.push(r.result.report.wall.as_secs_f64() * 1e3);
+        imbalance_times.push(r.result.report.imbalance.as_secs_f64() * 1e3);
+        last = Some(r);
+    }
+    let r = last.expect("one frame");
+    let ms = fragrace::floor::median(&mut times);
+    let check_ms = fragrace::floor::median(&mut check_times);
+    let checked_ms = fragrace::floor::median(&mut checked_times);
+    // The passes alone (transform, binning, shading, fixed function), without buffer
+    // allocation and clears.
+    let pass_ms = fragrace::floor::median(&mut pass_times);
+    // Threads waiting for the last one at the end of shading, summed over threads.
+    let imbalance_ms = fragrace::floor::median(&mut imbalance_times);
+    let stats = &r.result.report.stats;
+    let tris = loaded.scene.mesh.triangle_count() as f64 * stats.geometry_passes.max(1) as f64;
+    let floor = if a.floor {
+        let counts = r.result.counts.as_deref().with_context(|| {
+            format!(
+                "--floor replays the per-pixel counts of `count`; `{}` has none",
+                spec.algo
+            )
+        })?;
+        let cfg = fragrace::floor::FloorConfig {
+            counts,
+            width: spec.width,
+            height: spec.height,
+            tile: fragrace::emu::raster::effective_tile_size(
+                fragrace::emu::raster::RasterState::default().tile_size,
+            ),
+            threads: spec.exec.threads,
+            frames: a.frames,
+        };
+        Some(fragrace::floor::count_floor(&cfg).context("the floor's replay did not add up")?)
+    } else {
+        None
+    };
+    let mut v = serde_json::json!({
+        "algo": spec.algo,
+        "scene": spec.scene.name(),
+        "triangles": loaded.scene.mesh.triangle_count(),
+        "width": spec.width, "height": spec.height,
+        "exec": spec.exec.mode.name(),
+        "threads": spec.exec.threads,
+        "frames": times.len(),
+        "median_ms": ms,
+        "passes_median_ms": pass_ms,
+        "imbalance_median_ms": imbalance_ms,
+        "check_median_ms": check_ms,
+        "checked_median_ms": checked_ms,
+        "failed_checks": failed_checks,
+        "min_ms": times.first(),
+        "max_ms": times.last(),
+        "fragments": stats.fragments_generated,
+        "fragments_per_s": stats.fragments_generated as f64 / (ms / 1e3),
+        "triangles_per_s": tris / (ms / 1e3),
+        "steps": stats.steps,
+        "steps_per_s": stats.steps as f64 / (ms / 1e3),
+    });
+    merge(&mut v, &memory);
+    v["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
+    if let Some(f) = floor {
+        v["floor_atomics_ms"] = f.atomics_ms.into();
+        v["floor_frame_ms"] = f.frame_ms.into();
+    }
+    if a.run.json {
+        println!("{v}");
+    } else {
+        println!(
+            "{} on {} ({} triangles) {}x{}, {} with {} threads: median {:.2} ms over {} frames (min {:.2}, max {:.2}); passes alone {:.2} ms; self-checks after it {:.2} ms (frame and checks {:.2} ms)\n  {:.1} M fragments/s, {:.1} M triangles/s, {:.2} M steps/s",
+            spec.algo, spec.scene.name(), loaded.scene.mesh.triangle_count(), spec.width, spec.height, spec.exec.mode.name(), spec.exec.threads,
+            ms, times.len(), times[0], times[times.len() - 1], pass_ms, check_ms, checked_ms,
+            stats.fragments_generated as f64 / (ms / 1e3) / 1e6, tris / (ms / 1e3) / 1e6, stats.steps as f64 / (ms / 1e3) / 1e6
+        );
+        if spec.exec.threads > 1 {
+            println!(
+                "  threads idle at the end of shading, waiting for the last one: {imbalance_ms:.3} ms (median, summed over threads)"
+            );
+        }
+        if failed_checks > 0 {
+            println!(
+                "  {failed_checks} failed checks over the frames (see `{} render`)",
+                run::CLI
+            );
+        }
+        if let Some(f) = floor {
+            println!(
+                "  floor: the frame's {} atomic adds alone {:.2} ms; with a fresh zeroed buffer {:.2} ms",
+                stats.fragments_generated, f.atomics_ms, f.frame_ms
+            );
+        }
+    }
+    Ok(())
+}
