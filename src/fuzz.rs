@@ -44,8 +44,7 @@ pub struct FuzzConfig {
     pub max_size: u32,
     /// Built-in scenes to draw from only (empty: the random mix).
     pub scenes: Vec<String>,
-    /// Occupancy culling for every algorithm that takes it (`--occupancy`); `None`: a
-    /// quarter of those runs are culled with a random map size and range.
+    /// Occupancy culling for every algorithm that takes it (`--occupancy`); `None`: none.
     pub occupancy: Option<fragrace_kernels::occupancy::Occupancy>,
 }
 
@@ -235,18 +234,9 @@ pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i:
     if exec.mode != ExecMode::Parallel && rng.gen_bool(0.1) {
         exec.simt = [4, 32][rng.gen_range(0..2)];
     }
-    // Occupancy culling, drawn after everything else for the same reason.
-    use fragrace_kernels::occupancy::{FillMode, Occupancy, RangeSource};
+    // Occupancy culling, for the algorithms that take it, when the campaign asks for it.
     let takes = fragrace_kernels::algorithm(&algo).is_some_and(|a| a.takes_occupancy());
-    let occupancy = match cfg.occupancy {
-        Some(o) if takes => Some(o),
-        None if takes && rng.gen_bool(0.25) => Some(Occupancy {
-            d: [1, 2, 32, 64][rng.gen_range(0..4)],
-            range: [RangeSource::Exact, RangeSource::Bbox, RangeSource::Hull][rng.gen_range(0..3)],
-            fill: FillMode::Atomic,
-        }),
-        _ => None,
-    };
+    let occupancy = cfg.occupancy.filter(|_| takes);
     RunSpec {
         scene,
         camera,

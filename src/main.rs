@@ -88,16 +88,9 @@ struct FuzzArgs {
     /// Only these built-in scenes (comma-separated; default: a random mix).
     #[arg(long, value_delimiter = ',')]
     scene: Vec<String>,
-    /// Occupancy culling with D words per pixel for every fuzzed algorithm that takes it
-    /// (default: a quarter of their runs culled, with random D and range).
-    #[arg(long, value_name = "D")]
-    occupancy: Option<u32>,
-    /// With --occupancy: exact, bbox or hull.
-    #[arg(long)]
-    range: Option<fragrace_kernels::occupancy::RangeSource>,
-    /// With --occupancy: atomic or plain (racy by design).
-    #[arg(long)]
-    occupancy_fill: Option<fragrace_kernels::occupancy::FillMode>,
+    /// Occupancy culling for every fuzzed algorithm that takes it (default: none).
+    #[command(flatten)]
+    occupancy: OccupancyArgs,
     #[arg(long)]
     json: bool,
     /// Refuse a campaign whose runs in flight are estimated above this much memory (default:
@@ -132,13 +125,10 @@ struct ReportArgs {
     views: Option<u32>,
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Occupancy culling with D words per pixel for the algorithms that take it (their
-    /// rows are named `NAME+occ`); the others run as they are.
-    #[arg(long, value_name = "D")]
-    occupancy: Option<u32>,
-    /// With --occupancy: exact, bbox or hull.
-    #[arg(long)]
-    range: Option<fragrace_kernels::occupancy::RangeSource>,
+    /// Occupancy culling for the algorithms that take it (their rows are named `NAME+occ`);
+    /// the others run as they are.
+    #[command(flatten)]
+    occupancy: OccupancyArgs,
     /// Refuse a report whose largest run is estimated above this much memory (default: half
     /// of the physical memory).
     #[arg(long, value_name = "SIZE")]
@@ -219,19 +209,8 @@ struct RunArgs {
     /// Opacity of every fragment in the OIT composite.
     #[arg(long, default_value_t = 0.3)]
     alpha: f32,
-    /// Occupancy-map culling in front of the k-buffer's capture pass, with D words (32 D
-    /// depth sub-intervals) per pixel, 1 to 64 and at least k/32 (`fragrace list` says
-    /// which algorithms take it).
-    #[arg(long, value_name = "D")]
-    occupancy: Option<u32>,
-    /// Occupancy culling: the per-pixel depth range from the scene (`exact`), its bounding
-    /// box (`bbox`) or its convex hull (`hull`). Default exact.
-    #[arg(long)]
-    range: Option<fragrace_kernels::occupancy::RangeSource>,
-    /// Occupancy culling: set the map's bits with `atomic` OR (default), or with a `plain`
-    /// load, OR and store (racy by design: bits are lost).
-    #[arg(long)]
-    occupancy_fill: Option<fragrace_kernels::occupancy::FillMode>,
+    #[command(flatten)]
+    occupancy: OccupancyArgs,
     /// Output PNG.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -326,7 +305,7 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
             k: a.k,
             alpha: a.alpha,
             spin_cap: a.spin_cap,
-            occupancy: occupancy_of(a)?,
+            occupancy: a.occupancy.get()?,
             ..Params::default()
         },
         exec,
@@ -335,19 +314,39 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
     Ok(spec)
 }
 
-/// The occupancy-culling parameters of a run; `--range` and `--occupancy-fill` mean
-/// nothing without `--occupancy` and are refused alone.
-fn occupancy_of(a: &RunArgs) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
-    match a.occupancy {
-        Some(d) => Ok(Some(fragrace_kernels::occupancy::Occupancy {
-            d,
-            range: a.range.unwrap_or_default(),
-            fill: a.occupancy_fill.unwrap_or_default(),
-        })),
-        None if a.range.is_some() || a.occupancy_fill.is_some() => {
-            bail!("--range and --occupancy-fill configure occupancy culling: add --occupancy D (1 to 64)")
+/// The occupancy-culling options of `render`, `check`, `bench`, `fuzz` and `report`.
+#[derive(Args, Clone)]
+struct OccupancyArgs {
+    /// Occupancy-map culling in front of the k-buffer's capture pass, with D words (32 D
+    /// depth sub-intervals) per pixel, 1 to 64 and at least k/32 (`fragrace list` says
+    /// which algorithms take it).
+    #[arg(long, value_name = "D")]
+    occupancy: Option<u32>,
+    /// Occupancy culling: the per-pixel depth range from the scene (`exact`), its bounding
+    /// box (`bbox`) or its convex hull (`hull`). Default exact.
+    #[arg(long)]
+    range: Option<fragrace_kernels::occupancy::RangeSource>,
+    /// Occupancy culling: set the map's bits with `atomic` OR (default), or with a `plain`
+    /// load, OR and store (racy by design: bits are lost).
+    #[arg(long)]
+    occupancy_fill: Option<fragrace_kernels::occupancy::FillMode>,
+}
+
+impl OccupancyArgs {
+    /// The stage's parameters; `--range` and `--occupancy-fill` mean nothing without
+    /// `--occupancy` and are refused alone.
+    fn get(&self) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
+        match self.occupancy {
+            Some(d) => Ok(Some(fragrace_kernels::occupancy::Occupancy {
+                d,
+                range: self.range.unwrap_or_default(),
+                fill: self.occupancy_fill.unwrap_or_default(),
+            })),
+            None if self.range.is_some() || self.occupancy_fill.is_some() => {
+                bail!("--range and --occupancy-fill configure occupancy culling: add --occupancy D (1 to 64)")
+            }
+            None => Ok(None),
         }
-        None => Ok(None),
     }
 }
 

@@ -26,16 +26,8 @@ fn parse_duration(s: &str) -> Result<std::time::Duration> {
 /// The occupancy culling a fuzz campaign forces, checked against its algorithms: at
 /// least one of them must take it, and `d` must hold the largest k the campaign draws (16).
 fn fuzz_occupancy(a: &FuzzArgs) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
-    let Some(d) = a.occupancy else {
-        if a.range.is_some() || a.occupancy_fill.is_some() {
-            bail!("--range and --occupancy-fill configure occupancy culling: add --occupancy D (1 to 64)");
-        }
+    let Some(occ) = a.occupancy.get()? else {
         return Ok(None);
-    };
-    let occ = fragrace_kernels::occupancy::Occupancy {
-        d,
-        range: a.range.unwrap_or_default(),
-        fill: a.occupancy_fill.unwrap_or_default(),
     };
     occ.validate(16)?;
     let all = fragrace_kernels::algorithms();

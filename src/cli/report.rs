@@ -1,6 +1,6 @@
 //! `fragrace report`: tables of measured EPR, R_h, bytes per pixel and time, and EPR over views.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use fragrace::run::{self, RunSpec, SceneSpec};
 use fragrace::scene::Camera;
 
@@ -17,21 +17,10 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         a.algo.clone()
     };
     let exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, 64)?;
-    let occupancy = match a.occupancy {
-        Some(d) => {
-            let o = fragrace_kernels::occupancy::Occupancy {
-                d,
-                range: a.range.unwrap_or_default(),
-                fill: Default::default(),
-            };
-            o.validate(a.k)?;
-            Some(o)
-        }
-        None if a.range.is_some() => {
-            bail!("--range configures occupancy culling: add --occupancy D (1 to 64)")
-        }
-        None => None,
-    };
+    let occupancy = a.occupancy.get()?;
+    if let Some(o) = occupancy {
+        o.validate(a.k)?;
+    }
     // The occupancy culling of one algorithm's runs, and its row name.
     let culled = |name: &str| {
         let takes = fragrace_kernels::algorithm(name).is_some_and(|x| x.takes_occupancy());
