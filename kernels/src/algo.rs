@@ -30,6 +30,9 @@ pub struct Params {
     pub fab_capacity: u32,
     /// Background colour of the composite.
     pub background: [f32; 3],
+    /// Fragment merging: z-thickness and beta (the `merging` family).
+    #[serde(default)]
+    pub merge: crate::merging::MergeParams,
 }
 
 impl Default for Params {
@@ -42,6 +45,7 @@ impl Default for Params {
             buckets: 5,
             fab_capacity: 64,
             background: [1.0, 1.0, 1.0],
+            merge: crate::merging::MergeParams::default(),
         }
     }
 }

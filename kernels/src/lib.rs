@@ -14,6 +14,7 @@ pub mod algo;
 pub mod basic;
 pub mod common;
 pub mod kbuffer;
+pub mod merging;
 pub mod oracle;
 pub mod peeling;
 pub mod protocols;
