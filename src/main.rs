@@ -184,6 +184,14 @@ struct RunArgs {
     /// Opacity of every fragment in the OIT composite.
     #[arg(long, default_value_t = 0.3)]
     alpha: f32,
+    /// Merging algorithms: the z-thickness of every fragment, `NxP` (N times the z-resolution
+    /// P(z) of a 24-bit depth buffer, equation 9; `NxP:BITS` for other precisions) or a
+    /// fixed view depth (e.g. 0.01).
+    #[arg(long, default_value = "2xP", value_parser = parse_thickness)]
+    thickness: fragrace_kernels::merging::Thickness,
+    /// Merging algorithms: beta of equation 4 (SFM: 0 exact optics, 1 linear), in [0, 1].
+    #[arg(long, default_value_t = 0.0)]
+    beta: f32,
     /// Output PNG.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -254,6 +262,11 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
             fragrace_kernels::names().join(", ")
         );
     }
+    let merge = fragrace_kernels::merging::MergeParams {
+        thickness: a.thickness,
+        beta: a.beta,
+    };
+    merge.validate()?;
     Ok(RunSpec {
         scene,
         camera: Camera::new(a.azimuth, a.elevation),
@@ -264,6 +277,7 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
             k: a.k.max(1),
             alpha: a.alpha,
             spin_cap: a.spin_cap.max(1),
+            merge,
             ..Params::default()
         },
         exec,
@@ -393,6 +407,15 @@ fn print_summary(v: &serde_json::Value) {
             v["error_pixels"],
             v["robustness"].as_f64().unwrap_or(0.0),
             v["coplanarity"].as_f64().unwrap_or(0.0)
+        );
+    }
+    let im = &v["image"];
+    if !im.is_null() {
+        println!(
+            "  image vs the truth's composite: image EPR {:.6}  PSNR {:.2} dB  max channel difference {:.6}",
+            im["image_epr"].as_f64().unwrap_or(0.0),
+            im["psnr"].as_f64().unwrap_or(f64::INFINITY),
+            im["max_diff"].as_f64().unwrap_or(0.0)
         );
     }
     println!(
@@ -663,6 +686,11 @@ fn cmd_bench(a: &BenchArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+fn parse_thickness(s: &str) -> Result<fragrace_kernels::merging::Thickness, String> {
+    s.parse()
+        .map_err(|e: fragrace_kernels::merging::MergeParamError| e.to_string())
 }
 
 fn parse_binning(s: &str) -> Result<fragrace::emu::Binning, String> {

@@ -159,6 +159,12 @@ impl RunSpec {
         if self.params.spin_cap != Params::default().spin_cap {
             c += &format!(" --spin-cap {}", self.params.spin_cap);
         }
+        if self.params.merge != Params::default().merge {
+            c += &format!(
+                " --thickness {} --beta {}",
+                self.params.merge.thickness, self.params.merge.beta
+            );
+        }
         if let Some(s) = self.schedule() {
             c += &format!(
                 " --policy {} --seed {} --window {} --block {}",
@@ -382,6 +388,7 @@ pub fn summary_json(
         v["robustness"] = serde_json::json!(c.metrics.robustness);
         v["coplanarity"] = serde_json::json!(c.metrics.coplanarity);
         v["first_error"] = serde_json::json!(c.metrics.first_error);
+        v["image"] = serde_json::json!(c.metrics.image);
     }
     v
 }

@@ -13,16 +13,17 @@
 //! exact composite of the truth.
 
 pub mod algorithm1;
+mod dfb_sfm;
 pub mod ofm;
 pub mod record;
 pub mod sfm;
 pub mod thickness;
 
-pub use thickness::{DepthModel, MergeParamError, MergeParams, Thickness};
+pub use thickness::{DepthModel, MergeParamError, MergeParams, Thickness, ZModel};
 
 use crate::algo::Algorithm;
 
 /// The algorithms of this family.
 pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    Vec::new()
+    vec![Box::new(dfb_sfm::DfbSfm)]
 }

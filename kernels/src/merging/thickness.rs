@@ -19,7 +19,8 @@
 
 use glam::Mat4;
 
-use crate::algo::AlgoError;
+use super::record::ZFrag;
+use crate::algo::{AlgoError, Frame, Params};
 
 /// How thick each fragment is.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -147,6 +148,17 @@ impl std::str::FromStr for Thickness {
     }
 }
 
+impl std::fmt::Display for Thickness {
+    /// The syntax [`Thickness::from_str`](std::str::FromStr) reads.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Thickness::Fixed(t) => write!(f, "{t}"),
+            Thickness::ZResolution { multiple, bits: 24 } => write!(f, "{multiple}xP"),
+            Thickness::ZResolution { multiple, bits } => write!(f, "{multiple}xP:{bits}"),
+        }
+    }
+}
+
 /// How window depth maps to view depth for a frame's projection.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum DepthModel {
@@ -222,6 +234,34 @@ impl DepthModel {
             DepthModel::Affine { range } => range * unit,
         };
         p.abs() as f32
+    }
+}
+
+/// What a kernel needs to turn a rasterized fragment into a [`ZFrag`]: the frame's depth
+/// model, the thickness, and the opacity of every fragment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ZModel {
+    pub depth: DepthModel,
+    pub thickness: Thickness,
+    pub alpha: f32,
+}
+
+impl ZModel {
+    /// The model of `frame` under `params` (merge parameters checked).
+    pub fn of(frame: &Frame<'_>, params: &Params) -> Result<ZModel, MergeParamError> {
+        params.merge.validate()?;
+        Ok(ZModel {
+            depth: DepthModel::of(frame.view_proj)?,
+            thickness: params.merge.thickness,
+            alpha: params.alpha,
+        })
+    }
+
+    /// The fragment of primitive `prim` at window depth `window_depth`: its view depth, its
+    /// thickness there, its colour at the model's opacity.
+    pub fn fragment(&self, window_depth: f32, prim: u32) -> ZFrag {
+        let z = self.depth.view_depth(window_depth);
+        ZFrag::of_primitive(z, self.thickness.at(&self.depth, z), prim, self.alpha)
     }
 }
 
@@ -312,6 +352,8 @@ mod tests {
                 bits: 24
             }
         );
-        assert_eq!("2xP:16".parse::<Thickness>().unwrap().validate(), Ok(()));
+        for t in ["2xP:16", "2xP", "0.5", "0"] {
+            assert_eq!(t.parse::<Thickness>().unwrap().to_string(), t);
+        }
     }
 }
