@@ -17,6 +17,7 @@ mod dfb_sfm;
 pub mod ofm;
 pub mod record;
 pub mod sfm;
+mod skb;
 pub mod thickness;
 
 pub use thickness::{DepthModel, MergeParamError, MergeParams, Thickness, ZModel};
@@ -25,5 +26,9 @@ use crate::algo::Algorithm;
 
 /// The algorithms of this family.
 pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    vec![Box::new(dfb_sfm::DfbSfm)]
+    vec![
+        Box::new(skb::SkbOfm(skb::Sync::OrderedInterlock)),
+        Box::new(skb::SkbOfm(skb::Sync::Unsynchronized)),
+        Box::new(dfb_sfm::DfbSfm),
+    ]
 }

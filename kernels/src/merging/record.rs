@@ -56,6 +56,7 @@ impl ZFrag {
         ZFrag::new(z, t, [c[0], c[1], c[2]], alpha)
     }
 
+    /// Nothing merged: an empty slot (as [`ZFrag::EMPTY`] or zeroed memory).
     pub fn is_empty(&self) -> bool {
         self.n == 0.0
     }
