@@ -14,6 +14,7 @@
 
 pub mod algorithm1;
 mod dfb_sfm;
+mod kb_ofm;
 pub mod ofm;
 pub mod record;
 pub mod sfm;
@@ -30,5 +31,6 @@ pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
         Box::new(skb::SkbOfm(skb::Sync::OrderedInterlock)),
         Box::new(skb::SkbOfm(skb::Sync::Unsynchronized)),
         Box::new(dfb_sfm::DfbSfm),
+        Box::new(kb_ofm::KbOfm),
     ]
 }
