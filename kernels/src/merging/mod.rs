@@ -18,7 +18,7 @@ mod kb_ofm;
 pub mod ofm;
 pub mod record;
 pub mod sfm;
-mod skb;
+pub mod skb;
 pub mod thickness;
 
 pub use thickness::{DepthModel, MergeParamError, MergeParams, Thickness, ZModel};

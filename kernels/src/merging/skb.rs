@@ -56,6 +56,11 @@ pub(super) fn k_of(params: &Params) -> Result<u32, AlgoError> {
 pub enum Sync {
     /// Ordered pixel interlock around the read-modify-write.
     OrderedInterlock,
+    /// Unordered pixel interlock: mutual exclusion, entry in whatever order the executor
+    /// produced. Not registered: the test of OFM's order independence runs it (the merged
+    /// records are the same whatever the order; their visibilities up to rounding, as long
+    /// as no record goes to the tail).
+    UnorderedInterlock,
     /// None: the read-modify-write races.
     Unsynchronized,
 }
@@ -104,10 +109,12 @@ impl FragmentKernel for Store {
     fn info(&self) -> KernelInfo {
         let info = KernelInfo::new(match self.sync {
             Sync::OrderedInterlock => "skb-ofm-store",
+            Sync::UnorderedInterlock => "skb-ofm-mutex-store",
             Sync::Unsynchronized => "skb-ofm-unordered-store",
         });
         match self.sync {
             Sync::OrderedInterlock => info.with_interlock(InterlockMode::ORDERED),
+            Sync::UnorderedInterlock => info.with_interlock(InterlockMode::UNORDERED),
             Sync::Unsynchronized => info,
         }
     }
@@ -115,7 +122,8 @@ impl FragmentKernel for Store {
     async fn shade(&self, f: impl Fragment) {
         let (b, p) = (self.b, f.pixel_index());
         let mut g = self.model.fragment(f.depth(), f.primitive_id());
-        if self.sync == Sync::OrderedInterlock {
+        let locked = self.sync != Sync::Unsynchronized;
+        if locked {
             f.interlock_begin().await;
         }
         let before = f.load(b.count, p).await.min(b.k) as usize;
@@ -175,7 +183,7 @@ impl FragmentKernel for Store {
         if dirty != 0 {
             f.store(b.max_pos, p, farthest(&core[..n]) as u32).await;
         }
-        if self.sync == Sync::OrderedInterlock {
+        if locked {
             f.interlock_end().await;
         }
     }
@@ -217,6 +225,11 @@ impl Algorithm for SkbOfm {
                 "static k+-buffer + order-independent fragment merging: each fragment merged by OFM \
                  (mix operator) with the core records it overlaps, max array, tail record mixed \
                  with what falls behind, under ordered pixel interlock",
+                HazardClass::NeedsInterlock,
+            ),
+            Sync::UnorderedInterlock => (
+                "skb-ofm-mutex",
+                "skb-ofm under unordered pixel interlock: mutual exclusion, any entry order",
                 HazardClass::NeedsInterlock,
             ),
             Sync::Unsynchronized => (
@@ -317,7 +330,7 @@ impl Algorithm for SkbOfm {
         }
         let generated = stats.fragments_generated;
         let img_bad = image.iter().position(|v| v.iter().any(|c| !c.is_finite()));
-        let synced = self.0 == Sync::OrderedInterlock;
+        let synced = self.0 != Sync::Unsynchronized;
         let label = |name: &str| {
             if synced {
                 name.to_string()
