@@ -35,7 +35,7 @@ pub fn output_fragments(input: &[ZFrag], m: usize, beta: f32, out: &mut Vec<ZFra
                 if let Some(next) = fnext {
                     // lines 14-18: tail handling
                     cur.v = over(cur.v, next.v);
-                    cur.t = next.z - cur.z + cur.t;
+                    cur.t += next.z - cur.z; // t := fnext.z - fi.z + fi.t
                     cur.z = next.z;
                     cur.a += next.a;
                     cur.n += next.n;
