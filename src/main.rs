@@ -198,7 +198,7 @@ struct RunArgs {
     /// For `count`: per-pixel counts as little-endian u32, row-major, top row first.
     #[arg(long)]
     raw_out: Option<PathBuf>,
-    /// Directory for heatmaps (depth complexity, errors, hazards).
+    /// Directory for heatmaps (depth complexity, errors, hazards, image difference).
     #[arg(long)]
     heatmap: Option<PathBuf>,
     /// Print one JSON object on stdout.
@@ -369,6 +369,21 @@ fn write_outputs(
                 spec.height,
                 &errs,
             )?;
+            // The image against the truth's composite, in 8-bit steps of the largest
+            // channel difference (the heatmap scales to its maximum).
+            if let Some(im) = &c.metrics.image {
+                let steps: Vec<u32> = im
+                    .diff
+                    .iter()
+                    .map(|&d| (d.min(1.0) * 255.0).round() as u32)
+                    .collect();
+                fragrace::output::write_heatmap(
+                    &dir.join("image-diff.png"),
+                    spec.width,
+                    spec.height,
+                    &steps,
+                )?;
+            }
         }
     }
     Ok(())
