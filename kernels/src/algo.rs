@@ -30,8 +30,12 @@ pub struct Params {
     pub fab_capacity: u32,
     /// Background colour of the composite.
     pub background: [f32; 3],
-    /// Fragment merging: z-thickness and beta (the `merging` family).
-    #[serde(default)]
+    /// Fragment merging: z-thickness and beta (the `merging` family). Left out of case files
+    /// when default, so that files of runs that do not merge are as before.
+    #[serde(
+        default,
+        skip_serializing_if = "crate::merging::MergeParams::is_default"
+    )]
     pub merge: crate::merging::MergeParams,
 }
 

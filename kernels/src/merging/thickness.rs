@@ -88,6 +88,11 @@ impl From<MergeParamError> for AlgoError {
 }
 
 impl MergeParams {
+    /// Whether these are the defaults (left out of serialised parameters).
+    pub fn is_default(&self) -> bool {
+        *self == MergeParams::default()
+    }
+
     /// Checks every field against its range.
     pub fn validate(&self) -> Result<(), MergeParamError> {
         self.thickness.validate()?;
