@@ -1020,6 +1020,17 @@ pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
             } else {
                 None
             },
+            merge: fragrace_kernels::merging::MergeParams {
+                thickness: if bool::arbitrary(u)? {
+                    fragrace_kernels::merging::Thickness::Fixed(finite_f32(u)?)
+                } else {
+                    fragrace_kernels::merging::Thickness::ZResolution {
+                        multiple: finite_f32(u)?,
+                        bits: u32::arbitrary(u)?,
+                    }
+                },
+                beta: finite_f32(u)?,
+            },
         },
         exec: ExecConfig {
             mode,

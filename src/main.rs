@@ -211,13 +211,21 @@ struct RunArgs {
     alpha: f32,
     #[command(flatten)]
     occupancy: OccupancyArgs,
+    /// Merging algorithms: the z-thickness of every fragment, `NxP` (N times the z-resolution
+    /// P(z) of a 24-bit depth buffer, equation 9; `NxP:BITS` for other precisions) or a
+    /// fixed view depth (e.g. 0.01).
+    #[arg(long, default_value = "2xP", value_parser = parse_thickness)]
+    thickness: fragrace_kernels::merging::Thickness,
+    /// Merging algorithms: beta of equation 4 (SFM: 0 exact optics, 1 linear), in [0, 1].
+    #[arg(long, default_value_t = 0.0)]
+    beta: f32,
     /// Output PNG.
     #[arg(long)]
     out: Option<PathBuf>,
     /// For `count`: per-pixel counts as little-endian u32, row-major, top row first.
     #[arg(long)]
     raw_out: Option<PathBuf>,
-    /// Directory for heatmaps (depth complexity, errors, hazards).
+    /// Directory for heatmaps (depth complexity, errors, hazards, image difference, culled).
     #[arg(long)]
     heatmap: Option<PathBuf>,
     /// Print one JSON object on stdout.
@@ -306,6 +314,14 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
             alpha: a.alpha,
             spin_cap: a.spin_cap,
             occupancy: a.occupancy.get()?,
+            merge: {
+                let merge = fragrace_kernels::merging::MergeParams {
+                    thickness: a.thickness,
+                    beta: a.beta,
+                };
+                merge.validate()?;
+                merge
+            },
             ..Params::default()
         },
         exec,
@@ -489,6 +505,15 @@ fn print_summary(v: &serde_json::Value) {
         println!(
             "  C_p {:.4}: coplanarity, covered pixels with two fragments at exactly the same depth",
             v["coplanarity"].as_f64().unwrap_or(0.0)
+        );
+    }
+    let im = &v["image"];
+    if !im.is_null() {
+        println!(
+            "  image vs the truth's composite: image EPR {:.6}  PSNR {:.2} dB  max channel difference {:.6}",
+            im["image_epr"].as_f64().unwrap_or(0.0),
+            im["psnr"].as_f64().unwrap_or(f64::INFINITY),
+            im["max_diff"].as_f64().unwrap_or(0.0)
         );
     }
     println!(
@@ -703,6 +728,11 @@ fn cmd_list(json: bool) -> Result<()> {
     println!("\nscenes: {}", fragrace::scene::builtin_names().join(", "));
     println!("policies: random, pct:D, warp:N, reverse, fifo, far-first, bytes:HEX");
     Ok(())
+}
+
+fn parse_thickness(s: &str) -> Result<fragrace_kernels::merging::Thickness, String> {
+    s.parse()
+        .map_err(|e: fragrace_kernels::merging::MergeParamError| e.to_string())
 }
 
 fn parse_binning(s: &str) -> Result<fragrace::emu::Binning, String> {

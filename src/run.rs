@@ -169,6 +169,12 @@ impl RunSpec {
                 o.fill.name()
             );
         }
+        if self.params.merge != Params::default().merge {
+            c += &format!(
+                " --thickness {} --beta {}",
+                self.params.merge.thickness, self.params.merge.beta
+            );
+        }
         if let Some(s) = self.schedule() {
             c += &format!(
                 " --policy {} --seed {} --window {} --block {}",
@@ -414,6 +420,7 @@ pub fn summary_json(
         v["robustness"] = serde_json::json!(c.metrics.robustness);
         v["coplanarity"] = serde_json::json!(c.metrics.coplanarity);
         v["first_error"] = serde_json::json!(c.metrics.first_error);
+        v["image"] = serde_json::json!(c.metrics.image);
     }
     if r.culling.is_some() {
         v["occupancy"] = crate::culling::summary(rendered, checked.map(|c| &c.metrics), None);

@@ -31,6 +31,8 @@ pub enum SpecError {
     UnknownAlgo(String),
     #[error(transparent)]
     Occupancy(Box<crate::run::RunError>),
+    #[error(transparent)]
+    Merge(#[from] fragrace_kernels::merging::MergeParamError),
 }
 
 impl RunSpec {
@@ -56,6 +58,7 @@ impl RunSpec {
         };
         self.exec.validate()?;
         self.params.validate()?;
+        self.params.merge.validate()?;
         // Occupancy culling: an algorithm that takes it, and a map size for its k.
         crate::culling::validate(self, &*algo).map_err(|e| SpecError::Occupancy(Box::new(e)))?;
         Ok(())

@@ -34,6 +34,13 @@ pub struct Params {
     /// algorithms that take it ([`Algorithm::takes_occupancy`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub occupancy: Option<crate::occupancy::Occupancy>,
+    /// Fragment merging: z-thickness and beta (the `merging` family). Left out of case files
+    /// when default, so that files of runs that do not merge are as before.
+    #[serde(
+        default,
+        skip_serializing_if = "crate::merging::MergeParams::is_default"
+    )]
+    pub merge: crate::merging::MergeParams,
 }
 
 impl Default for Params {
@@ -47,6 +54,7 @@ impl Default for Params {
             fab_capacity: 64,
             background: [1.0, 1.0, 1.0],
             occupancy: None,
+            merge: crate::merging::MergeParams::default(),
         }
     }
 }

@@ -15,6 +15,7 @@ pub mod basic;
 pub mod common;
 pub mod kbuffer;
 pub mod limits;
+pub mod merging;
 pub mod occupancy;
 pub mod oracle;
 pub mod peeling;

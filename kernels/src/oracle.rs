@@ -11,6 +11,13 @@
 //!   fragments the algorithm should have captured (all of them, or `min(k, n)` per pixel).
 //! - C_p, the coplanarity probability (depth-fighting paper, Fig. 13): covered pixels with at
 //!   least two fragments at exactly the same depth, over covered pixels.
+//! - The image metrics ([`ImageMetrics`]), for every algorithm that resolves an image,
+//!   whatever it keeps: against the exact composite of the truth's fragments, the per-pixel
+//!   maximum channel difference, `image_epr` (covered pixels off by more than 1/255 over
+//!   covered pixels, as the bucket-depth-peeling paper's equation 7 counts) and the PSNR.
+//!   Algorithms that change the fragment set on purpose (the `merging` family, Kim & Kye,
+//!   "Z-Thickness Blending: Effective Fragment Merging for Multi-Fragment Rendering")
+//!   are judged by these.
 
 use crate::algo::{AlgoInfo, AlgoResult, Capacity, CapturedFrag, Params};
 use crate::common::depth_order;
@@ -45,6 +52,27 @@ pub struct Metrics {
     /// Occupancy culling only: those fragments per pixel, row-major (for heatmaps).
     #[serde(skip)]
     pub culled_heat: Vec<u32>,
+    /// The image against the exact composite of the truth (`None`: the result has no image).
+    pub image: Option<ImageMetrics>,
+}
+
+/// A resolved image against the exact front-to-back composite of the truth's fragments, over
+/// covered pixels (RGB).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ImageMetrics {
+    /// Largest channel difference of any covered pixel.
+    pub max_diff: f32,
+    /// Covered pixels with a channel off by more than [`IMAGE_TOLERANCE`] (or NaN).
+    pub error_pixels: u64,
+    /// `error_pixels` over covered pixels.
+    pub image_epr: f64,
+    /// Mean squared channel error over covered pixels.
+    pub mse: f64,
+    /// `10 log10(1 / mse)` in dB, peak 1 (infinite for identical images; JSON `null`).
+    pub psnr: f64,
+    /// Per-pixel maximum channel difference, row-major, 0 where uncovered (heatmaps).
+    #[serde(skip)]
+    pub diff: Vec<f32>,
 }
 
 /// Tolerance of image comparisons (one 8-bit step).
@@ -71,6 +99,11 @@ pub fn compare(
         m.culled_truth = Some(0);
         m.culled_heat = vec![0; n];
     }
+    let mut image = result.image.as_ref().map(|_| ImageMetrics {
+        diff: vec![0.0; n],
+        ..Default::default()
+    });
+    let mut squared = 0.0f64;
     for p in 0..n {
         let tp = t.pixel(p);
         if let Some(b) = bounds {
@@ -92,6 +125,27 @@ pub fn compare(
         }
         if tp.is_empty() {
             continue;
+        }
+        if let (Some(im), Some(img)) = (image.as_mut(), result.image.as_ref()) {
+            let want = crate::common::composite_frags(tp, params.alpha, params.background);
+            let got = img.get(p).copied().unwrap_or([f32::NAN; 4]);
+            let mut worst = 0.0f32;
+            for c in 0..3 {
+                let d = (got[c] - want[c]).abs();
+                worst = if d.is_nan() {
+                    f32::INFINITY
+                } else {
+                    worst.max(d)
+                };
+                squared += if d.is_nan() {
+                    1.0
+                } else {
+                    f64::from(d).powi(2)
+                };
+            }
+            im.diff[p] = worst;
+            im.max_diff = im.max_diff.max(worst);
+            im.error_pixels += u64::from(worst > IMAGE_TOLERANCE);
         }
         m.covered_pixels += 1;
         m.generated += tp.len() as u64;
@@ -165,6 +219,14 @@ pub fn compare(
     } else {
         1.0
     };
+    if let Some(im) = image.as_mut() {
+        if m.covered_pixels > 0 {
+            im.image_epr = im.error_pixels as f64 / m.covered_pixels as f64;
+            im.mse = squared / (3 * m.covered_pixels) as f64;
+        }
+        im.psnr = -10.0 * im.mse.log10();
+    }
+    m.image = image;
     m
 }
 

@@ -76,6 +76,16 @@ pub(crate) fn write_outputs(
             if !c.metrics.culled_heat.is_empty() {
                 heat("culled.png", &c.metrics.culled_heat)?;
             }
+            // The image against the truth's composite, in 8-bit steps of the largest
+            // channel difference (the heatmap scales to its maximum).
+            if let Some(im) = &c.metrics.image {
+                let steps: Vec<u32> = im
+                    .diff
+                    .iter()
+                    .map(|&d| (d.min(1.0) * 255.0).round() as u32)
+                    .collect();
+                heat("image-diff.png", &steps)?;
+            }
         }
         if !written.iter().any(|p| p.starts_with(dir)) {
             eprintln!(

@@ -35,10 +35,10 @@ pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
 /// Scan phase 1: the invocation at column 0 of each row writes the exclusive prefix sum of
 /// its row's counts into `offsets` and the row's total into `row_total[y]` (a row is one
 /// scan block; the other invocations of the row have nothing to do).
-struct RowScan {
-    counts: Buf<u32>,
-    offsets: Buf<u32>,
-    row_total: Buf<u32>,
+pub(crate) struct RowScan {
+    pub counts: Buf<u32>,
+    pub offsets: Buf<u32>,
+    pub row_total: Buf<u32>,
 }
 
 impl FragmentKernel for RowScan {
@@ -62,9 +62,9 @@ impl FragmentKernel for RowScan {
 
 /// Scan phase 2: pixel (0, 0) turns the row totals into the rows' exclusive bases, in place,
 /// and writes the grand total.
-struct RowTotalsScan {
-    row_total: Buf<u32>,
-    total: Buf<u32>,
+pub(crate) struct RowTotalsScan {
+    pub row_total: Buf<u32>,
+    pub total: Buf<u32>,
 }
 
 impl FragmentKernel for RowTotalsScan {
@@ -86,9 +86,9 @@ impl FragmentKernel for RowTotalsScan {
 }
 
 /// Scan phase 3: every pixel adds its row's base to its offset.
-struct AddRowBase {
-    offsets: Buf<u32>,
-    row_base: Buf<u32>,
+pub(crate) struct AddRowBase {
+    pub offsets: Buf<u32>,
+    pub row_base: Buf<u32>,
 }
 
 impl FragmentKernel for AddRowBase {
