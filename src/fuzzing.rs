@@ -1020,6 +1020,11 @@ pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
             } else {
                 None
             },
+            range: [
+                fragrace_kernels::occupancy::RangeSource::Exact,
+                fragrace_kernels::occupancy::RangeSource::Bbox,
+                fragrace_kernels::occupancy::RangeSource::Hull,
+            ][u.int_in_range(0..=2)?],
         },
         exec: ExecConfig {
             mode,

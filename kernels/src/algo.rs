@@ -34,6 +34,14 @@ pub struct Params {
     /// algorithms that take it ([`Algorithm::takes_occupancy`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub occupancy: Option<crate::occupancy::Occupancy>,
+    /// Where the bucket schemes (`bdp`, `bdp2`, `adp`) take each pixel's depth range from
+    /// (`--range`): the occupancy stage's range pass, run on its own.
+    #[serde(default, skip_serializing_if = "is_default_range")]
+    pub range: crate::occupancy::RangeSource,
+}
+
+fn is_default_range(r: &crate::occupancy::RangeSource) -> bool {
+    *r == crate::occupancy::RangeSource::default()
 }
 
 impl Default for Params {
@@ -47,6 +55,7 @@ impl Default for Params {
             fab_capacity: 64,
             background: [1.0, 1.0, 1.0],
             occupancy: None,
+            range: crate::occupancy::RangeSource::default(),
         }
     }
 }
@@ -201,6 +210,9 @@ pub struct AlgoResult {
     pub storage_bytes: u64,
     /// What occupancy culling did, when it ran ([`Params::occupancy`]).
     pub culling: Option<crate::occupancy::CullSummary>,
+    /// Bucket schemes only: per pixel (row-major), the fragments that lost their bucket to
+    /// another fragment routed to the same one (deterministic, not races).
+    pub collisions: Option<Vec<u32>>,
 }
 
 /// Why an algorithm could not run.

@@ -15,6 +15,7 @@ pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
     v.extend(crate::abuffer::algorithms());
     v.extend(crate::kbuffer::algorithms());
     v.extend(crate::peeling::algorithms());
+    v.extend(crate::bucket::algorithms());
     v
 }
 
