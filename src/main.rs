@@ -206,8 +206,9 @@ struct RunArgs {
     /// which algorithms take it).
     #[arg(long, value_name = "D")]
     occupancy: Option<u32>,
-    /// Occupancy culling: the per-pixel depth range from the scene (`exact`), its bounding
-    /// box (`bbox`) or its convex hull (`hull`). Default exact.
+    /// Occupancy culling, and the bucket schemes (bdp, bdp2, adp): the per-pixel depth
+    /// range from the scene (`exact`), its bounding box (`bbox`) or its convex hull
+    /// (`hull`). Default exact.
     #[arg(long)]
     range: Option<fragrace_kernels::occupancy::RangeSource>,
     /// Occupancy culling: set the map's bits with `atomic` OR (default), or with a `plain`
@@ -295,6 +296,7 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
             alpha: a.alpha,
             spin_cap: a.spin_cap.max(1),
             occupancy: occupancy_of(a)?,
+            range: a.range.unwrap_or_default(),
             ..Params::default()
         },
         exec,
@@ -302,15 +304,17 @@ fn spec_of(a: &RunArgs) -> Result<RunSpec> {
 }
 
 /// The occupancy-culling parameters of a run; `--range` and `--occupancy-fill` mean
-/// nothing without `--occupancy` and are refused alone.
+/// nothing without `--occupancy` and are refused alone (`--range` alone is the depth range
+/// of the algorithms that take one, the bucket schemes).
 fn occupancy_of(a: &RunArgs) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
+    let takes_range = fragrace_kernels::algorithm(&a.algo).is_some_and(|x| x.takes_range());
     match a.occupancy {
         Some(d) => Ok(Some(fragrace_kernels::occupancy::Occupancy {
             d,
             range: a.range.unwrap_or_default(),
             fill: a.occupancy_fill.unwrap_or_default(),
         })),
-        None if a.range.is_some() || a.occupancy_fill.is_some() => {
+        None if (a.range.is_some() && !takes_range) || a.occupancy_fill.is_some() => {
             bail!("--range and --occupancy-fill configure occupancy culling: add --occupancy D (1 to 64)")
         }
         None => Ok(None),

@@ -239,6 +239,13 @@ pub trait Algorithm: Send + Sync {
         false
     }
 
+    /// Whether the algorithm starts from a per-pixel depth range ([`Params::range`], the
+    /// bucket schemes); others ignore the parameter (the CLI refuses `--range` for them
+    /// without occupancy culling).
+    fn takes_range(&self) -> bool {
+        false
+    }
+
     /// Runs every pass of the algorithm on a fresh device, shading with `exec`, resolves,
     /// and checks the algorithm's invariants ([`AlgoResult::checks`]). The same as
     /// [`Algorithm::run_frame`] followed by [`Algorithm::self_check`].

@@ -163,6 +163,10 @@ impl FragmentKernel for Route<'_> {
 pub struct Adp;
 
 impl Algorithm for Adp {
+    fn takes_range(&self) -> bool {
+        true
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "adp",

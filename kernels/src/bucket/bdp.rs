@@ -205,6 +205,10 @@ fn run(
 pub struct Bdp;
 
 impl Algorithm for Bdp {
+    fn takes_range(&self) -> bool {
+        true
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "bdp",
@@ -236,6 +240,10 @@ impl Algorithm for Bdp {
 pub struct Bdp2;
 
 impl Algorithm for Bdp2 {
+    fn takes_range(&self) -> bool {
+        true
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "bdp2",
