@@ -49,7 +49,14 @@ fn executors() -> Vec<(String, ExecConfig)> {
 
 #[test]
 fn bit_identical_under_every_executor_and_policy() {
-    for scene in ["cubes", "spheres", "coplanar-stack", "bunny", "teapot", "hairball"] {
+    for scene in [
+        "cubes",
+        "spheres",
+        "coplanar-stack",
+        "bunny",
+        "teapot",
+        "hairball",
+    ] {
         for algo in SCHEMES {
             let mut baseline: Option<String> = None;
             for (what, exec) in executors() {
