@@ -221,7 +221,7 @@ struct RunArgs {
     /// For `count`: per-pixel counts as little-endian u32, row-major, top row first.
     #[arg(long)]
     raw_out: Option<PathBuf>,
-    /// Directory for heatmaps (depth complexity, errors, hazards).
+    /// Directory for heatmaps (depth complexity, errors, hazards, bucket collisions).
     #[arg(long)]
     heatmap: Option<PathBuf>,
     /// Print one JSON object on stdout.
@@ -419,6 +419,15 @@ fn write_outputs(
         if let Some(c) = &res.counts {
             fragrace::output::write_heatmap(
                 &dir.join("depth-complexity.png"),
+                spec.width,
+                spec.height,
+                c,
+            )?;
+        }
+        if let Some(c) = &res.collisions {
+            // Bucket schemes: fragments that lost their bucket, per pixel.
+            fragrace::output::write_heatmap(
+                &dir.join("collisions.png"),
                 spec.width,
                 spec.height,
                 c,

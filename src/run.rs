@@ -166,6 +166,9 @@ impl RunSpec {
                 o.range.name(),
                 o.fill.name()
             );
+        } else if self.params.range != Default::default() {
+            // The bucket schemes' depth range (`Params::range`).
+            c += &format!(" --range {}", self.params.range.name());
         }
         if let Some(s) = self.schedule() {
             c += &format!(
