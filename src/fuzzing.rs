@@ -1031,6 +1031,11 @@ pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
                 },
                 beta: finite_f32(u)?,
             },
+            range: [
+                fragrace_kernels::occupancy::RangeSource::Exact,
+                fragrace_kernels::occupancy::RangeSource::Bbox,
+                fragrace_kernels::occupancy::RangeSource::Hull,
+            ][u.int_in_range(0..=2)?],
         },
         exec: ExecConfig {
             mode,

@@ -225,7 +225,8 @@ struct RunArgs {
     /// For `count`: per-pixel counts as little-endian u32, row-major, top row first.
     #[arg(long)]
     raw_out: Option<PathBuf>,
-    /// Directory for heatmaps (depth complexity, errors, hazards, image difference, culled).
+    /// Directory for heatmaps (depth complexity, errors, hazards, image difference, culled,
+    /// bucket collisions).
     #[arg(long)]
     heatmap: Option<PathBuf>,
     /// Print one JSON object on stdout.
@@ -313,7 +314,8 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
             k: a.k,
             alpha: a.alpha,
             spin_cap: a.spin_cap,
-            occupancy: a.occupancy.get()?,
+            occupancy: a.occupancy.get(takes_range(&a.algo))?,
+            range: a.occupancy.range.unwrap_or_default(),
             merge: {
                 let merge = fragrace_kernels::merging::MergeParams {
                     thickness: a.thickness,
@@ -338,8 +340,9 @@ struct OccupancyArgs {
     /// which algorithms take it).
     #[arg(long, value_name = "D")]
     occupancy: Option<u32>,
-    /// Occupancy culling: the per-pixel depth range from the scene (`exact`), its bounding
-    /// box (`bbox`) or its convex hull (`hull`). Default exact.
+    /// Occupancy culling, and the bucket schemes (bdp, bdp2, adp): the per-pixel depth
+    /// range from the scene (`exact`), its bounding box (`bbox`) or its convex hull
+    /// (`hull`). Default exact.
     #[arg(long)]
     range: Option<fragrace_kernels::occupancy::RangeSource>,
     /// Occupancy culling: set the map's bits with `atomic` OR (default), or with a `plain`
@@ -350,20 +353,29 @@ struct OccupancyArgs {
 
 impl OccupancyArgs {
     /// The stage's parameters; `--range` and `--occupancy-fill` mean nothing without
-    /// `--occupancy` and are refused alone.
-    fn get(&self) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
+    /// `--occupancy` and are refused alone (`--range` alone is the depth range of the
+    /// algorithms that take one, the bucket schemes: `takes_range`).
+    fn get(&self, takes_range: bool) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
         match self.occupancy {
             Some(d) => Ok(Some(fragrace_kernels::occupancy::Occupancy {
                 d,
                 range: self.range.unwrap_or_default(),
                 fill: self.occupancy_fill.unwrap_or_default(),
             })),
-            None if self.range.is_some() || self.occupancy_fill.is_some() => {
+            None if (self.range.is_some() && !takes_range) || self.occupancy_fill.is_some() => {
                 bail!("--range and --occupancy-fill configure occupancy culling: add --occupancy D (1 to 64)")
             }
             None => Ok(None),
         }
     }
+}
+
+/// Whether any of `algos` (comma-separated) takes a depth range of its own (`--range`
+/// without `--occupancy`).
+fn takes_range(algos: &str) -> bool {
+    algos
+        .split(',')
+        .any(|n| fragrace_kernels::algorithm(n).is_some_and(|x| x.takes_range()))
 }
 
 fn main() {

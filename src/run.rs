@@ -168,6 +168,9 @@ impl RunSpec {
                 o.range.name(),
                 o.fill.name()
             );
+        } else if self.params.range != Default::default() {
+            // The bucket schemes' depth range (`Params::range`).
+            c += &format!(" --range {}", self.params.range.name());
         }
         if self.params.merge != Params::default().merge {
             c += &format!(
@@ -401,6 +404,14 @@ pub fn summary_json(
         "hazards": { "lost_updates": hz.lost_updates, "races": hz.races, "torn": hz.torn },
         "faults": r.report.stats.faulted,
         "dropped": r.dropped,
+        // Bucket schemes: fragments that lost their bucket to another (total, worst pixel).
+        "collisions": r.collisions.as_ref().map(|c| {
+            serde_json::json!({
+                "total": c.iter().map(|&x| u64::from(x)).sum::<u64>(),
+                "max_per_pixel": c.iter().copied().max().unwrap_or(0),
+                "pixels": c.iter().filter(|&&x| x > 0).count(),
+            })
+        }),
         "storage_bytes": r.storage_bytes,
         "bytes_per_pixel": r.storage_bytes as f64 / (spec.width as f64 * spec.height as f64),
         "passes": { "geometry": r.report.stats.geometry_passes, "fullscreen": r.report.stats.fullscreen_passes },

@@ -41,6 +41,14 @@ pub struct Params {
         skip_serializing_if = "crate::merging::MergeParams::is_default"
     )]
     pub merge: crate::merging::MergeParams,
+    /// Where the bucket schemes (`bdp`, `bdp2`, `adp`) take each pixel's depth range from
+    /// (`--range`): the occupancy stage's range pass, run on its own.
+    #[serde(default, skip_serializing_if = "is_default_range")]
+    pub range: crate::occupancy::RangeSource,
+}
+
+fn is_default_range(r: &crate::occupancy::RangeSource) -> bool {
+    *r == crate::occupancy::RangeSource::default()
 }
 
 impl Default for Params {
@@ -55,6 +63,7 @@ impl Default for Params {
             background: [1.0, 1.0, 1.0],
             occupancy: None,
             merge: crate::merging::MergeParams::default(),
+            range: crate::occupancy::RangeSource::default(),
         }
     }
 }
@@ -209,6 +218,9 @@ pub struct AlgoResult {
     pub storage_bytes: u64,
     /// What occupancy culling did, when it ran ([`Params::occupancy`]).
     pub culling: Option<crate::occupancy::CullSummary>,
+    /// Bucket schemes only: per pixel (row-major), the fragments that lost their bucket to
+    /// another fragment routed to the same one (deterministic, not races).
+    pub collisions: Option<Vec<u32>>,
 }
 
 /// Why an algorithm could not run.
@@ -232,6 +244,13 @@ pub trait Algorithm: Send + Sync {
     /// [`Params::occupancy`] asks for it (the k-buffers whose capture is one geometry pass).
     /// Others refuse the parameter (the CLI checks this before running).
     fn takes_occupancy(&self) -> bool {
+        false
+    }
+
+    /// Whether the algorithm starts from a per-pixel depth range ([`Params::range`], the
+    /// bucket schemes); others ignore the parameter (the CLI refuses `--range` for them
+    /// without occupancy culling).
+    fn takes_range(&self) -> bool {
         false
     }
 

@@ -12,6 +12,7 @@
 pub mod abuffer;
 pub mod algo;
 pub mod basic;
+pub mod bucket;
 pub mod common;
 pub mod kbuffer;
 pub mod limits;

@@ -16,6 +16,7 @@ pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
     v.extend(crate::kbuffer::algorithms());
     v.extend(crate::peeling::algorithms());
     v.extend(crate::merging::algorithms());
+    v.extend(crate::bucket::algorithms());
     v
 }
 

@@ -26,7 +26,7 @@ fn parse_duration(s: &str) -> Result<std::time::Duration> {
 /// The occupancy culling a fuzz campaign forces, checked against its algorithms: at
 /// least one of them must take it, and `d` must hold the largest k the campaign draws (16).
 fn fuzz_occupancy(a: &FuzzArgs) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
-    let Some(occ) = a.occupancy.get()? else {
+    let Some(occ) = a.occupancy.get(crate::takes_range(&a.algo.join(",")))? else {
         return Ok(None);
     };
     occ.validate(16)?;

@@ -67,6 +67,10 @@ pub(crate) fn write_outputs(
         if let Some(c) = &res.counts {
             heat("depth-complexity.png", c)?;
         }
+        if let Some(c) = &res.collisions {
+            // Bucket schemes: fragments that lost their bucket, per pixel.
+            heat("collisions.png", c)?;
+        }
         if !res.report.hazard_heat.is_empty() {
             heat("hazards.png", &res.report.hazard_heat)?;
         }

@@ -17,7 +17,7 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         a.algo.clone()
     };
     let exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, 64)?;
-    let occupancy = a.occupancy.get()?;
+    let occupancy = a.occupancy.get(crate::takes_range(&a.algo.join(",")))?;
     if let Some(o) = occupancy {
         o.validate(a.k)?;
     }
