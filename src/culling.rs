@@ -5,6 +5,7 @@
 //! The stage itself is `fragrace_kernels::occupancy`; this module only measures it. It knows
 //! no k-buffer either: it compares two runs of whatever algorithm the spec names.
 
+use fragrace_kernels::occupancy::CullTest;
 use fragrace_kernels::oracle::Metrics;
 use fragrace_kernels::{AlgoError, AlgoResult, Algorithm, Check};
 use serde_json::json;
@@ -49,11 +50,21 @@ pub fn checks(m: &Metrics, r: &AlgoResult) -> Vec<Check> {
         ));
     }
     if let (Some(want), 1) = (m.culled_truth, c.samples) {
+        let (name, who) = match c.test {
+            CullTest::EarlyDepth => (
+                "the early test culled exactly the fragments beyond the bound",
+                "early-culled",
+            ),
+            CullTest::Shader => (
+                "the capture kernel's test culled exactly the fragments beyond the bound",
+                "shader-culled",
+            ),
+        };
         v.push(Check::new(
-            "the early test culled exactly the fragments beyond the bound",
+            name,
             want == c.culled_fragments,
             format!(
-                "early-culled {}, true fragments beyond their bound {want}",
+                "{who} {}, true fragments beyond their bound {want}",
                 c.culled_fragments
             ),
         ));
@@ -121,6 +132,7 @@ pub fn summary(
         "d": occ.d,
         "sub_intervals": occ.d * 32,
         "range": occ.range.name(),
+        "test": c.test,
         "fill": occ.fill.name(),
         "passes": c.passes,
         "peel_passes": c.peel_passes,
@@ -140,7 +152,14 @@ pub fn summary(
         let (ops_without, atomics_without) = ops(&b.result, None);
         // k-buffer invocations: every rasterized fragment of the capture passes without
         // culling (nothing tests them before the shader); the peel passes' shaded ones with.
-        let shaded_without = b.result.report.stats.fragments_generated;
+        // Every geometry pass rasterizes the same scene, so the unculled capture passes
+        // shade the fragments of one geometry pass times the peel passes (SRAB's extra
+        // geometry pass counts fragments for its loss figure, and is not a capture).
+        let bs = &b.result.report.stats;
+        let shaded_without = match bs.geometry_passes {
+            0 => 0,
+            g => bs.fragments_generated / g as u64 * c.peel_passes as u64,
+        };
         let shaded_with: u64 = c
             .passes
             .iter()

@@ -302,6 +302,7 @@ fn list_says_which_algorithms_take_occupancy_culling() {
         "kb-spinlock",
         "kb-interlock",
         "kb-rmw",
+        "srab",
     ] {
         assert!(takers.contains(&a), "{a} missing from {takers:?}");
     }

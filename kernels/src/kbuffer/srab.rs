@@ -38,6 +38,20 @@
 //! decrement only those counters and desynchronise the routing, so the capture kernel
 //! still discards partially covering fragments before the (late) stencil test and counts
 //! them: with multisampling off none is, and only the fragments beyond 8 are lost.
+//!
+//! **Occupancy culling** (`--occupancy D`; the occupancy-culling seed, Figure 1 right: "the
+//! noticeable image quality improvement ... when fragment culling is enabled in the
+//! stencil-routed k-buffer"). The stage of [`crate::occupancy`] finds each pixel's bound on
+//! the depth of its k-th nearest fragment (`k <= 8`), and the capture discards fragments
+//! beyond it, so the 8 samples go to fragments within the bound: the first 8 of them in API
+//! order, which include the k nearest (Lemma 2.1). The test runs in the capture kernel, not
+//! as an early depth test ([`crate::occupancy::CullTest::Shader`], the paper's shader-based
+//! culling): in the fixed-function order the stencil test comes before the depth test, so a
+//! fragment failing an early depth test would still decrement the routing counters of the
+//! samples whose stencil test it fails, and two samples would end up routing the same
+//! fragment. A fragment discarded by its shader before the late stencil test touches no
+//! counter. Culled fragments are therefore still shaded; what culling buys SRAB is quality,
+//! not speed (the paper: SRAB "is significantly lessened from the additional geometry pass").
 
 use fragrace_emu::{
     Buf, CompareFunc, ExecConfig, Format, Fragment, FragmentKernel, FragmentState, Framebuffer,
@@ -53,6 +67,7 @@ use crate::basic::CountKernel;
 use crate::common::{
     self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments, EMPTY,
 };
+use crate::occupancy::Culling;
 use crate::resolve::{self, Composite};
 
 /// Slots per pixel: the samples of the MSAA framebuffer.
@@ -111,6 +126,15 @@ impl FragmentKernel for StencilInit {
 /// module notes); the routed ones are counted per pixel (instrumentation).
 struct Capture8 {
     routed: Buf<u32>,
+    /// With occupancy culling: each pixel's bound, and a per-pixel count of the fragments
+    /// discarded beyond it (instrumentation).
+    cull: Option<ShaderCull>,
+}
+
+#[derive(Clone, Copy)]
+struct ShaderCull {
+    bound: Buf<f32>,
+    culled: Buf<u32>,
 }
 
 impl FragmentKernel for Capture8 {
@@ -121,6 +145,19 @@ impl FragmentKernel for Capture8 {
         if f.coverage() != FULL {
             f.discard();
             return;
+        }
+        if let Some(c) = self.cull {
+            // The culling test, before the late stencil test: a fragment beyond the bound
+            // leaves the routing counters alone (`depth <= bound` passes, as LEQUAL does).
+            let bound = f.load(c.bound, f.pixel_index()).await;
+            if !matches!(
+                f.depth().partial_cmp(&bound),
+                Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+            ) {
+                f.atomic_add(c.culled, f.pixel_index(), 1).await;
+                f.discard();
+                return;
+            }
         }
         f.atomic_add(self.routed, f.pixel_index(), 1).await;
         f.output(0, [f.depth(), f32::from_bits(f.primitive_id()), 0.0, 0.0]);
@@ -203,6 +240,10 @@ impl Algorithm for Srab {
         }
     }
 
+    fn takes_occupancy(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -221,6 +262,13 @@ fn run(
 ) -> Result<AlgoResult, AlgoError> {
     let n = pixels(frame);
     let (w, h) = (frame.width, frame.height);
+    if params.occupancy.is_some() && !(1..=SAMPLES as u32).contains(&params.k) {
+        return Err(AlgoError::Invalid(format!(
+            "--k {}: srab holds {SAMPLES} fragments per pixel, so its occupancy culling keeps \
+             the k nearest for k from 1 to {SAMPLES}",
+            params.k
+        )));
+    }
     let mut device = common::fresh(exec);
 
     // 1. Count pass (instrumentation, loss accounting): the truth's fragments per pixel
@@ -253,6 +301,25 @@ fn run(
         report.merge(&device.fullscreen(&mut fb, &st, &StencilInit, exec)?);
     }
 
+    // Occupancy culling (when asked): the stage's passes find each pixel's bound, which
+    // the capture kernel tests itself (module notes).
+    let mut culling = match params.occupancy {
+        Some(_) => {
+            let mut bound_fb = framebuffer(frame, SampleCount::X1, &[])?;
+            Culling::prepare(&mut device, &mut bound_fb, frame, params, exec)?
+        }
+        None => None,
+    };
+    let cull = match &culling {
+        Some(c) => {
+            let bound = device.buffer::<f32>("srab-bound", n as u64)?;
+            device.memory.write(bound, 0, c.bounds())?;
+            let culled = device.buffer::<u32>("srab-culled", n as u64)?;
+            Some(ShaderCull { bound, culled })
+        }
+        None => None,
+    };
+
     // 3. Capture: stencil EQUAL ROUTE, decrement on pass and fail, no depth test.
     let routed = device.buffer::<u32>("srab-routed", n as u64)?;
     let mut cap_state = FragmentState::new();
@@ -271,12 +338,23 @@ fn run(
         &mut fb,
         frame,
         &msaa_pass(cap_state),
-        &Capture8 { routed },
+        &Capture8 { routed, cull },
         exec,
     )?;
     report.merge(&capture);
     let image = fb.image(0);
     let routed = device.memory.read(routed)?;
+    let culled = match cull {
+        Some(c) => device.memory.read(c.culled)?,
+        None => vec![0; n],
+    };
+    let culled_total: u64 = culled.iter().map(|&c| c as u64).sum();
+    let culling = culling.take().map(|mut c| {
+        c.add_shader_peel(&capture, culled_total);
+        let (stage, summary) = c.finish();
+        report.merge(&stage);
+        summary
+    });
 
     // 4. Resolve.
     let mut out_fb = resolve::framebuffer(frame)?;
@@ -291,10 +369,12 @@ fn run(
     let mut lists = Vec::with_capacity(n);
     let mut dropped = 0u64;
     let mut shallow_dropped = 0u64;
+    // Fragments within the bound (all of them without culling) that found no sample.
+    let mut lost_within = 0u64;
     let mut stencil_bad: Option<String> = None;
     let mut order_bad: Option<String> = None;
     let mut overcount: Option<String> = None;
-    for (p, (&nf, &r)) in frag_counts.iter().zip(&routed).enumerate() {
+    for (p, ((&nf, &r), &cp)) in frag_counts.iter().zip(&routed).zip(&culled).enumerate() {
         let (x, y) = (p as u32 % w, p as u32 / w);
         for s in 0..SAMPLES as u8 {
             let want = routing.predict(ROUTE + s, r);
@@ -325,14 +405,15 @@ fn run(
             ));
         }
         let kept = stored.len() as u64;
-        if kept > nf as u64 || r > nf {
+        if kept > nf as u64 || r + cp > nf {
             if overcount.is_none() {
                 overcount = Some(format!(
-                    "pixel ({x}, {y}): {kept} stored, {r} routed, of {nf} fragments"
+                    "pixel ({x}, {y}): {kept} stored, {r} routed, {cp} culled, of {nf} fragments"
                 ));
             }
         } else {
             dropped += nf as u64 - kept;
+            lost_within += (nf - cp) as u64 - kept;
             if nf as usize <= SAMPLES {
                 shallow_dropped += nf as u64 - kept;
             }
@@ -345,13 +426,18 @@ fn run(
     let routed_total: u64 = routed.iter().map(|&c| c as u64).sum();
     let cs = &capture.stats;
     let ok = |v: &Option<String>| v.is_none();
-    let checks = vec![
+    let partial = cs.discarded - culled_total.min(cs.discarded);
+    let mut checks = vec![
         Check::new(
-            "capture: every fragment routed or dropped for partial coverage, none faulted",
-            routed_total + cs.discarded == cs.fragments_generated && cs.shaded == cs.fragments_generated && cs.faulted == 0,
+            "capture: every fragment routed, culled or dropped for partial coverage, none faulted",
+            routed_total + cs.discarded == cs.fragments_generated
+                && culled_total <= cs.discarded
+                && cs.shaded == cs.fragments_generated
+                && cs.faulted == 0,
             format!(
-                "routed {routed_total} + partial {} of {} generated, {} shaded, {} faulted",
-                cs.discarded, cs.fragments_generated, cs.shaded, cs.faulted
+                "routed {routed_total} + culled {culled_total} + partial {partial} of {} \
+                 generated, {} shaded, {} faulted",
+                cs.fragments_generated, cs.shaded, cs.faulted
             ),
         ),
         Check::new(
@@ -373,12 +459,22 @@ fn run(
             "fragments dropped for partial MSAA coverage (informational)",
             true,
             format!(
-                "{} partially covering fragments dropped; {shallow_dropped} fragments lost on pixels \
-                 with <= 8 fragments (none with multisample-off rasterization)",
-                cs.discarded
+                "{partial} partially covering fragments dropped; {shallow_dropped} fragments lost on pixels \
+                 with <= 8 fragments (none with multisample-off rasterization)"
             ),
         ),
     ];
+    if culling.is_some() {
+        checks.push(Check::new(
+            "fragments within the bound that found no sample (informational)",
+            true,
+            format!(
+                "{lost_within} of the {} fragments within their pixel's bound \
+                 ({culled_total} culled beyond it)",
+                counted - culled_total
+            ),
+        ));
+    }
     let storage_bytes = fb_bytes(&fb) + n as u64 * resolve::TARGET_BYTES + device.memory.bytes();
     Ok(AlgoResult {
         capture: Some(Capture::from_lists(w, h, lists)),
@@ -387,6 +483,7 @@ fn run(
         checks,
         dropped,
         storage_bytes,
+        culling,
         ..Default::default()
     })
 }
@@ -510,6 +607,57 @@ mod tests {
             assert_eq!(m.error_pixels, 64);
             assert_eq!(m.captured, 64 * 8);
         }
+    }
+
+    #[test]
+    fn occupancy_culling_routes_the_eight_nearest_instead_of_the_first_eight() {
+        use crate::occupancy::{CullTest, Occupancy};
+        let mut mesh = Mesh::default();
+        // Nearest layers last in API order: without culling SRAB keeps the 8 farthest.
+        for i in 0..10 {
+            cover_all(&mut mesh, 0.8 - 0.15 * i as f32, 0.01);
+        }
+        let frame = frame(&mesh, 8, 8);
+        let truth = Truth::capture(&frame, 1).unwrap();
+        let plain = Params::default();
+        let culled = Params {
+            occupancy: Some(Occupancy {
+                d: 1,
+                range: Default::default(),
+                fill: Default::default(),
+            }),
+            ..Params::default()
+        };
+        for exec in execs() {
+            let r = Srab.run(&frame, &culled, &exec).unwrap();
+            assert_checks(&r, &format!("{:?}", exec.mode));
+            let c = r.culling.as_ref().expect("a culled run reports its stage");
+            assert_eq!(c.test, CullTest::Shader);
+            assert_eq!(c.culled_fragments, 64 * 2, "{:?}", exec.mode);
+            assert_eq!(r.report.hazards.total(), 0);
+            let cap = r.capture.as_ref().unwrap();
+            for p in 0..cap.pixels() {
+                let mut prims: Vec<u32> = cap.pixel(p).iter().map(|f| f.prim).collect();
+                prims.sort_unstable();
+                assert_eq!(prims, (2..10).collect::<Vec<_>>(), "{:?}", exec.mode);
+            }
+            let m = oracle::compare(&Srab.info(), &r, &truth, &culled);
+            assert_eq!(m.lemma_2_1_violations, Some(0));
+            assert_eq!(m.culled_truth, Some(64 * 2));
+            // Still short of the A-buffer on every pixel (capacity 8 of 10), but the image
+            // is nearer the truth than the unculled run's.
+            assert_eq!(m.error_pixels, 64);
+            let base = Srab.run(&frame, &plain, &exec).unwrap();
+            let mb = oracle::compare(&Srab.info(), &base, &truth, &plain);
+            let (ic, ib) = (m.image.unwrap(), mb.image.unwrap());
+            assert!(ic.mse < ib.mse, "culled mse {} vs plain {}", ic.mse, ib.mse);
+        }
+        // More than 8 nearest cannot be routed into 8 samples.
+        let too_many = Params { k: 9, ..culled };
+        let Err(err) = Srab.run(&frame, &too_many, &ExecConfig::ordered()) else {
+            panic!("k = 9 must be refused");
+        };
+        assert!(err.to_string().contains("--k 9"), "{err}");
     }
 
     #[test]

@@ -165,6 +165,22 @@ impl Occupancy {
     }
 }
 
+/// Where the peel pass tests fragments against the bound.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CullTest {
+    /// The early `LEQUAL` depth test ([`Culling::peel_state`]): culled fragments are never
+    /// shaded (the paper's hardware culling).
+    #[default]
+    EarlyDepth,
+    /// The capture kernel reads the bound and discards what lies beyond it (the paper's
+    /// shader-based culling, `t` in its Figure 5): culled fragments are shaded but store
+    /// nothing. For captures whose fixed-function state an early depth test would change
+    /// (stencil routing: a stencil test runs before the depth test, so a fragment failing
+    /// depth would still step the routing counters).
+    Shader,
+}
+
 /// One pass of the stage, for reports.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct StagePass {
@@ -178,6 +194,8 @@ pub struct StagePass {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct CullSummary {
     pub occupancy: Option<Occupancy>,
+    /// Where the peel pass tested the bound.
+    pub test: CullTest,
     /// The stage's passes (range, fill, count) and the peel pass.
     pub passes: Vec<StagePass>,
     /// Fragments the peel pass's early depth test killed.
@@ -314,6 +332,12 @@ impl Culling {
         self.occupancy
     }
 
+    /// Each pixel's bound (row-major; [`bits::NO_CULLING`] where nothing is culled), for a
+    /// capture kernel that tests it itself ([`CullTest::Shader`]).
+    pub fn bounds(&self) -> &[f32] {
+        &self.summary.bounds
+    }
+
     /// `base` (the algorithm's own capture state) behind an early `LEQUAL` test against the
     /// bound, without depth writes: the peel pass.
     pub fn peel_state(base: &PassState) -> PassState {
@@ -342,6 +366,17 @@ impl Culling {
             shaded: peel.stats.shaded,
             fragments: peel.stats.fragments_generated,
         });
+    }
+
+    /// Records a peel pass whose kernel tested the bound itself ([`CullTest::Shader`]) and
+    /// discarded `culled` fragments beyond it.
+    pub fn add_shader_peel(&mut self, peel: &PassReport, culled: u64) {
+        let first = self.summary.peel_passes == 0;
+        self.summary.test = CullTest::Shader;
+        self.add_peel(peel);
+        if first {
+            self.summary.culled_fragments = culled;
+        }
     }
 
     /// The stage's passes (to merge into the run's report) and its summary.
