@@ -20,13 +20,14 @@ pub const NAMES: &[&str] = &[
     "coplanar-stack",
     "spheres",
     "hairball",
+    "interpenetrating",
     "bunny",
     "teapot",
     "random-triangles",
 ];
 
 /// How parameters are written: `name:param:param`.
-pub const USAGE: &str = "cubes | coplanar-stack[:N] | spheres | hairball | bunny | teapot | random-triangles[:SEED[:N]]";
+pub const USAGE: &str = "cubes | coplanar-stack[:N] | spheres | hairball | interpenetrating | bunny | teapot | random-triangles[:SEED[:N]]";
 
 /// Number of quads of `coplanar-stack` without a parameter.
 pub const COPLANAR_STACK_DEFAULT: usize = 8;
@@ -69,6 +70,7 @@ pub fn mesh(name: &str) -> Result<Mesh, SceneError> {
         "cubes" => no_params(cubes),
         "spheres" => no_params(spheres),
         "hairball" => no_params(hairball),
+        "interpenetrating" => no_params(interpenetrating),
         "bunny" | "teapot" if !params.is_empty() => Err(bad(USAGE)),
         "bunny" => parse_obj_bytes(BUNNY_OBJ_GZ),
         "teapot" => parse_obj_bytes(TEAPOT_OBJ_GZ),
@@ -107,9 +109,23 @@ pub fn mesh(name: &str) -> Result<Mesh, SceneError> {
     }
 }
 
+/// Which diagonal splits a box's quads into triangles.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Diagonal {
+    /// Corners 0 and 2 of each quad.
+    First,
+    /// Corners 1 and 3.
+    Second,
+}
+
 /// Appends an axis-aligned box (8 vertices, 12 triangles, counter-clockwise seen from
 /// outside, so back-face culling and `front_facing` behave).
 fn push_box(mesh: &mut Mesh, lo: Vec3, hi: Vec3) {
+    push_box_split(mesh, lo, hi, Diagonal::First);
+}
+
+/// [`push_box`] with the quads split along `diagonal`.
+fn push_box_split(mesh: &mut Mesh, lo: Vec3, hi: Vec3, diagonal: Diagonal) {
     let base = mesh.positions.len() as u32;
     for i in 0..8 {
         let pick = |bit: u32, l: f32, h: f32| if i & bit != 0 { h } else { l };
@@ -129,9 +145,35 @@ fn push_box(mesh: &mut Mesh, lo: Vec3, hi: Vec3) {
         [4, 5, 7, 6],
     ];
     for [a, b, c, d] in QUADS {
-        mesh.indices.push([a, b, c].map(|i| i + base));
-        mesh.indices.push([a, c, d].map(|i| i + base));
+        let tris = match diagonal {
+            Diagonal::First => [[a, b, c], [a, c, d]],
+            Diagonal::Second => [[a, b, d], [b, c, d]],
+        };
+        for t in tris {
+            mesh.indices.push(t.map(|i| i + base));
+        }
     }
+}
+
+/// `interpenetrating`: z-fighting surfaces, the case of the z-thickness paper's Figure 3
+/// ("two superimposed cubes"). Two boxes on the same six planes, their quads split along
+/// opposite diagonals, so that their fragments tie exactly or differ by a rounding step;
+/// and two spheres of one centre and radius tessellated differently (16 x 32 and 15 x 29
+/// segments), whose surfaces cross each other everywhere with depth gaps up to the
+/// tessellation's sagitta (about 0.6 % of the radius). 1,796 triangles. The order of
+/// such fragments is decided by rounding and arrival, the speckle of z-fighting; a
+/// z-thickness wider than the gaps merges them.
+pub fn interpenetrating() -> Mesh {
+    let mut mesh = Mesh::default();
+    let (lo, hi) = (Vec3::splat(-0.5), Vec3::splat(0.5));
+    push_box_split(&mut mesh, lo, hi, Diagonal::First);
+    push_box_split(&mut mesh, lo, hi, Diagonal::Second);
+    mesh.normals = None;
+    let mut spheres = uv_sphere(Vec3::ZERO, 0.7, 16, 32);
+    spheres.append(&uv_sphere(Vec3::ZERO, 0.7, 15, 29));
+    spheres.normals = None;
+    mesh.append(&spheres);
+    mesh
 }
 
 /// `cubes`: three overlapping unit cubes whose faces are *exactly* coplanar in places:
