@@ -25,6 +25,7 @@ pub mod geometry;
 pub mod hazard;
 mod hint;
 pub mod interlock;
+pub mod invocation;
 pub mod kernel;
 pub mod memory;
 pub mod pipeline;
@@ -34,16 +35,14 @@ pub mod stats;
 pub mod sync;
 
 pub use exec::{Binning, ExecConfig, ExecMode, Policy, ScheduleConfig};
-pub use fragment::{DirectFrag, Fragment, Performed};
+pub use fragment::Fragment;
 pub use framebuffer::{Framebuffer, Image};
 pub use geometry::{Draw, Mesh, MeshError};
 pub use hazard::{Hazard, HazardCounts, HazardKind};
 pub use interlock::InterlockMode;
-pub use kernel::FragInput;
-pub use kernel::{
-    Access, CompareExchange, FaultKind, Frag, FragmentKernel, KernelInfo, PixelArray, Store,
-};
-pub use memory::{Buf, Memory, Values, Word};
+pub use invocation::{Access, CompareExchange, DirectFrag, Frag, Performed, Store};
+pub use kernel::{FaultKind, FragInput, FragmentKernel, KernelInfo};
+pub use memory::{Buf, Memory, PixelArray, Values, Word};
 pub use pipeline::{Device, Fault, OcclusionQuery, PassError, PassReport, PassState};
 pub use raster::{CullMode, FrontFace, RasterState, SampleCount, Viewport};
 pub use state::{

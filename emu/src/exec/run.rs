@@ -9,10 +9,8 @@ use super::policy::{Candidate, Chooser};
 use super::simt::Simt;
 use super::{ExecConfig, ExecMode, ScheduleConfig};
 use crate::hazard::{Detector, Hazard, HazardCounts, InvocationId};
-use crate::kernel::{
-    DirectState, FaultKind, Frag, FragInput, FragmentKernel, Invocation, PassEnv, StepKind,
-    OP_KINDS,
-};
+use crate::invocation::{DirectState, Frag, Invocation, PassEnv, StepKind, OP_KINDS};
+use crate::kernel::{FaultKind, FragInput, FragmentKernel};
 use crate::stats::Stats;
 use crate::sync::pool;
 

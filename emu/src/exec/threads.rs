@@ -8,7 +8,8 @@ use std::pin::pin;
 use std::task::{Context, Poll, Waker};
 
 use crate::interlock::{Interlock, InterlockMode};
-use crate::kernel::{FaultKind, Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv};
+use crate::invocation::{Frag, Invocation, Mode, PassEnv};
+use crate::kernel::{FaultKind, FragInput, FragmentKernel};
 use crate::memory::Memory;
 use crate::sync::{thread, Arc};
 

@@ -31,12 +31,10 @@ use std::task::{Context, Poll, Waker};
 use std::time::{Duration, Instant};
 
 use crate::exec::{record_panic, Acc, ShadeOutcome, Tally};
-use crate::fragment::DirectFrag;
 use crate::framebuffer::TileMemory;
-use crate::kernel::{
-    DirectState, Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv, PixelArray,
-};
-use crate::memory::PixelPrefetcher;
+use crate::invocation::{DirectFrag, DirectState, Frag, Invocation, Mode, PassEnv};
+use crate::kernel::{FragInput, FragmentKernel};
+use crate::memory::{PixelArray, PixelPrefetcher};
 use crate::raster::{Binned, FlatChunk, Prepared, SampleCount, Segment, SetupTriangle, Span};
 use crate::state::FragmentState;
 use crate::sync::pool;
