@@ -24,7 +24,7 @@ pub mod protocols;
 pub mod registry;
 pub(crate) mod resolve;
 #[cfg(test)]
-mod test_scenes;
+mod testing;
 
 pub use algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, Check, Frame, HazardClass,
