@@ -9,6 +9,8 @@
 //! (every fragment captured under the `ordered` executor, sorted by depth then primitive
 //! id), by one differential oracle ([`oracle`]).
 
+#![forbid(unsafe_code)]
+
 pub mod abuffer;
 pub mod algo;
 pub mod basic;
