@@ -2,6 +2,7 @@
 //! facing and culling, the exact test of tiny triangles, clipping, planes and tile bins.
 
 use super::*;
+use crate::raster::block;
 use crate::raster::clip::{self, ClipVert, Planes, MAX_POLY, NON_FINITE};
 use crate::raster::coverage::{self, area2, bbox, Edges, SampleInfo, ONE};
 use crate::raster::{CullMode, Span, SUBPIXEL_BITS};
@@ -402,13 +403,13 @@ impl Ctx<'_> {
         }
         let (w, h) = (r[2] - r[0], r[3] - r[1]);
         if (LEAN || self.si.offs.len() == 1) && w < 8 && h < 8 {
-            let bits = if !coverage::block_fits(r, self.w, self.h) {
+            let bits = if !block::block_fits(r, self.w, self.h) {
                 // Clamped to the viewport (rare): the box may be too large for `i32`.
-                coverage::block_mask_wide(&Edges::new(v), &self.si, r)
+                block::block_mask_wide(&Edges::new(v), &self.si, r)
             } else if w < 4 && h < 4 {
-                coverage::block_mask(v, &self.si, r)
+                block::block_mask(v, &self.si, r)
             } else {
-                coverage::block_mask8(v, &self.si, r)
+                block::block_mask8(v, &self.si, r)
             };
             // Not `count_ones`: without POPCNT (not in the x86_64 baseline) that is a dozen
             // instructions.
