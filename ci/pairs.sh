@@ -11,12 +11,24 @@
 # piping it into python3 started the interpreter while a 75 ms fragrace run was timing its
 # frames, and on two cores that took one from it (bunny @2048: 6.1-8.1 ms piped against
 # 4.4-5.8 ms captured, alternating runs). ci/bench.sh and ci/ab.sh do the same.
-# Usage: bash ci/pairs.sh [ROUNDS] [THREADS]   (defaults: 3 rounds, 2 threads)
-# Env: CASES (default "dragon.obj.gz:512 dragon.obj.gz:2048 bunny.obj.gz:2048"; MESH:SIZE).
+# Usage: bash ci/pairs.sh [ROUNDS] [THREADS] [ALGO]   (defaults: 3 rounds, 2 threads, count)
+# ALGO is fragrace's name; the peer runs its counterpart (count, ll, kb-rmw -> kbuf-rmw,
+# kb-atomic32 -> kbuf-atomic; both with k = 8, the peer's default).
+# Env: CASES (default "dragon.obj.gz:512 dragon.obj.gz:2048 bunny.obj.gz:2048"; MESH:SIZE);
+# LOCKSTEP=1 runs fragrace with its default lockstep warps instead of --no-lockstep.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 rounds=${1:-3}
 threads=${2:-2}
+algo=${3:-count}
+case "$algo" in
+    count | ll) peer_algo=$algo; kflag=() ;;
+    kb-rmw) peer_algo=kbuf-rmw; kflag=(--k 8) ;;
+    kb-atomic32) peer_algo=kbuf-atomic; kflag=(--k 8) ;;
+    *) echo "no peer counterpart for \`$algo\` (count, ll, kb-rmw, kb-atomic32)" >&2; exit 2 ;;
+esac
+lockstep=--no-lockstep
+[ "${LOCKSTEP:-0}" = 1 ] && lockstep=
 cargo build --release -q
 F=./target/release/fragrace
 M=../shared/models
@@ -29,13 +41,13 @@ for c in ${CASES:-dragon.obj.gz:512 dragon.obj.gz:2048 bunny.obj.gz:2048}; do
     ratios=()
     cratios=()
     for r in $(seq "$rounds"); do
-        theirs=$(python3 -c "import json,sys; print(round(json.load(sys.stdin)['median_ms'], 2))" <<< "$(LP_NUM_THREADS=$threads python3 "$PEER" "$M/$mesh" --algo count --width "$size" --height "$size" --frames 15 --warmup 3 2>/dev/null | tail -1)")
-        read -r ours checked < <(python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), round(d['checked_median_ms'], 2))" <<< "$($F bench --obj "$M/$mesh" --algo count --threads "$threads" --width "$size" --height "$size" --frames 15 --warmup 3 --no-lockstep --json)")
+        theirs=$(python3 -c "import json,sys; print(round(json.load(sys.stdin)['median_ms'], 2))" <<< "$(LP_NUM_THREADS=$threads python3 "$PEER" "$M/$mesh" --algo "$peer_algo" "${kflag[@]}" --width "$size" --height "$size" --frames 15 --warmup 3 2>/dev/null | tail -1)")
+        read -r ours checked < <(python3 -c "import json,sys; d=json.load(sys.stdin); print(round(d['median_ms'], 2), round(d['checked_median_ms'], 2))" <<< "$($F bench --obj "$M/$mesh" --algo "$algo" "${kflag[@]}" --threads "$threads" --width "$size" --height "$size" --frames 15 --warmup 3 $lockstep --json)")
         ratio=$(python3 -c "print(f'{$ours / $theirs:.2f}')")
         cratio=$(python3 -c "print(f'{$checked / $theirs:.2f}')")
         ratios+=("$ratio")
         cratios+=("$cratio")
-        echo "$mesh @$size, pair $r: fragrace $ours ms / llvmpipe $theirs ms = $ratio (with fragrace's self-check after the frame: $checked ms, $cratio)"
+        echo "$algo, $mesh @$size, pair $r: fragrace $ours ms / llvmpipe $theirs ms = $ratio (with fragrace's self-check after the frame: $checked ms, $cratio)"
     done
-    echo "$mesh @$size: median ratio $(python3 -c "$median" "${ratios[@]}") over $rounds pairs (with the self-check: $(python3 -c "$median" "${cratios[@]}"))"
+    echo "$algo, $mesh @$size: median ratio $(python3 -c "$median" "${ratios[@]}") over $rounds pairs (with the self-check: $(python3 -c "$median" "${cratios[@]}"))"
 done

@@ -5,6 +5,8 @@
 //! checks ([`run`]), images and heatmaps ([`output`]), case files, fuzzing and the CLI.
 //! The GPU itself is [`fragrace_emu`]; the algorithms are [`fragrace_kernels`].
 
+#![forbid(unsafe_code)]
+
 pub mod budget;
 pub mod case;
 pub mod culling;

@@ -12,22 +12,32 @@
 //! - [`run_on_threads`]: one thread per invocation; under `--cfg loom` these are loom
 //!   threads, and loom explores the interleavings (the `loom` executor).
 //!
-//! This module knows nothing of rasterization or algorithms: it is handed fragment inputs
-//! in API order and a kernel, and returns each fragment's outputs.
+//! Every shading loop lives here: `direct` (the ordered and parallel executors on fragment
+//! lists), `scheduled` (the scheduled executor, and its admission of a rasterized pass's
+//! waves: blocks, per-wave seeds, `bytes:` schedules that run on across waves), `fused`
+//! (the ordered and parallel executors rasterizing, shading and writing one unit of tile
+//! work at a time), `threads` (one thread per invocation); `slots` is what they share.
+//!
+//! This module knows no algorithm, and nothing of passes or devices: it is handed fragment
+//! inputs in API order (or, on the fused path, set-up triangles and tiles) and a kernel, and
+//! returns each fragment's outputs.
 
+mod direct;
+pub(crate) mod fused;
 mod limits;
 mod policy;
-mod run;
+mod scheduled;
 mod simt;
+mod slots;
 mod threads;
 
+pub(crate) use direct::{shade, shade_lists};
 pub use limits::{max_threads, ExecConfigError, MAX_LANES, MAX_SIMT, MAX_WINDOW};
 pub use policy::{Policy, PolicyParseError};
-pub use run::Execution;
-pub use run::Fault;
-pub(crate) use run::{
-    explore, record_panic, shade, shade_chunks, Acc, FragOut, ShadeOutcome, Tally,
-};
+pub use scheduled::Execution;
+pub(crate) use scheduled::{explore, Waves};
+pub use slots::Fault;
+pub(crate) use slots::{record_panic, Acc, FragOut, ShadeOutcome, Tally};
 pub use threads::{run_on_threads, ThreadOutcome};
 
 /// Configuration of the `scheduled` executor.

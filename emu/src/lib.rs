@@ -5,18 +5,24 @@
 //! run a [`FragmentKernel`] once per fragment, and full-screen passes
 //! ([`Device::fullscreen`]) that run it once per pixel. Kernels are `async fn`s over a
 //! [`Fragment`] context: every shared-memory access is awaited, a place where another
-//! invocation may run. The executor picks the context ([`fragment`]): [`Frag`] where an
-//! invocation can be suspended, [`DirectFrag`] where accesses complete at once. An [`ExecConfig`] picks the executor: `ordered` (the reference), `parallel` (real
-//! threads, fragments of one pixel at once on different threads) or `scheduled` (a seeded
-//! [`Policy`] interleaves invocations at every access, a hazard detector watches).
+//! invocation may run. The executor picks the context ([`invocation`]): [`Frag`] where an
+//! invocation can be suspended, [`DirectFrag`] where accesses complete at once. An
+//! [`ExecConfig`] picks the executor: `ordered` (the reference), `parallel` (real threads,
+//! fragments of one pixel at once on different threads) or `scheduled` (a seeded [`Policy`]
+//! interleaves invocations at every access, a hazard detector watches).
 //!
 //! Fixed-function state ([`state`]) is applied in API order whatever order the shaders
 //! ran in. Nothing in this crate knows about any multi-fragment algorithm.
 //!
-//! Module map: [`raster`] (clipping, setup, binning, coverage), [`state`] (depth, stencil,
-//! blending), [`framebuffer`] (tile-major targets), [`memory`] (buffers, atomics),
-//! [`kernel`] (the kernel API), [`fragment`] (the kernel contexts), [`exec`] (executors and policies), [`interlock`],
-//! [`hazard`] (the detector), [`stats`], [`pipeline`] (passes), [`sync`] (std or loom).
+//! Module map: [`kernel`] and [`fragment`] (the kernel API, the contract with algorithms),
+//! [`invocation`] (the per-invocation runtime: slots, contexts, access futures), [`memory`]
+//! (buffers, words, operations), [`raster`] (clipping, setup, binning, coverage), [`state`]
+//! (depth, stencil, blending), [`framebuffer`] (tile-major targets), [`exec`] (executors,
+//! policies and every shading loop), [`interlock`], [`hazard`] (the detector), [`stats`],
+//! [`pipeline`] (devices and passes), [`sync`] (std or loom).
+
+// Every unsafe block states why it is sound (house rule); clippy holds us to it.
+#![deny(clippy::undocumented_unsafe_blocks)]
 
 pub mod exec;
 pub mod fragment;
@@ -25,6 +31,7 @@ pub mod geometry;
 pub mod hazard;
 mod hint;
 pub mod interlock;
+pub mod invocation;
 pub mod kernel;
 pub mod memory;
 pub mod pipeline;
@@ -34,16 +41,14 @@ pub mod stats;
 pub mod sync;
 
 pub use exec::{Binning, ExecConfig, ExecMode, Policy, ScheduleConfig};
-pub use fragment::{DirectFrag, Fragment, Performed};
+pub use fragment::Fragment;
 pub use framebuffer::{Framebuffer, Image};
 pub use geometry::{Draw, Mesh, MeshError};
 pub use hazard::{Hazard, HazardCounts, HazardKind};
 pub use interlock::InterlockMode;
-pub use kernel::FragInput;
-pub use kernel::{
-    Access, CompareExchange, FaultKind, Frag, FragmentKernel, KernelInfo, PixelArray, Store,
-};
-pub use memory::{Buf, Memory, Values, Word};
+pub use invocation::{Access, CompareExchange, DirectFrag, Frag, Performed, Store};
+pub use kernel::{FaultKind, FragInput, FragmentKernel, KernelInfo};
+pub use memory::{Buf, Memory, PixelArray, Values, Word};
 pub use pipeline::{Device, Fault, OcclusionQuery, PassError, PassReport, PassState};
 pub use raster::{CullMode, FrontFace, RasterState, SampleCount, Viewport};
 pub use state::{

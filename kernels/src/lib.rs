@@ -9,6 +9,8 @@
 //! (every fragment captured under the `ordered` executor, sorted by depth then primitive
 //! id), by one differential oracle ([`oracle`]).
 
+#![forbid(unsafe_code)]
+
 pub mod abuffer;
 pub mod algo;
 pub mod basic;
@@ -24,7 +26,7 @@ pub mod protocols;
 pub mod registry;
 pub(crate) mod resolve;
 #[cfg(test)]
-mod test_scenes;
+mod testing;
 
 pub use algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, Check, Frame, HazardClass,

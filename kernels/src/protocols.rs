@@ -22,6 +22,7 @@ pub use crate::abuffer::sb::{SbStore, SparseAllocate};
 pub use crate::basic::CountKernel;
 pub use crate::kbuffer::atomic::{Census, Claim32, Depth32, Store64};
 pub use crate::kbuffer::interlock::InterlockStore;
-pub use crate::kbuffer::rmw::{RmwStore, SplitSlots};
+pub use crate::kbuffer::rmw::RmwStore;
+pub use crate::kbuffer::slots::SplitSlots;
 pub use crate::kbuffer::spinlock::SpinStore;
 pub use crate::occupancy::passes::{Count as OccupancyCount, Fill as OccupancyFill};

@@ -24,7 +24,8 @@
 //! then run, as they would on the hardware.
 
 use super::policy::Candidate;
-use crate::kernel::{FaultKind, Invocation, StepKind};
+use crate::invocation::{Invocation, StepKind};
+use crate::kernel::FaultKind;
 use crate::memory::{Addr, Memory, OpKind};
 
 /// Spinning steps in a row, with no memory changing anywhere, after which a spinning lane

@@ -8,7 +8,8 @@ use std::pin::pin;
 use std::task::{Context, Poll, Waker};
 
 use crate::interlock::{Interlock, InterlockMode};
-use crate::kernel::{FaultKind, Frag, FragInput, FragmentKernel, Invocation, Mode, PassEnv};
+use crate::invocation::{Frag, Invocation, Mode, PassEnv};
+use crate::kernel::{FaultKind, FragInput, FragmentKernel};
 use crate::memory::Memory;
 use crate::sync::{thread, Arc};
 
@@ -76,10 +77,10 @@ pub fn run_on_threads<K: FragmentKernel + Send + 'static>(
                         Poll::Pending => thread::yield_now(),
                     }
                 }
-                if let Some(claim) = super::run::abandon(&inv, &env) {
+                if let Some(claim) = super::slots::abandon(&inv, &env) {
                     let mut pending = vec![claim];
                     let mut waits = 0;
-                    while !super::run::pass_deferred(&mut pending, &env) && waits < max_steps {
+                    while !super::slots::pass_deferred(&mut pending, &env) && waits < max_steps {
                         waits += 1;
                         thread::yield_now();
                     }

@@ -30,6 +30,7 @@
 //! stored in its bin entry, so rasterizing it costs nothing; setup records are 64 bytes with no
 //! heap; large buffers are recycled from frame to frame (`pool`).
 
+mod block;
 mod clip;
 mod coverage;
 pub(crate) mod pool;

@@ -280,16 +280,16 @@ impl Algorithm for BunLl {
 mod tests {
     use fragrace_emu::Policy;
 
-    use super::super::test_support::*;
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
+    use crate::testing::*;
 
     #[test]
     fn bun_ll_is_exact_and_hazard_free_under_every_executor() {
         assert_exact_and_hazard_free_everywhere(&BunLl);
         let mesh = layers();
-        let f = frame(&mesh, 24, 20);
+        let f = frame_sized(&mesh, 24, 20);
         for buckets in [1, 2, 7] {
             let params = Params {
                 buckets,
@@ -314,7 +314,7 @@ mod tests {
             &ExecConfig::scheduled(Policy::Pct { depth: 3 }, 4),
         );
         let deep = stack(21);
-        let f = frame(&deep, 4, 3);
+        let f = frame_sized(&deep, 4, 3);
         assert_exact(
             &BunLl,
             &f,
@@ -332,13 +332,13 @@ mod tests {
         // fragment per pixel; a pool of 2 nodes per pixel (2 * 20 / 5 = 8 nodes a bucket)
         // keeps 8 fragments in each bucket and drops the rest.
         let mesh = stack(5);
-        let f = frame(&mesh, 5, 4);
+        let f = frame_sized(&mesh, 5, 4);
         let params = Params {
             pool_per_pixel: Some(2.0),
             ..Params::default()
         };
         let truth = Truth::capture(&f, 1).unwrap();
-        for exec in executors() {
+        for exec in executor_configs() {
             let r = BunLl.run(&f, &params, &exec).unwrap();
             for c in &r.checks {
                 assert!(c.passed, "{:?}: `{}`: {}", exec.mode, c.name, c.detail);

@@ -220,8 +220,8 @@ impl Algorithm for Dfb {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_support::*;
     use super::*;
+    use crate::testing::*;
 
     #[test]
     fn dfb_is_exact_under_every_executor() {
@@ -232,7 +232,7 @@ mod tests {
     fn dfb_shell_sorts_deep_pixels() {
         // 20 fragments per pixel: the resolve takes the shell-sort branch.
         let mesh = stack(20);
-        let f = frame(&mesh, 6, 5);
+        let f = frame_sized(&mesh, 6, 5);
         for exec in [
             ExecConfig::ordered(),
             ExecConfig::parallel(3),

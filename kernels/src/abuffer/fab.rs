@@ -131,16 +131,16 @@ impl Algorithm for Fab {
 mod tests {
     use fragrace_emu::Policy;
 
-    use super::super::test_support::*;
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
+    use crate::testing::*;
 
     #[test]
     fn fab_is_exact_under_every_executor() {
         assert_exact_and_hazard_free_everywhere(&Fab);
         let mesh = layers();
-        let f = frame(&mesh, 24, 20);
+        let f = frame_sized(&mesh, 24, 20);
         // Exactly sized arrays: capacity = the deepest pixel.
         let params = Params {
             fab_capacity: 6,
@@ -152,13 +152,13 @@ mod tests {
     #[test]
     fn fab_overflow_is_counted_exactly_and_keeps_the_rest() {
         let mesh = stack(7);
-        let f = frame(&mesh, 6, 5);
+        let f = frame_sized(&mesh, 6, 5);
         let params = Params {
             fab_capacity: 3,
             ..Params::default()
         };
         let truth = Truth::capture(&f, 1).unwrap();
-        for exec in executors() {
+        for exec in executor_configs() {
             let r = Fab.run(&f, &params, &exec).unwrap();
             for c in &r.checks {
                 assert!(c.passed, "{:?}: `{}`: {}", exec.mode, c.name, c.detail);

@@ -498,16 +498,16 @@ impl Algorithm for LinkedList {
 mod tests {
     use fragrace_emu::Policy;
 
-    use super::super::test_support::*;
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
+    use crate::testing::*;
 
     #[test]
     fn ll_is_exact_and_hazard_free_under_every_executor() {
         assert_exact_and_hazard_free_everywhere(&LinkedList::default());
         let mesh = layers();
-        let f = frame(&mesh, 24, 20);
+        let f = frame_sized(&mesh, 24, 20);
         // A roomy pool from pool_per_pixel instead of the count pass.
         let params = Params {
             pool_per_pixel: Some(8.0),
@@ -522,7 +522,7 @@ mod tests {
         }
         // Deep lists: the resolve shell-sorts.
         let mesh = stack(19);
-        let f = frame(&mesh, 5, 4);
+        let f = frame_sized(&mesh, 5, 4);
         for exec in [
             ExecConfig::ordered(),
             ExecConfig::parallel(2),
@@ -535,14 +535,14 @@ mod tests {
     #[test]
     fn ll_small_pool_counts_overflow_exactly_and_never_corrupts() {
         let mesh = stack(4);
-        let f = frame(&mesh, 6, 5); // 30 pixels x 4 = 120 fragments
+        let f = frame_sized(&mesh, 6, 5); // 30 pixels x 4 = 120 fragments
         let truth = Truth::capture(&f, 1).unwrap();
         for (per_pixel, capacity) in [(1.5, 45u64), (0.0, 0), (3.99, 119), (4.0, 120)] {
             let params = Params {
                 pool_per_pixel: Some(per_pixel),
                 ..Params::default()
             };
-            for exec in executors() {
+            for exec in executor_configs() {
                 let r = LinkedList::default().run(&f, &params, &exec).unwrap();
                 let what = format!("pool {per_pixel}/px under {:?}", exec.mode);
                 for c in &r.checks {
@@ -572,7 +572,7 @@ mod tests {
     /// (torn records, races, half-written nodes seen) per seed.
     fn race_bug(variant: LinkedList, seeds: u64) -> Vec<(u64, u64, bool)> {
         let mesh = stack(8);
-        let f = frame(&mesh, 4, 4);
+        let f = frame_sized(&mesh, 4, 4);
         let truth = Truth::capture(&f, 1).unwrap();
         (0..seeds)
             .map(|seed| {

@@ -7,27 +7,16 @@
 //! resolve). The count pass is `basic::CountKernel`.
 
 mod array;
-mod bun;
 mod checks;
-pub(crate) mod dfb; // pub(crate): protocol kernels re-exported by crate::protocols
-mod fab;
-pub(crate) mod ll;
 mod run;
-pub(crate) mod sb;
-#[cfg(test)]
-mod test_support;
+
+// `pub(crate)`: modules whose protocol kernels `crate::protocols` re-exports.
+crate::registry::family! {
+    pub(crate) ll,
+    fab,
+    pub(crate) sb,
+    pub(crate) dfb,
+    bun,
+}
 
 pub use ll::LinkedList;
-
-use crate::algo::Algorithm;
-
-/// The algorithms of this family.
-pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    let mut v = Vec::new();
-    v.extend(ll::algorithms());
-    v.extend(fab::algorithms());
-    v.extend(sb::algorithms());
-    v.extend(dfb::algorithms());
-    v.extend(bun::algorithms());
-    v
-}

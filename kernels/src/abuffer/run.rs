@@ -7,7 +7,7 @@
 //! returns the capture, the image, the shared invariants ([`super::checks::capture_checks`])
 //! after its own, and the storage of its buffers plus the resolve target. [`AbRun`] does
 //! those steps once for all of them, so that an algorithm's `run` reads as its passes and
-//! its own invariants only. (The k-buffers' counterpart is `kbuffer::rmw::KbRun`.) The
+//! its own invariants only. (The k-buffers' counterpart is `kbuffer::run::KbRun`.) The
 //! count-scan-store A-buffers (DFB, z-thickness paper section 4.3; SB, depth-fighting paper
 //! section 2) differ only in their scans, so [`Counted`] does what follows the scan once.
 //!

@@ -214,8 +214,8 @@ impl Algorithm for SBuffer {
 mod tests {
     use fragrace_emu::Policy;
 
-    use super::super::test_support::*;
     use super::*;
+    use crate::testing::*;
 
     #[test]
     fn sb_is_exact_under_every_executor() {
@@ -229,7 +229,7 @@ mod tests {
         let mut mesh = fragrace_emu::Mesh::default();
         quad(&mut mesh, [-0.3, -0.3, 0.2, 0.1], 0.1, 0.3);
         quad(&mut mesh, [-0.1, -0.5, 0.4, 0.0], -0.2, 0.0);
-        let f = frame(&mesh, 40, 30);
+        let f = frame_sized(&mesh, 40, 30);
         for exec in [
             ExecConfig::ordered(),
             ExecConfig::parallel(4),
@@ -247,7 +247,7 @@ mod tests {
     #[test]
     fn sb_deep_pixels() {
         let mesh = stack(18);
-        let f = frame(&mesh, 5, 7);
+        let f = frame_sized(&mesh, 5, 7);
         for exec in [
             ExecConfig::ordered(),
             ExecConfig::parallel(2),

@@ -287,10 +287,16 @@ impl Algorithm for Adp {
     }
 }
 
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(Adp)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kbuffer::rmw::testing::{assert_checks, frame, run};
+    use crate::testing::{assert_checks, frame, run};
 
     /// `n` quads at distinct depths over the same pixels, clustered: the first `n - 1`
     /// within 15 % of the NDC depth range (farther apart than a histogram bit), the last
@@ -299,9 +305,9 @@ mod tests {
         let mut mesh = fragrace_emu::Mesh::default();
         for i in 0..n - 1 {
             let z = -0.9 + 0.3 * i as f32 / n as f32;
-            crate::test_scenes::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], z, 0.0);
+            crate::testing::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], z, 0.0);
         }
-        crate::test_scenes::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], 0.9, 0.0);
+        crate::testing::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], 0.9, 0.0);
         mesh
     }
 
@@ -347,7 +353,7 @@ mod tests {
         // Two layers 1e-6 apart (far below (zFar - zNear) / 1024) and one far away.
         let mut mesh = fragrace_emu::Mesh::default();
         for z in [-0.5, -0.5 + 2e-6, 0.8] {
-            crate::test_scenes::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], z, 0.0);
+            crate::testing::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], z, 0.0);
         }
         let f = frame(&mesh, 8);
         let (r, m) = run(&Adp, &f, &Params::default(), &ExecConfig::ordered());

@@ -270,10 +270,16 @@ impl Algorithm for Bdp2 {
     }
 }
 
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(Bdp), Box::new(Bdp2)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kbuffer::rmw::testing::{assert_checks, frame, run as run_checked};
+    use crate::testing::{assert_checks, frame, run as run_checked};
 
     /// `n` quads stacked at distinct depths over the same pixels, spread over `spread` of
     /// the NDC depth range from its near end.
@@ -281,7 +287,7 @@ mod tests {
         let mut mesh = fragrace_emu::Mesh::default();
         for i in 0..n {
             let z = -0.9 + spread * i as f32 / n.max(2) as f32;
-            crate::test_scenes::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], z, 0.0);
+            crate::testing::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], z, 0.0);
         }
         mesh
     }
@@ -308,7 +314,7 @@ mod tests {
         // Layers packed into the first sub-intervals plus one far layer that stretches the
         // range: BDP keeps 2 per sub-interval, BDP2 4.
         let mut mesh = stack(8, 0.05);
-        crate::test_scenes::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], 0.9, 0.0);
+        crate::testing::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], 0.9, 0.0);
         let f = frame(&mesh, 8);
         let params = Params {
             k: 9,
@@ -352,7 +358,7 @@ mod tests {
     fn an_empty_view_is_refused() {
         let mut mesh = fragrace_emu::Mesh::default();
         // Entirely behind the far plane: clipped away, no depth anywhere.
-        crate::test_scenes::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], 3.0, 0.0);
+        crate::testing::tilted_quad(&mut mesh, [-0.9, 0.9, -0.9, 0.9], 3.0, 0.0);
         let f = frame(&mesh, 8);
         let msg = match Bdp.run(&f, &Params::default(), &ExecConfig::ordered()) {
             Err(e) => e.to_string(),

@@ -35,25 +35,22 @@
 //! nearest ([`Capacity::KNearest`]) and no composite image is produced. The paper's colour
 //! mode (packed RGBA8 instead of depths, section 3.2) trades the depths for the colours.
 
-mod adp;
-mod bdp;
+crate::registry::family! {
+    bdp,
+    adp,
+}
 
 use fragrace_emu::{
     BlendEquation, BlendState, Buf, Device, ExecConfig, Format, Fragment, Image, LogicOp,
     PassReport, PassState, TargetState,
 };
 
-use crate::algo::{AlgoError, AlgoResult, Algorithm, Capture, CapturedFrag, Check, Frame, Params};
+use crate::algo::{AlgoError, AlgoResult, Capture, CapturedFrag, Check, Frame, Params};
 use crate::common::{capture_state, pixels};
 use crate::occupancy::range;
 
 pub use adp::Adp;
 pub use bdp::{Bdp, Bdp2};
-
-/// The algorithms of this family.
-pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    vec![Box::new(Bdp), Box::new(Bdp2), Box::new(Adp)]
-}
 
 /// Render targets of a bucket array (or a histogram, or an equalised histogram): the 8
 /// MRTs of section 3.1.

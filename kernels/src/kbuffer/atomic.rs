@@ -11,7 +11,7 @@
 //! under every interleaving.
 //!
 //! - `kb-atomic32`: 32-bit keys are the depth's f32 bits (order-preserving for depth >= 0,
-//!   see [`super::rmw::depth_key`]); a second geometry pass attaches primitives: each
+//!   see [`super::slots::depth_key`]); a second geometry pass attaches primitives: each
 //!   fragment whose key is among the k claims, by compare-exchange, the first unclaimed slot
 //!   holding its key. Equal depths are kept as separate slots by the chain (the carried
 //!   value equals the old one and moves on), so `m` coplanar fragments with `c <= m` slots of
@@ -23,7 +23,9 @@
 
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo, Word};
 
-use super::rmw::{depth_key, pack64, KbRun, Shape, Slots};
+use super::checks::Shape;
+use super::run::KbRun;
+use super::slots::{depth_key, pack64, Slots};
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
 };
@@ -310,8 +312,8 @@ impl Algorithm for KbAtomic64 {
 mod tests {
     use fragrace_emu::ExecConfig;
 
-    use super::super::rmw::testing::*;
     use super::*;
+    use crate::testing::*;
 
     #[test]
     fn atomic32_exact_under_every_executor() {

@@ -20,7 +20,9 @@
 
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, InterlockMode, KernelInfo};
 
-use super::rmw::{rmw_insert, KbRun, Shape, Slots, SplitSlots};
+use super::checks::Shape;
+use super::run::KbRun;
+use super::slots::{rmw_insert, Slots, SplitSlots};
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
 };
@@ -170,8 +172,8 @@ impl Algorithm for KbInterlock {
 mod tests {
     use fragrace_emu::Policy;
 
-    use super::super::rmw::testing::*;
     use super::*;
+    use crate::testing::*;
 
     #[test]
     fn ordered_exact_under_every_executor() {

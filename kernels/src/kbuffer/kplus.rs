@@ -513,7 +513,7 @@ mod tests {
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
-    use crate::test_scenes::{frame, tilted_quad};
+    use crate::testing::{frame_sized, tilted_quad};
 
     /// Overlapping quads in shuffled depth order (up to 14 layers per pixel), two pairs of
     /// exactly coplanar layers, and diagonal edges.
@@ -555,7 +555,7 @@ mod tests {
 
     fn check_exact(algo: &dyn Algorithm, k: u32) {
         let mesh = scene();
-        let frame = frame(&mesh, 24, 20);
+        let frame = frame_sized(&mesh, 24, 20);
         let truth = Truth::capture(&frame, 1).unwrap();
         let params = Params {
             k,
@@ -619,7 +619,7 @@ mod tests {
         // As the paper notes, k = 1 behaves as a Z-buffer and k >= depth complexity as an
         // A-buffer (every fragment kept, nothing culled or evicted).
         let mesh = scene();
-        let frame = frame(&mesh, 16, 16);
+        let frame = frame_sized(&mesh, 16, 16);
         let truth = Truth::capture(&frame, 1).unwrap();
         for algo in [&KPlus as &dyn Algorithm, &KPlusHeap] {
             let p1 = Params {
@@ -657,7 +657,7 @@ mod tests {
                 0.0,
             );
         }
-        let frame = frame(&mesh, 8, 8);
+        let frame = frame_sized(&mesh, 8, 8);
         let truth = Truth::capture(&frame, 1).unwrap();
         let params = Params {
             k: 4,
@@ -691,7 +691,7 @@ mod tests {
     #[test]
     fn k_zero_is_rejected() {
         let mesh = scene();
-        let frame = frame(&mesh, 4, 4);
+        let frame = frame_sized(&mesh, 4, 4);
         let params = Params {
             k: 0,
             ..Params::default()

@@ -57,7 +57,9 @@ use fragrace_emu::{
     FragmentState, Image, KernelInfo, SampleCount, TargetState,
 };
 
-use super::rmw::{key_less, rmw_insert, KbRun, Shape, Slots, SplitSlots, MAX_K};
+use super::checks::Shape;
+use super::run::KbRun;
+use super::slots::{key_less, rmw_insert, Slots, SplitSlots, MAX_K};
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
 };
@@ -372,9 +374,9 @@ impl Algorithm for KbMultipass {
 mod tests {
     use fragrace_emu::{ExecConfig, Policy};
 
-    use super::super::rmw::testing::*;
     use super::super::rmw::KbRmw;
     use super::*;
+    use crate::testing::*;
 
     fn passes(r: &AlgoResult) -> u64 {
         r.report.stats.geometry_passes as u64

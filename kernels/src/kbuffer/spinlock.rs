@@ -34,7 +34,9 @@
 
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
-use super::rmw::{rmw_insert, KbRun, Shape, Slots, SplitSlots};
+use super::checks::Shape;
+use super::run::KbRun;
+use super::slots::{rmw_insert, Slots, SplitSlots};
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
 };
@@ -194,10 +196,10 @@ impl Algorithm for KbSpinlock {
 mod tests {
     use fragrace_emu::{ExecConfig, Policy};
 
-    use super::super::rmw::testing::*;
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
+    use crate::testing::*;
 
     /// Runs under `exec` and asserts the invariants and that every error pixel dropped a
     /// fragment; returns (dropped, error pixels).

@@ -496,7 +496,7 @@ mod tests {
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
-    use crate::test_scenes::frame;
+    use crate::testing::frame_sized;
 
     /// A triangle covering the whole viewport (every sample of every pixel), NDC depth
     /// `z + tilt * x`.
@@ -547,7 +547,7 @@ mod tests {
         corner(&mut mesh, 0.5, 0.5, 0.15, 0.0);
         corner(&mut mesh, 0.25, 0.25, 0.55, 0.0);
         corner(&mut mesh, 0.5, -1.0, 0.05, 0.0);
-        let frame = frame(&mesh, 16, 16);
+        let frame = frame_sized(&mesh, 16, 16);
         let truth = Truth::capture(&frame, 1).unwrap();
         let t = truth.capture.as_ref().unwrap();
         let params = Params::default();
@@ -590,7 +590,7 @@ mod tests {
         for i in 0..10 {
             cover_all(&mut mesh, 0.8 - 0.15 * i as f32, 0.01);
         }
-        let frame = frame(&mesh, 8, 8);
+        let frame = frame_sized(&mesh, 8, 8);
         let truth = Truth::capture(&frame, 1).unwrap();
         let params = Params::default();
         for exec in execs() {
@@ -666,7 +666,7 @@ mod tests {
         for i in 0..260 {
             cover_all(&mut mesh, -0.9 + 1.8 * (i as f32 / 260.0), 0.0);
         }
-        let frame = frame(&mesh, 4, 4);
+        let frame = frame_sized(&mesh, 4, 4);
         let params = Params::default();
         let exec = ExecConfig::ordered();
         let good = run(&frame, &params, &exec, Routing::Saturate).unwrap();
@@ -708,7 +708,7 @@ mod tests {
             mesh.indices.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
         }
         cover_all(&mut mesh, 0.2, 0.0);
-        let frame = frame(&mesh, 16, 16);
+        let frame = frame_sized(&mesh, 16, 16);
         let truth = Truth::capture(&frame, 1).unwrap();
         let t = truth.capture.as_ref().unwrap();
         let params = Params::default();

@@ -239,7 +239,7 @@ mod tests {
     use super::*;
     use crate::basic::Truth;
     use crate::oracle;
-    use crate::test_scenes::{frame, tilted_quad};
+    use crate::testing::{frame_sized, tilted_quad};
 
     fn execs() -> Vec<ExecConfig> {
         let mut v = vec![ExecConfig::ordered(), ExecConfig::parallel(2)];
@@ -254,7 +254,7 @@ mod tests {
         let mut mesh = Mesh::default();
         tilted_quad(&mut mesh, [-0.8, 0.3, -0.9, 0.1], 0.2, 0.05);
         tilted_quad(&mut mesh, [0.35, 0.9, -0.2, 0.8], -0.4, 0.05);
-        let frame = frame(&mesh, 20, 16);
+        let frame = frame_sized(&mesh, 20, 16);
         let truth = Truth::capture(&frame, 1).unwrap();
         for alpha in [0.3, 0.75, 1.0] {
             let params = Params {
@@ -296,7 +296,7 @@ mod tests {
                 0.05,
             );
         }
-        let frame = frame(&mesh, 16, 16);
+        let frame = frame_sized(&mesh, 16, 16);
         let truth = Truth::capture(&frame, 1).unwrap();
         let t = truth.capture.as_ref().unwrap();
         let params = Params::default();
@@ -355,7 +355,7 @@ mod tests {
                 0.0,
             );
         }
-        let frame = frame(&mesh, 4, 4);
+        let frame = frame_sized(&mesh, 4, 4);
         let r = Wboit
             .run(&frame, &Params::default(), &ExecConfig::ordered())
             .unwrap();

@@ -240,3 +240,8 @@ impl Algorithm for DfbSfm {
         })
     }
 }
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(DfbSfm)]
+}

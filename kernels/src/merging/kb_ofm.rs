@@ -198,3 +198,8 @@ impl Algorithm for KbOfm {
         })
     }
 }
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(KbOfm)]
+}

@@ -13,24 +13,15 @@
 //! exact composite of the truth.
 
 pub mod algorithm1;
-mod dfb_sfm;
-mod kb_ofm;
 pub mod ofm;
 pub mod record;
 pub mod sfm;
-pub mod skb;
 pub mod thickness;
 
-pub use thickness::{DepthModel, MergeParamError, MergeParams, Thickness, ZModel};
-
-use crate::algo::Algorithm;
-
-/// The algorithms of this family.
-pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    vec![
-        Box::new(skb::SkbOfm(skb::Sync::OrderedInterlock)),
-        Box::new(skb::SkbOfm(skb::Sync::Unsynchronized)),
-        Box::new(dfb_sfm::DfbSfm),
-        Box::new(kb_ofm::KbOfm),
-    ]
+crate::registry::family! {
+    pub skb,
+    dfb_sfm,
+    kb_ofm,
 }
+
+pub use thickness::{DepthModel, MergeParamError, MergeParams, Thickness, ZModel};

@@ -369,3 +369,8 @@ impl Algorithm for SkbOfm {
         })
     }
 }
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(SkbOfm(Sync::OrderedInterlock)), Box::new(SkbOfm(Sync::Unsynchronized))]
+}

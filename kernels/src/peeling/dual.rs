@@ -244,10 +244,16 @@ impl Algorithm for Dual {
     }
 }
 
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(Dual)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kbuffer::rmw::testing::{frame, run};
+    use crate::testing::{frame, run};
 
     #[test]
     fn peels_every_layer_and_loses_exactly_the_coplanar_ones() {
@@ -261,7 +267,7 @@ mod tests {
     fn exact_without_coplanarity_in_half_the_passes() {
         let mut mesh = fragrace_emu::Mesh::default();
         for i in 0..7 {
-            crate::test_scenes::tilted_quad(
+            crate::testing::tilted_quad(
                 &mut mesh,
                 [-0.9 + 0.05 * i as f32, 0.8, -0.7, 0.9],
                 -0.6 + 0.17 * ((i * 3) % 7) as f32,

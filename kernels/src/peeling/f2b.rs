@@ -178,10 +178,16 @@ impl Algorithm for F2b {
     }
 }
 
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(F2b)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kbuffer::rmw::testing::{frame, run};
+    use crate::testing::{frame, run};
 
     #[test]
     fn peels_the_nearest_layers_and_loses_exactly_the_coplanar_ones() {
@@ -194,7 +200,7 @@ mod tests {
         // Quads at distinct depths only.
         let mut mesh = fragrace_emu::Mesh::default();
         for i in 0..6 {
-            crate::test_scenes::tilted_quad(
+            crate::testing::tilted_quad(
                 &mut mesh,
                 [-0.9 + 0.1 * i as f32, 0.8, -0.7, 0.9],
                 -0.5 + 0.17 * ((i * 5) % 6) as f32,

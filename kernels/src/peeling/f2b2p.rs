@@ -229,10 +229,16 @@ impl Algorithm for F2b2p {
     }
 }
 
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(F2b2p)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kbuffer::rmw::testing::{assert_exact_everywhere, frame, run};
+    use crate::testing::{assert_exact_everywhere, frame, run};
 
     #[test]
     fn exact_under_every_executor_with_coplanar_fragments() {
@@ -242,7 +248,7 @@ mod tests {
     #[test]
     fn a_deep_coplanar_stack_is_peeled_two_by_two() {
         // Seven identical quads: one layer of 7 coplanar fragments per pixel.
-        let mesh = crate::test_scenes::coplanar_stack(7);
+        let mesh = crate::testing::coplanar_stack(7);
         let f = frame(&mesh, 8);
         let (r, m) = run(
             &F2b2p,

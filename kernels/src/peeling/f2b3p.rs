@@ -258,10 +258,16 @@ impl Algorithm for F2b3p {
     }
 }
 
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(F2b3p)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kbuffer::rmw::testing::{assert_exact_everywhere, frame, run};
+    use crate::testing::{assert_exact_everywhere, frame, run};
 
     #[test]
     fn exact_under_every_executor_with_coplanar_fragments() {
@@ -270,7 +276,7 @@ mod tests {
 
     #[test]
     fn peels_a_coplanar_stack_as_f2b_2p_does() {
-        let mesh = crate::test_scenes::coplanar_stack(7);
+        let mesh = crate::testing::coplanar_stack(7);
         let f = frame(&mesh, 8);
         let (r, m) = run(
             &F2b3p,

@@ -266,12 +266,18 @@ impl Algorithm for F2bB {
     }
 }
 
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(F2bB::fab()), Box::new(F2bB::kb())]
+}
+
 #[cfg(test)]
 mod tests {
     use fragrace_emu::{ExecConfig, Policy};
 
     use super::*;
-    use crate::kbuffer::rmw::testing::{assert_exact_everywhere, frame, run, scheduled};
+    use crate::testing::{assert_exact_everywhere, frame, run, scheduled};
 
     #[test]
     fn fab_is_exact_under_every_executor_while_layers_fit() {
@@ -280,7 +286,7 @@ mod tests {
 
     #[test]
     fn fab_keeps_k_slots_of_a_layer_and_counts_the_rest() {
-        let mesh = crate::test_scenes::coplanar_stack(11);
+        let mesh = crate::testing::coplanar_stack(11);
         let f = frame(&mesh, 8);
         let params = Params {
             k: 16,
@@ -297,7 +303,7 @@ mod tests {
 
     #[test]
     fn kb_loses_racing_coplanar_fragments_and_the_detector_sees_it() {
-        let mesh = crate::test_scenes::coplanar_stack(6);
+        let mesh = crate::testing::coplanar_stack(6);
         let f = frame(&mesh, 8);
         let params = Params::default();
         let (r, m) = run(&F2bB::kb(), &f, &params, &ExecConfig::ordered());

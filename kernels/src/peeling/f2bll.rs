@@ -351,10 +351,16 @@ impl Algorithm for F2bLl {
     }
 }
 
+
+/// The algorithms of this file, for its family's registry line.
+pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
+    vec![Box::new(F2bLl)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kbuffer::rmw::testing::assert_exact_everywhere;
+    use crate::testing::assert_exact_everywhere;
 
     #[test]
     fn exact_under_every_executor_with_coplanar_fragments() {

@@ -35,34 +35,20 @@
 //! lost fragments with one atomic counter (`AlgoResult::dropped`). F2B-LL adds a per-pixel
 //! linked list with atomics.
 
-mod dual;
-mod dualll;
-mod f2b;
-mod f2b2p;
-mod f2b3p;
-mod f2bb;
-mod f2bll;
+crate::registry::family! {
+    f2b,
+    f2b2p,
+    f2b3p,
+    f2bll,
+    f2bb,
+    dual,
+    dualll,
+}
 
 use fragrace_emu::{Format, Framebuffer, Image, SampleCount};
 
 use crate::algo::{AlgoError, AlgoResult, Capture, CapturedFrag, Check, Frame, Params};
 use crate::common::{self, composite_frags, depth_order, pixels};
-
-use crate::algo::Algorithm;
-
-/// The algorithms of this family.
-pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
-    vec![
-        Box::new(f2b::F2b),
-        Box::new(f2b2p::F2b2p),
-        Box::new(f2b3p::F2b3p),
-        Box::new(f2bll::F2bLl),
-        Box::new(f2bb::F2bB::fab()),
-        Box::new(f2bb::F2bB::kb()),
-        Box::new(dual::Dual),
-        Box::new(dualll::DualLl),
-    ]
-}
 
 /// Most layers a peeler may be asked for (k), so that a typo cannot ask for billions of
 /// geometry passes.
@@ -274,9 +260,9 @@ pub(super) fn texel_f32(image: &Image, p: usize) -> [f32; 4] {
 /// Returns each run's result and metrics for further assertions.
 #[cfg(test)]
 pub(super) fn assert_same_loss_everywhere(
-    algo: &dyn Algorithm,
+    algo: &dyn crate::algo::Algorithm,
 ) -> Vec<(String, AlgoResult, crate::oracle::Metrics)> {
-    use crate::kbuffer::rmw::testing::{executors, frame, quads, run};
+    use crate::testing::{executors, frame, quads, run};
     let mesh = quads(16);
     let f = frame(&mesh, 16);
     let mut baseline: Option<Vec<bool>> = None;

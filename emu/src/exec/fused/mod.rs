@@ -1,0 +1,491 @@
+//! The fused path of the `ordered` and `parallel` executors: rasterize, test, shade and
+//! write one unit of tile work at a time, with no per-pass fragment lists.
+//!
+//! The general path (`crate::pipeline` (`run_waves`)) materializes every fragment of a wave
+//! (rasterize all tiles, shade all fragments, then run the late stage), which the scheduled
+//! executor needs (it interleaves invocations of many tiles) and ordered interlock needs
+//! (tickets). Direct executors need none of that: a worker takes a unit of work (a tile, or a
+//! [`Segment`] of one), rasterizes it into a warp of at most `batch` fragments, shades the
+//! warp (lanes in lockstep or one after the other, as `ExecConfig::lockstep` says), runs the
+//! late tests and target writes in API order, and goes on. Memory stays in the tile; nothing
+//! is allocated per fragment.
+//!
+//! When the pass's fixed-function results commute (no colour targets, no stencil, no depth
+//! writes: capture passes, counting), a tile's triangles are cut into segments of at most
+//! `ExecConfig::segment` and different threads take segments of the same tile at the same
+//! time: fragments of one pixel then run concurrently on different threads, as on a GPU,
+//! and races on shared memory are real races. Otherwise a tile belongs to one worker at a
+//! time, so depth, stencil and blending happen in API order. When a pass needs nothing of
+//! the framebuffer at all (no test either), the parallel executor skips the tiles:
+//! [`run_unbinned`] hands out chunks of triangles, set up and shaded by whichever worker
+//! takes them. Without lockstep such passes also shade through a loop of their own
+//! (`Worker::run_unit_counting`), which carries nothing per pixel but the kernel.
+//!
+//! This module knows no algorithm; it does not handle interlock (ordered interlock needs the
+//! per-pixel tickets of the general path) nor the contention table.
+
+use std::time::{Duration, Instant};
+
+use crate::exec::{Acc, ShadeOutcome};
+use crate::framebuffer::TileMemory;
+use crate::invocation::PassEnv;
+use crate::kernel::{FragInput, FragmentKernel};
+use crate::raster::{Binned, FlatChunk, Prepared, Segment, SetupTriangle, Span};
+use crate::state::FragmentState;
+use crate::sync::pool;
+use crate::sync::split::SplitRange;
+
+/// What a fused pass needs besides the kernel and its environment.
+pub(crate) struct FusedPass<'a> {
+    pub state: &'a FragmentState,
+    pub instance: u32,
+    /// Multisampling off on a multisampled target: one coverage bit covers every sample.
+    pub single: bool,
+    /// Depth and stencil tests before shading (otherwise after).
+    pub early: bool,
+    pub targets: usize,
+    /// Lanes per warp.
+    pub lanes: usize,
+    pub lockstep: bool,
+    pub threads: usize,
+    /// `Some(n)`: cut tiles into segments of at most `n` triangles shared between threads
+    /// (only when the fixed-function results commute); `None`: one tile per unit.
+    pub segment: Option<u32>,
+    /// Invocation ids of this pass start here (see [`FragInput::seq`]).
+    pub seq_base: u64,
+}
+
+/// Where a unit of work's covered runs come from: a segment of a tile's bin lists
+/// (rasterized into the worker's buffer), or a chunk of triangles set up without binning
+/// (whose setup produced them).
+trait SpanSource {
+    fn spans<'s>(&'s self, buf: &'s mut Vec<Span>) -> &'s [Span];
+}
+
+struct SegmentSpans<'b> {
+    binned: &'b Binned,
+    seg: Segment,
+}
+
+impl SpanSource for SegmentSpans<'_> {
+    fn spans<'s>(&'s self, buf: &'s mut Vec<Span>) -> &'s [Span] {
+        buf.clear();
+        self.binned.raster_segment_spans(&self.seg, |s| buf.push(s));
+        buf
+    }
+}
+
+impl SpanSource for FlatChunk {
+    fn spans<'s>(&'s self, _: &'s mut Vec<Span>) -> &'s [Span] {
+        &self.spans
+    }
+}
+
+/// Fixed-function counts of a fused pass.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct FusedCounts {
+    pub generated: u64,
+    pub early_culled: u64,
+    pub late_culled: u64,
+    pub samples_passed: u64,
+}
+
+impl FusedCounts {
+    /// Adds these counts to a pass's statistics.
+    pub fn add_to(&self, stats: &mut crate::stats::Stats) {
+        stats.fragments_generated += self.generated;
+        stats.early_culled += self.early_culled;
+        stats.late_culled += self.late_culled;
+        stats.samples_passed += self.samples_passed;
+    }
+
+    fn add(&mut self, o: &FusedCounts) {
+        self.generated += o.generated;
+        self.early_culled += o.early_culled;
+        self.late_culled += o.late_culled;
+        self.samples_passed += o.samples_passed;
+    }
+}
+
+/// Whether a pass's fixed-function work commutes, so that several threads may work on one
+/// tile at once (tests read the tile and nothing writes it).
+pub(crate) fn commutes(state: &FragmentState, targets: usize) -> bool {
+    targets == 0 && !state.stencil.enabled && !(state.depth.test && state.depth.write)
+}
+
+/// A worker's view of its current tile: shared (segments; tests only read) or exclusive.
+enum TileAccess<'t> {
+    Shared(&'t TileMemory),
+    Exclusive(&'t mut TileMemory),
+}
+
+impl TileAccess<'_> {
+    fn tile(&self) -> &TileMemory {
+        match self {
+            TileAccess::Shared(t) => t,
+            TileAccess::Exclusive(t) => t,
+        }
+    }
+
+    #[inline]
+    fn test(
+        &mut self,
+        state: &FragmentState,
+        (lx, ly): (u32, u32),
+        cov: u8,
+        depths: &[f32; 8],
+        front_facing: bool,
+    ) -> u8 {
+        match self {
+            TileAccess::Shared(t) => t.depth_test_readonly(state, lx, ly, cov, depths),
+            TileAccess::Exclusive(t) => {
+                t.depth_stencil(state, lx, ly, cov, depths, front_facing, true)
+            }
+        }
+    }
+}
+
+/// Runs a fused pass over `tiles` (all of the framebuffer's tiles, in tile order).
+// Never inlined: one call per pass, and profiles can then tell the pass apart.
+#[inline(never)]
+pub(crate) fn run_fused<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    pass: &FusedPass<'_>,
+    binned: &Binned,
+    tiles: &mut [TileMemory],
+) -> (ShadeOutcome, FusedCounts, Duration) {
+    let threads = pass.threads.max(1);
+    if pass.state.depth.test || pass.state.stencil.enabled {
+        // Tests read the depth and stencil planes of every tile (lazily allocated).
+        for t in tiles.iter_mut() {
+            t.materialize();
+        }
+    }
+    let (results, imbalance): (Vec<(Acc, FusedCounts)>, Duration) = match pass.segment {
+        Some(max) => {
+            debug_assert!(commutes(pass.state, pass.targets));
+            let mut segments = Vec::new();
+            for t in 0..tiles.len() {
+                binned.tile_segments(t, max, &mut segments);
+            }
+            let tiles: &[TileMemory] = tiles;
+            // One shared counter, not `SplitRange`: segments of one tile are cut so that
+            // different threads shade them at the same time (`ExecConfig::segment`).
+            let next = crate::sync::AtomicUsize::new(0);
+            let work = |_| {
+                let mut w = Worker::new(kernel, env, pass);
+                loop {
+                    let i = next.fetch_add(1, crate::sync::Ordering::Relaxed);
+                    let Some(&seg) = segments.get(i) else { break };
+                    let tile = TileAccess::Shared(&tiles[seg.tile as usize]);
+                    w.run_unit(&SegmentSpans { binned, seg }, env, Some(tile));
+                }
+                w.finish()
+            };
+            broadcast_timed(threads.min(segments.len().max(1)), work)
+        }
+        None => {
+            let count = tiles.len();
+            let threads = threads.min(count.max(1));
+            // Each tile is handed out once (`SplitRange`), so its lock is never contended:
+            // it only moves the `&mut` to the thread that took the index.
+            let slots: Vec<pool::Mutex<Option<&mut TileMemory>>> = tiles
+                .iter_mut()
+                .map(|t| pool::Mutex::new(Some(t)))
+                .collect();
+            let queue = SplitRange::new(count, threads);
+            let work = |me: usize| {
+                let mut w = Worker::new(kernel, env, pass);
+                let mut segs = Vec::new();
+                while let Some(index) = queue.next(me) {
+                    let taken = slots[index]
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .take();
+                    let Some(tile) = taken else { continue };
+                    segs.clear();
+                    // Several units in turn, in API order: each unit's spans are gathered
+                    // before shading (see `Worker::run_unit`).
+                    binned.tile_segments(index, EXCLUSIVE_UNIT, &mut segs);
+                    let mut access = Some(TileAccess::Exclusive(tile));
+                    for &seg in &segs {
+                        access = w.run_unit(&SegmentSpans { binned, seg }, env, access);
+                    }
+                }
+                w.finish()
+            };
+            broadcast_timed(threads, work)
+        }
+    };
+    let mut outcome = ShadeOutcome::default();
+    let mut counts = FusedCounts::default();
+    for (acc, c) in results {
+        acc.finish(&mut outcome);
+        counts.add(&c);
+    }
+    (outcome, counts, imbalance)
+}
+
+/// [`pool::broadcast`], and how long the threads waited for the last one to finish: the sum
+/// over threads of the time from a thread's end to the last thread's end (load imbalance,
+/// [`PassReport::imbalance`](super::PassReport::imbalance)).
+fn broadcast_timed<R: Send>(n: usize, work: impl Fn(usize) -> R + Sync) -> (Vec<R>, Duration) {
+    let results = pool::broadcast(n, |i| {
+        let r = work(i);
+        (r, Instant::now())
+    });
+    let last = results.iter().map(|(_, end)| *end).max();
+    let imbalance = match last {
+        Some(last) => results.iter().map(|(_, end)| last - *end).sum(),
+        None => Duration::ZERO,
+    };
+    (results.into_iter().map(|(r, _)| r).collect(), imbalance)
+}
+
+/// Most bin entries per unit of work of a tile that one worker holds (units of one tile run
+/// in turn, in API order).
+const EXCLUSIVE_UNIT: u32 = 1024;
+
+/// Most input triangles per unit of work of [`run_unbinned`]: its setup records stay in
+/// the worker's cache between setup and shading.
+pub(crate) const UNBINNED_CHUNK: usize = 512;
+
+/// Fewest chunks of [`run_unbinned`] per thread (when the mesh has enough triangles): a
+/// thread that ends its part takes chunks from the back of another's, so the threads end
+/// at most about a chunk apart. With 8 a thread, the bunny @2048 (3674 triangles, chunks
+/// of 230, about 0.35 ms each on two threads) left the threads 221 µs apart on average at
+/// the end of the pass (`PassReport::imbalance`), 5 % of its frame; 32: 102 µs, 64: 53 µs.
+const CHUNKS_PER_THREAD: usize = 64;
+
+/// Whether a pass can run unbinned ([`run_unbinned`]): its fixed-function work commutes,
+/// and it has no depth or stencil test and no target, so that a fragment needs nothing
+/// of the framebuffer and the order in which threads visit pixels does not matter.
+pub(crate) fn unbinned(state: &FragmentState, targets: usize) -> bool {
+    commutes(state, targets) && !state.depth.test
+}
+
+/// Runs a fused pass without binning: workers take chunks of at most [`UNBINNED_CHUNK`]
+/// input triangles in turn, set each up ([`Prepared::setup_flat`]) and rasterize and shade it
+/// at once, in API order within the chunk. Fragments of one pixel from different chunks run
+/// concurrently on different threads, as on a GPU. Only for passes that
+/// [`unbinned`] allows (nothing per-pixel is ordered) and well-formed meshes
+/// ([`Prepared::well_formed`]). Returns the outcome, the counts and the triangles rejected.
+#[inline(never)]
+pub(crate) fn run_unbinned<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    pass: &FusedPass<'_>,
+    prepared: &Prepared<'_>,
+) -> (ShadeOutcome, FusedCounts, u64, Duration) {
+    debug_assert!(unbinned(pass.state, pass.targets) && !pass.early_tests());
+    let n = prepared.triangle_count();
+    let threads = pass.threads.max(1);
+    // At least about `CHUNKS_PER_THREAD` chunks a thread, so that a mesh of few large
+    // triangles still spreads over the threads and the threads end close together.
+    let size = n
+        .div_ceil(threads * CHUNKS_PER_THREAD)
+        .clamp(16, UNBINNED_CHUNK);
+    let chunks = n.div_ceil(size);
+    let threads = threads.min(chunks.max(1));
+    // Threads start far apart in the mesh (see `SplitRange`).
+    let queue = SplitRange::new(chunks, threads);
+    let work = |me: usize| {
+        let mut w = Worker::new(kernel, env, pass);
+        let mut chunk = FlatChunk::default();
+        let mut rejected = 0;
+        while let Some(c) = queue.next(me) {
+            prepared.setup_flat(c * size..(c + 1) * size, &mut chunk);
+            rejected += chunk.rejected;
+            // The chunk's setup records are this unit's planes.
+            let chunk_env = PassEnv {
+                tris: &chunk.tris,
+                ..env.clone()
+            };
+            w.run_unit(&chunk, &chunk_env, None);
+        }
+        let (acc, counts) = w.finish();
+        (acc, counts, rejected)
+    };
+    let (results, imbalance) = broadcast_timed(threads, work);
+    let mut outcome = ShadeOutcome::default();
+    let mut counts = FusedCounts::default();
+    let mut rejected = 0;
+    for (acc, c, r) in results {
+        acc.finish(&mut outcome);
+        counts.add(&c);
+        rejected += r;
+    }
+    (outcome, counts, rejected, imbalance)
+}
+
+/// What the fragments of a unit of work share before shading: coverage masking and the
+/// early tests (both loops of [`Worker::run_unit`] rasterize the same way).
+struct RowSetup<'p> {
+    pass: &'p FusedPass<'p>,
+    /// The unit's setup records (planes), for the tests.
+    tris: &'p [SetupTriangle],
+    tests: bool,
+    sample_mask: u8,
+    all_samples: u8,
+    per_sample_depth: bool,
+    positions: &'static [(f32, f32)],
+    width: u32,
+    pixels: u64,
+}
+
+/// What the pixels of one span share.
+struct Row<'p> {
+    cov: u8,
+    /// The setup record (planes), only for the tests: loading it per span cost a cache
+    /// miss per triangle on large meshes.
+    planes: Option<&'p SetupTriangle>,
+    fy: f32,
+    /// `seq` of the span's pixel 0: unique and increasing in API order (source triangle,
+    /// then pixel). By source triangle, not setup index, so that ids do not depend on how
+    /// setup was split among threads; unique because the fan pieces of a clipped
+    /// triangle cover disjoint samples and, with several samples, are merged per pixel.
+    row_seq: u64,
+}
+
+impl FusedPass<'_> {
+    /// Depth or stencil tests run before shading.
+    fn early_tests(&self) -> bool {
+        self.early && (self.state.depth.test || self.state.stencil.enabled)
+    }
+
+    /// Depth or stencil tests run after shading.
+    fn late_tests(&self) -> bool {
+        !self.early && (self.state.depth.test || self.state.stencil.enabled)
+    }
+
+    /// Nothing per pixel around the kernel: no test before or after shading and no target
+    /// to write, so a fragment is shaded and counted, nothing else (capture and counting
+    /// passes).
+    fn counting(&self) -> bool {
+        !self.early_tests() && !self.late_tests() && self.targets == 0
+    }
+}
+
+impl<'p> RowSetup<'p> {
+    fn new<K>(worker: &Worker<'p, K>, env: &'p PassEnv<'p>) -> Self {
+        let pass = worker.pass;
+        RowSetup {
+            pass,
+            tris: env.tris,
+            tests: pass.early_tests(),
+            sample_mask: pass.state.sample_mask & worker.all_samples,
+            all_samples: worker.all_samples,
+            per_sample_depth: env.samples > 1 && !pass.single,
+            positions: worker.positions,
+            width: env.width,
+            pixels: worker.pixels,
+        }
+    }
+
+    /// The span's shared values (`None`: masked out); counts its fragments as generated.
+    #[inline(always)]
+    fn row(&self, span: &Span, counts: &mut FusedCounts) -> Option<Row<'p>> {
+        let pass = self.pass;
+        let cov = if pass.single && span.coverage & 1 != 0 {
+            self.all_samples
+        } else {
+            span.coverage
+        };
+        let cov = cov & self.sample_mask;
+        if cov == 0 {
+            return None;
+        }
+        counts.generated += u64::from(span.x1 - span.x0);
+        Some(Row {
+            cov,
+            planes: self.tests.then(|| &self.tris[span.tri as usize]),
+            fy: span.y as f32,
+            row_seq: pass
+                .seq_base
+                .wrapping_add(span.source as u64 * self.pixels)
+                .wrapping_add(span.y as u64 * self.width as u64),
+        })
+    }
+}
+
+/// The tile of a unit of work that tests or writes targets (units without either have none).
+fn tile_of<'a, 't>(tile: &'a mut Option<TileAccess<'t>>) -> &'a mut TileAccess<'t> {
+    tile.as_mut()
+        .expect("a pass with tests or targets runs tile by tile")
+}
+
+impl Row<'_> {
+    /// The early tests of pixel `x`: its surviving coverage and centre depth, or `None`
+    /// when they cull it. The depth is interpolated here only for the tests (NaN otherwise:
+    /// `Frag::depth` does it on demand).
+    #[inline(always)]
+    fn early(
+        &self,
+        rows: &RowSetup<'_>,
+        span: &Span,
+        x: u32,
+        tile: &mut Option<TileAccess<'_>>,
+        counts: &mut FusedCounts,
+    ) -> Option<(u8, f32)> {
+        let Some(t) = self.planes else {
+            return Some((self.cov, f32::NAN));
+        };
+        let fx = x as f32;
+        let depth = t.depth_at(fx + 0.5, self.fy + 0.5);
+        let mut depths = [depth; 8];
+        if rows.per_sample_depth {
+            for (s, p) in rows.positions.iter().enumerate() {
+                depths[s] = t.depth_at(fx + p.0, self.fy + p.1);
+            }
+        }
+        let tile = tile_of(tile);
+        let (x0, y0) = (tile.tile().x0, tile.tile().y0);
+        let cov = tile.test(
+            rows.pass.state,
+            (x - x0, span.y - y0),
+            self.cov,
+            &depths,
+            span.front_facing,
+        );
+        if cov == 0 {
+            counts.early_culled += 1;
+            return None;
+        }
+        Some((cov, depth))
+    }
+
+    /// The invocation id of pixel `x`.
+    #[inline(always)]
+    fn seq(&self, x: u32) -> u64 {
+        self.row_seq.wrapping_add(x as u64)
+    }
+
+    /// The input of pixel `x`.
+    #[inline(always)]
+    fn input(
+        &self,
+        rows: &RowSetup<'_>,
+        span: &Span,
+        x: u32,
+        coverage: u8,
+        depth: f32,
+    ) -> FragInput {
+        FragInput {
+            seq: self.seq(x),
+            x,
+            y: span.y,
+            tri: span.tri,
+            primitive_id: span.source,
+            instance_id: rows.pass.instance,
+            coverage,
+            front_facing: span.front_facing,
+            depth,
+            ticket: 0,
+        }
+    }
+}
+
+mod worker;
+
+use worker::Worker;

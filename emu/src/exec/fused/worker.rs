@@ -1,0 +1,479 @@
+//! A worker of the fused path: shades the warps of its units of work (lanes in lockstep, one
+//! after the other, or through the counting loop of unbinned passes without lockstep) and
+//! runs their late tests and target writes.
+
+use std::future::Future;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::pin::Pin;
+use std::task::{Context, Poll, Waker};
+
+use crate::exec::{record_panic, Acc, Tally};
+use crate::invocation::{DirectFrag, DirectState, Frag, Invocation, Mode, PassEnv};
+use crate::kernel::FragmentKernel;
+use crate::memory::{PixelArray, PixelPrefetcher};
+use crate::raster::{SampleCount, Span};
+
+use super::{tile_of, FusedCounts, FusedPass, RowSetup, SpanSource, TileAccess};
+
+/// One worker thread's state: its warp of invocation slots and its tallies.
+pub(super) struct Worker<'a, K> {
+    kernel: &'a K,
+    pub(super) pass: &'a FusedPass<'a>,
+    slots: Vec<Invocation>,
+    /// The current unit's covered runs, rasterized before any is shaded.
+    spans: Vec<Span>,
+    /// Slots `..filled` hold the fragments gathered for the next warp (API order).
+    filled: usize,
+    acc: Acc,
+    counts: FusedCounts,
+    /// Sample positions (pixel-relative) for per-sample depths.
+    pub(super) positions: &'static [(f32, f32)],
+    pub(super) all_samples: u8,
+    pub(super) pixels: u64,
+    /// The kernel's per-pixel array, prefetched ahead of shading.
+    pixel_array: Option<PixelArray>,
+}
+
+/// Covered runs ahead of the one being shaded whose per-pixel slots are prefetched: far
+/// enough for a miss to the last-level cache to land (about a dozen fragments of a dense
+/// mesh), near enough for the line to still be there.
+const PREFETCH_SPANS: usize = 8;
+
+impl<'a, K: FragmentKernel> Worker<'a, K> {
+    pub(super) fn new(kernel: &'a K, env: &PassEnv<'_>, pass: &'a FusedPass<'a>) -> Self {
+        let lanes = pass.lanes.max(1);
+        let samples = env.samples;
+        Worker {
+            kernel,
+            pass,
+            slots: (0..lanes).map(|_| Invocation::new()).collect(),
+            spans: Vec::new(),
+            filled: 0,
+            acc: Acc::default(),
+            counts: FusedCounts::default(),
+            positions: SampleCount::from_count(samples)
+                .map(|c| c.positions())
+                .unwrap_or(&[(0.5, 0.5)]),
+            all_samples: if samples >= 8 {
+                0xff
+            } else {
+                (1u8 << samples) - 1
+            },
+            pixels: env.width as u64 * env.height as u64,
+            pixel_array: kernel.info().pixel_array,
+        }
+    }
+
+    /// The prefetcher of the kernel's per-pixel array (`None`: no hint, or no such buffer).
+    fn prefetcher<'e>(&self, env: &PassEnv<'e>) -> Option<PixelPrefetcher<'e>> {
+        self.pixel_array
+            .and_then(|a| env.memory.pixel_prefetcher(a, env.width))
+    }
+
+    pub(super) fn finish(mut self) -> (Acc, FusedCounts) {
+        for slot in &self.slots {
+            self.acc.add_ops(slot);
+        }
+        (self.acc, self.counts)
+    }
+
+    /// Rasterizes, tests, shades and writes one unit of work (a segment of a tile, or a
+    /// chunk of unbinned triangles, whose setup records `env.tris` holds); hands the tile
+    /// access back. `tile` is `None` only for units that neither test nor write targets.
+    ///
+    /// The unit is rasterized into [`Worker::spans`] first, then shaded: so the shading
+    /// loops have one instantiation whatever the source, and the kernel one call site in
+    /// each, which is what lets the compiler inline its state machine into the loop.
+    pub(super) fn run_unit<'t>(
+        &mut self,
+        src: &impl SpanSource,
+        env: &PassEnv<'_>,
+        tile: Option<TileAccess<'t>>,
+    ) -> Option<TileAccess<'t>> {
+        let mut buf = std::mem::take(&mut self.spans);
+        let spans = src.spans(&mut buf);
+        // Without lockstep (or with one lane) nothing interleaves inside a worker.
+        let tile = if !self.pass.lockstep || self.slots.len() == 1 {
+            if self.pass.counting() {
+                self.run_unit_counting(spans, env);
+                tile
+            } else {
+                self.run_unit_direct(spans, env, tile)
+            }
+        } else {
+            self.run_unit_lockstep(spans, env, tile)
+        };
+        self.spans = buf;
+        tile
+    }
+
+    /// [`Self::run_unit`] without lockstep: each fragment is shaded through
+    /// [`DirectFrag`] as soon as it is rasterized and tested, runs to its end and is retired
+    /// at once (API order holds), in one slot, with no warp to gather.
+    #[inline(never)]
+    fn run_unit_direct<'t>(
+        &mut self,
+        spans: &[Span],
+        env: &PassEnv<'_>,
+        mut tile: Option<TileAccess<'t>>,
+    ) -> Option<TileAccess<'t>> {
+        let rows = RowSetup::new(self, env);
+        let ahead = self.prefetcher(env);
+        let Worker {
+            kernel,
+            pass,
+            slots,
+            acc,
+            counts,
+            positions,
+            ..
+        } = self;
+        let (kernel, pass, positions) = (*kernel, *pass, *positions);
+        let late_tests = pass.late_tests();
+        // Nothing to test or write after shading (passes with early tests and no target,
+        // such as occlusion queries; those with no test at all take `run_unit_counting`).
+        let count_only = !late_tests && pass.targets == 0;
+        let slot = &slots[0];
+        // The fragment's state, in registers (see `DirectState`); the slot takes colour
+        // outputs and faults, and the state when the slot's path must see it.
+        let state = DirectState::new();
+        // Counts of the unit's invocations, added to the worker's once at the end.
+        let mut tally = Tally::default();
+        for (i, span) in spans.iter().enumerate() {
+            prefetch_ahead(ahead.as_ref(), spans, i);
+            let Some(row) = rows.row(span, counts) else {
+                continue;
+            };
+            // The state holds the input of the span's previous pixel (`first`: not yet).
+            let mut first = true;
+            for x in span.x0..span.x1 {
+                let Some((cov, depth)) = row.early(&rows, span, x, &mut tile, counts) else {
+                    continue;
+                };
+                if first {
+                    state.reset(row.input(&rows, span, x, cov, depth));
+                    first = false;
+                } else {
+                    state.reset_next(row.seq(x), x, cov, depth);
+                }
+                // Colour outputs are read only by the late stage: a counting pass leaves
+                // them (a load behind the previous fragment's lock) until the unit's end.
+                if !count_only {
+                    slot.clear_outputs();
+                }
+                shade_direct(kernel, slot, &state, env);
+                if count_only && !slot.faulted() {
+                    tally.add_direct(&state, samples_of(cov));
+                } else {
+                    // A fault to report, or late tests and target writes: the slot's path.
+                    state.spill(slot);
+                    if count_only {
+                        acc.tally_one(&mut tally, slot, samples_of(cov));
+                    } else {
+                        late(pass, env, positions, acc, counts, slot, tile_of(&mut tile));
+                    }
+                }
+            }
+        }
+        slot.clear_outputs();
+        state.drain_ops(slot);
+        acc.add_tally(tally);
+        counts.samples_passed += tally.samples_passed;
+        tile
+    }
+
+    /// [`Self::run_unit_direct`] for passes with nothing per pixel around the kernel: no
+    /// test before shading, nothing to test or write after it (capture and counting passes,
+    /// [`FusedPass::counting`]). Only what differs from pixel to pixel is set per fragment,
+    /// and the loop holds nothing else, so its state stays in registers (in the general
+    /// loop, the tests' code kept the fragment's state on the stack). Its prologue and
+    /// epilogue repeat [`Self::run_unit_direct`]'s on purpose: with the epilogue in a shared
+    /// inlined helper, LLVM allocated registers differently and the bunny's loop took 13 %
+    /// more instructions (callgrind, 83.3 against 94.4 M).
+    #[inline(never)]
+    fn run_unit_counting(&mut self, spans: &[Span], env: &PassEnv<'_>) {
+        let rows = RowSetup::new(self, env);
+        let ahead = self.prefetcher(env);
+        let Worker {
+            kernel,
+            slots,
+            acc,
+            counts,
+            ..
+        } = self;
+        let kernel = *kernel;
+        let slot = &slots[0];
+        let state = DirectState::new();
+        // The unit's tally, kept per span where it can be: per fragment only what the
+        // kernel decides (steps, discard), so that the loop's state fits in registers.
+        let mut tally = Tally::default();
+        for (i, span) in spans.iter().enumerate() {
+            prefetch_ahead(ahead.as_ref(), spans, i);
+            let Some(row) = rows.row(span, counts) else {
+                continue;
+            };
+            let samples = samples_of(row.cov);
+            // Nothing culls: every pixel of the span is shaded, with the span's coverage
+            // and no depth (`Frag::depth` interpolates it on demand).
+            state.reset(row.input(&rows, span, span.x0, row.cov, f32::NAN));
+            let discarded_before = tally.discarded;
+            let mut faulted = 0u64;
+            for x in span.x0..span.x1 {
+                state.next_pixel(row.seq(x), x);
+                shade_direct(kernel, slot, &state, env);
+                if slot.faulted() {
+                    // Counted by the slot's path. The input is rebuilt rather than copied
+                    // from the state, so that what the kernel does not read of it need not
+                    // be kept across the loop.
+                    faulted += 1;
+                    state.spill_results(slot, row.input(&rows, span, x, row.cov, f32::NAN));
+                    acc.count(slot);
+                } else {
+                    let steps = state.steps.get();
+                    tally.steps += steps;
+                    tally.max_steps = tally.max_steps.max(steps);
+                    tally.discarded += u64::from(state.discarded.get());
+                }
+            }
+            let finished = u64::from(span.x1 - span.x0) - faulted;
+            tally.shaded += finished;
+            tally.samples_passed +=
+                u64::from(samples) * (finished - (tally.discarded - discarded_before));
+        }
+        // Colour outputs are read only by the late stage, which these passes lack.
+        slot.clear_outputs();
+        state.drain_ops(slot);
+        acc.add_tally(tally);
+        counts.samples_passed += tally.samples_passed;
+    }
+
+    /// [`Self::run_unit`] with lockstep warps: fragments gather into a warp of slots,
+    /// whose lanes take turns at every access ([`shade_lockstep`]).
+    #[inline(never)]
+    fn run_unit_lockstep<'t>(
+        &mut self,
+        spans: &[Span],
+        env: &PassEnv<'_>,
+        mut tile: Option<TileAccess<'t>>,
+    ) -> Option<TileAccess<'t>> {
+        let lanes = self.slots.len();
+        let rows = RowSetup::new(self, env);
+        let ahead = self.prefetcher(env);
+        for (i, span) in spans.iter().enumerate() {
+            prefetch_ahead(ahead.as_ref(), spans, i);
+            let Some(row) = rows.row(span, &mut self.counts) else {
+                continue;
+            };
+            for x in span.x0..span.x1 {
+                let Some((cov, depth)) = row.early(&rows, span, x, &mut tile, &mut self.counts)
+                else {
+                    continue;
+                };
+                self.slots[self.filled].reset_direct(row.input(&rows, span, x, cov, depth));
+                self.filled += 1;
+                if self.filled == lanes {
+                    self.flush(env, &mut tile);
+                }
+            }
+        }
+        self.flush(env, &mut tile);
+        tile
+    }
+
+    /// Shades the gathered warp, then runs the late stage in API order.
+    fn flush(&mut self, env: &PassEnv<'_>, tile: &mut Option<TileAccess<'_>>) {
+        let n = self.filled;
+        if n == 0 {
+            return;
+        }
+        self.filled = 0;
+        let slots = &self.slots[..n];
+        // Only lockstep warps are gathered (see `run_unit`).
+        debug_assert!(self.pass.lockstep);
+        shade_lockstep(self.kernel, slots, env);
+        let late_tests = self.pass.late_tests();
+        if !late_tests && self.pass.targets == 0 {
+            // Nothing to test or write (capture and counting passes): count them.
+            self.counts.samples_passed += self.acc.count_passing(slots);
+            return;
+        }
+        for slot in slots {
+            late(
+                self.pass,
+                env,
+                self.positions,
+                &mut self.acc,
+                &mut self.counts,
+                slot,
+                tile_of(tile),
+            );
+        }
+    }
+}
+
+/// Prefetches the per-pixel slot of the first pixel of the covered run
+/// [`PREFETCH_SPANS`] after run `i` (runs are short on dense meshes, and the hardware
+/// prefetcher follows a long one).
+#[inline(always)]
+fn prefetch_ahead(ahead: Option<&PixelPrefetcher<'_>>, spans: &[Span], i: usize) {
+    if let (Some(p), Some(s)) = (ahead, spans.get(i + PREFETCH_SPANS)) {
+        p.pixel(s.x0, s.y);
+    }
+}
+
+/// Shades `slots` with their lanes in lockstep: every lane takes one step per turn (see
+/// `Access::poll`). A panic ends the lane that raised it and the turns go on.
+fn shade_lockstep<K: FragmentKernel>(kernel: &K, slots: &[Invocation], env: &PassEnv<'_>) {
+    let n = slots.len();
+    let mut cx = Context::from_waker(Waker::noop());
+    // Interlock is not used on this path, so the kernel is the whole invocation.
+    let mut futs: Vec<Option<_>> = slots
+        .iter()
+        .map(|slot| Some(kernel.shade(Frag { inv: slot, env })))
+        .collect();
+    let mut left = n;
+    // Next lane to poll in the current round. One `catch_unwind` covers many polls; a
+    // panic ends the lane being polled (`lane - 1`) and the rounds go on after it.
+    let mut lane = 0;
+    while left > 0 {
+        let rounds = catch_unwind(AssertUnwindSafe(|| loop {
+            while lane < n {
+                let i = lane;
+                lane += 1;
+                let Some(fut) = futs[i].as_mut() else {
+                    continue;
+                };
+                // SAFETY: the futures live in `futs`, which is not resized or moved until
+                // every one of them is dropped in place (`= None`), so a future is never
+                // moved after this pin.
+                let pinned = unsafe { Pin::new_unchecked(fut) };
+                let done = match pinned.poll(&mut cx) {
+                    Poll::Ready(()) => true,
+                    Poll::Pending => slots[i].faulted(),
+                };
+                if done {
+                    futs[i] = None;
+                    left -= 1;
+                }
+            }
+            if left == 0 {
+                break;
+            }
+            lane = 0;
+        }));
+        if let Err(payload) = rounds {
+            let i = lane - 1;
+            record_panic(&slots[i], payload.as_ref());
+            futs[i] = None;
+            left -= 1;
+        }
+    }
+}
+
+/// Shades one invocation to its end through [`DirectFrag`] (no lockstep: an access never
+/// suspends, so the kernel's state machine folds into this loop). A panic ends it.
+#[inline(always)]
+fn shade_direct<'a, K: FragmentKernel>(
+    kernel: &K,
+    inv: &'a Invocation,
+    state: &'a DirectState<'a>,
+    env: &'a PassEnv<'a>,
+) {
+    debug_assert!(matches!(env.mode, Mode::Direct { .. }));
+    // `DirectFrag` counts no contention: passes that keep the table take the general path.
+    debug_assert!(env.contention.is_none());
+    let r = catch_unwind(AssertUnwindSafe(|| {
+        let mut cx = Context::from_waker(Waker::noop());
+        // Interlock is not used on this path, so the kernel is the whole invocation.
+        let frag = DirectFrag::new(Frag { inv, env }, state);
+        // One poll: under `DirectFrag` nothing suspends, and an invocation is pending
+        // only once it has faulted (it is then dropped).
+        let pending = std::pin::pin!(kernel.shade(frag))
+            .poll(&mut cx)
+            .is_pending();
+        if pending && !inv.faulted() {
+            pending_without_fault(inv);
+        }
+    }));
+    if let Err(payload) = r {
+        record_panic(inv, payload.as_ref());
+    }
+}
+
+/// A kernel under `DirectFrag` returned `Pending` with no fault: a future that is not the
+/// kernel API's suspended it (an invocation cannot wait on anything else).
+#[cold]
+#[inline(never)]
+fn pending_without_fault(inv: &Invocation) {
+    inv.set_fault(crate::kernel::FaultKind::Misuse {
+        message: "the kernel awaited a future that is not a kernel API access, and it did \
+                  not complete"
+            .into(),
+    });
+}
+
+/// Counts a shaded fragment and runs its late tests and target writes.
+#[inline]
+fn late(
+    pass: &FusedPass<'_>,
+    env: &PassEnv<'_>,
+    positions: &[(f32, f32)],
+    acc: &mut Acc,
+    counts: &mut FusedCounts,
+    slot: &Invocation,
+    tile: &mut TileAccess<'_>,
+) {
+    let faulted = acc.count(slot);
+    if faulted || slot.discarded.get() {
+        return;
+    }
+    let state = pass.state;
+    let late_tests = pass.late_tests();
+    let f = slot.input.get();
+    let (lx, ly) = (f.x - tile.tile().x0, f.y - tile.tile().y0);
+    let mut mask = f.coverage;
+    if late_tests {
+        let centre = || {
+            let t = &env.tris[f.tri as usize];
+            t.depth_at(f.x as f32 + 0.5, f.y as f32 + 0.5)
+        };
+        let mut depths = [slot.depth_out.get().unwrap_or_else(centre); 8];
+        if slot.depth_out.get().is_none() && env.samples > 1 && !pass.single {
+            let t = &env.tris[f.tri as usize];
+            for (s, p) in positions.iter().enumerate() {
+                depths[s] = t.depth_at(f.x as f32 + p.0, f.y as f32 + p.1);
+            }
+        }
+        mask = tile.test(state, (lx, ly), mask, &depths, f.front_facing);
+        if mask == 0 {
+            counts.late_culled += 1;
+            return;
+        }
+    }
+    counts.samples_passed += mask.count_ones() as u64;
+    if pass.targets > 0 {
+        if let TileAccess::Exclusive(t) = tile {
+            let mut colors = [[0u32; 4]; 8];
+            for (c, o) in colors.iter_mut().zip(&slot.outputs).take(pass.targets) {
+                *c = o.get();
+            }
+            t.write_outputs(state, lx, ly, mask, &colors[..pass.targets]);
+        }
+    }
+}
+
+/// Covered samples in a coverage mask (`count_ones` without `popcnt`, which the baseline
+/// x86-64 target lacks: a table lookup rather than a dozen bit operations per fragment).
+#[inline(always)]
+fn samples_of(coverage: u8) -> u8 {
+    const TABLE: [u8; 256] = {
+        let mut t = [0u8; 256];
+        let mut i = 0;
+        while i < 256 {
+            t[i] = (i as u8).count_ones() as u8;
+            i += 1;
+        }
+        t
+    };
+    TABLE[coverage as usize]
+}

@@ -1,0 +1,503 @@
+//! The `scheduled` executor: one thread, a window of in-flight invocations, a seeded policy
+//! choosing who steps next, and the hazard detector watching every step.
+
+use std::future::Future;
+use std::task::{Context, Waker};
+
+use super::policy::{Candidate, Chooser};
+use super::simt::Simt;
+
+use super::slots::{
+    abandon, id_of, invocation, pass_deferred, poll_slot, Acc, FragOut, Polled, ShadeOutcome,
+};
+use super::{ExecConfig, ScheduleConfig};
+use crate::hazard::{Detector, HazardCounts};
+use crate::invocation::{Frag, Invocation, PassEnv, StepKind};
+use crate::kernel::{FaultKind, FragInput, FragmentKernel};
+
+/// Reusable state of the scheduled executor (everything but the futures), so that
+/// exploring many schedules of one model allocates nothing per execution.
+pub(crate) struct SchedScratch {
+    pub detector: Detector,
+    chooser: Option<Chooser>,
+    which: Vec<usize>,
+    free: Vec<usize>,
+    /// Slots in flight, in admission order.
+    inflight: Vec<usize>,
+    /// The runnable ones, in the same order (see `schedule_once`).
+    cands: Vec<Candidate>,
+    pub record: Vec<u8>,
+    conflicting: Vec<usize>,
+    sub_cands: Vec<Candidate>,
+    /// Interleave only conflicting invocations (ExecConfig::reduce).
+    pub reduce: bool,
+    /// Lockstep forward progress (ExecConfig::simt).
+    pub simt: Option<Simt>,
+}
+
+impl SchedScratch {
+    pub fn new(width: u32, height: u32) -> SchedScratch {
+        SchedScratch {
+            detector: Detector::new(width, height),
+            chooser: None,
+            which: Vec::new(),
+            free: Vec::new(),
+            inflight: Vec::new(),
+            cands: Vec::new(),
+            record: Vec::new(),
+            conflicting: Vec::new(),
+            sub_cands: Vec::new(),
+            reduce: false,
+            simt: None,
+        }
+    }
+}
+
+fn candidate(inv: &Invocation, slot: usize) -> Candidate {
+    let i = inv.input.get();
+    Candidate {
+        seq: i.seq,
+        depth: i.depth,
+        slot: slot as u32,
+    }
+}
+
+#[allow(clippy::too_many_arguments)] // see run_direct
+pub(super) fn run_scheduled<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    sc: &ScheduleConfig,
+    max_steps: u64,
+    inputs: &[FragInput],
+    outs: &mut [FragOut],
+    colors: &mut [[u32; 4]],
+    targets: usize,
+    outcome: &mut ShadeOutcome,
+    reduce: bool,
+    simt: u32,
+) {
+    let width = sc.window.max(1);
+    let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
+    let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
+    futs.resize_with(width, || None);
+    let mut scratch = SchedScratch::new(env.width, env.height);
+    scratch.reduce = reduce;
+    scratch.simt = (simt > 0).then(|| Simt::new(simt));
+    let mut acc = Acc::default();
+    schedule_once(
+        &slots,
+        &mut futs,
+        |inv| invocation(kernel, Frag { inv, env }),
+        env,
+        sc,
+        max_steps,
+        inputs,
+        outs,
+        colors,
+        targets,
+        &mut scratch,
+        &mut acc,
+    );
+    acc.finish(outcome);
+    let memory = env.memory;
+    outcome.hazard_counts = scratch.detector.counts();
+    outcome.hazards = scratch
+        .detector
+        .hazards(|b| memory.buffer_name(b).to_string());
+    outcome.scheduled_hotspots = scratch.detector.hotspots(crate::stats::HOTSPOTS);
+    outcome.heat = scratch.detector.take_heat();
+    outcome.schedule = sc.record.then(|| std::mem::take(&mut scratch.record));
+    outcome.bytes_used = scratch.chooser.as_ref().map_or(0, |c| c.bytes_used());
+}
+
+/// One scheduled execution of `inputs` on the given slots and future array (reset here).
+/// Returns the number of steps.
+#[allow(clippy::too_many_arguments)] // the executor's whole state, borrowed apart
+pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
+    slots: &'a [Invocation],
+    futs: &mut [Option<F>],
+    make: impl Fn(&'a Invocation) -> F,
+    env: &PassEnv<'_>,
+    sc: &ScheduleConfig,
+    max_steps: u64,
+    inputs: &[FragInput],
+    outs: &mut [FragOut],
+    colors: &mut [[u32; 4]],
+    targets: usize,
+    scratch: &mut SchedScratch,
+    acc: &mut Acc,
+) -> u64 {
+    let width = slots.len();
+    let reduce = scratch.reduce;
+    // Without interlock every in-flight invocation with a pending step is runnable, and
+    // stays so until its own next poll: the candidates are kept up to date as invocations
+    // are admitted, stepped and retired instead of being rebuilt before every step.
+    let simple = env.interlock.is_none() && scratch.simt.is_none();
+    let SchedScratch {
+        detector,
+        chooser,
+        which,
+        free,
+        inflight,
+        cands,
+        record,
+        conflicting,
+        sub_cands,
+        simt,
+        ..
+    } = scratch;
+    if let Some(m) = simt.as_mut() {
+        m.reset(width);
+    }
+    detector.reset(env.width, env.height);
+    if let Some(base) = inputs.iter().map(|f| f.seq).min() {
+        detector.set_base(base);
+    }
+    match chooser {
+        Some(c) => c.reset(&sc.policy, sc.seed, inputs.len() as u64 * 4),
+        None => *chooser = Some(Chooser::new(&sc.policy, sc.seed, inputs.len() as u64 * 4)),
+    }
+    let chooser = chooser.as_mut().expect("set above");
+    record.clear();
+    which.clear();
+    which.resize(width, 0);
+    free.clear();
+    free.extend((0..width).rev());
+    inflight.clear();
+    cands.clear();
+    for f in futs.iter_mut() {
+        *f = None;
+    }
+    let mut deferred: Vec<crate::interlock::Claim> = Vec::new();
+    let mut cx = Context::from_waker(Waker::noop());
+    let mut next = 0usize;
+    let mut step: u64 = 0;
+
+    macro_rules! retire {
+        ($slot:expr) => {{
+            let s = $slot;
+            futs[s] = None;
+            deferred.extend(abandon(&slots[s], env));
+            let i = which[s];
+            let seq = inputs[i].seq;
+            acc.harvest(
+                &slots[s],
+                &mut outs[i],
+                &mut colors[i * targets..(i + 1) * targets],
+            );
+            detector.finish(seq, step);
+            if let Some(p) = inflight.iter().position(|&x| x == s) {
+                inflight.remove(p);
+            }
+            if simple {
+                if let Some(p) = cands.iter().position(|c| c.slot as usize == s) {
+                    cands.remove(p);
+                }
+            }
+            if let Some(m) = simt.as_mut() {
+                m.retired();
+            }
+            free.push(s);
+        }};
+    }
+
+    loop {
+        // Admit in API order while there is room.
+        while next < inputs.len() {
+            let Some(s) = free.pop() else { break };
+            slots[s].reset(inputs[next]);
+            which[s] = next;
+            futs[s] = Some(make(&slots[s]));
+            detector.start(id_of(&inputs[next]), step, s);
+            chooser.admit(s as u32);
+            if let Some(m) = simt.as_mut() {
+                m.admit(s);
+            }
+            inflight.push(s);
+            next += 1;
+            // Run up to the first step.
+            if let Polled::Done = poll_slot(&mut futs[s], &slots[s], &mut cx) {
+                retire!(s);
+            } else if simple && slots[s].pending.get().is_some() {
+                cands.push(candidate(&slots[s], s));
+            }
+        }
+        if !deferred.is_empty() {
+            pass_deferred(&mut deferred, env);
+        }
+        if inflight.is_empty() {
+            break;
+        }
+        if !simple {
+            cands.clear();
+            for &s in inflight.iter() {
+                let inv = &slots[s];
+                let runnable = match inv.pending.get() {
+                    Some(StepKind::InterlockBegin) => Frag { inv, env }
+                        .claim()
+                        .is_none_or(|(l, m, c)| l.can_enter_claim(m, &c)),
+                    Some(StepKind::PassTurn) => Frag { inv, env }
+                        .claim()
+                        .is_none_or(|(l, _, c)| l.is_turn_claim(&c)),
+                    Some(_) => true,
+                    None => false,
+                };
+                if runnable {
+                    cands.push(candidate(inv, s));
+                }
+            }
+            if let Some(m) = simt.as_mut() {
+                m.filter(cands, slots, which);
+                if m.deadlocked(cands) {
+                    for (s, fault) in m.deadlock_faults(cands, slots, which) {
+                        slots[s].replace_fault(fault);
+                        retire!(s);
+                    }
+                    continue;
+                }
+            }
+        }
+        if cands.is_empty() {
+            // Everyone in flight waits on someone: a deadlock. Report and drop them all.
+            while let Some(&s) = inflight.first() {
+                let inv = &slots[s];
+                let w = inv.waits.get() + 1;
+                inv.replace_fault(FaultKind::Deadlock { waits: w });
+                retire!(s);
+            }
+            continue;
+        }
+        let k = if reduce {
+            // Only interleave where it can matter (see ExecConfig::reduce).
+            let key = |s: usize| match slots[s].pending.get() {
+                Some(StepKind::Mem { addr, .. }) => Some(addr.0),
+                _ => None,
+            };
+            let pixel = |s: usize| {
+                let i = slots[s].input.get();
+                (i.x, i.y)
+            };
+            conflicting.clear();
+            for (ci, c) in cands.iter().enumerate() {
+                let s = c.slot as usize;
+                let hot = inflight.iter().any(|&o| {
+                    o != s && ((key(s).is_some() && key(o) == key(s)) || pixel(o) == pixel(s))
+                });
+                if hot {
+                    conflicting.push(ci);
+                }
+            }
+            if conflicting.is_empty() {
+                0
+            } else {
+                sub_cands.clear();
+                sub_cands.extend(conflicting.iter().map(|&ci| cands[ci]));
+                conflicting[chooser.choose(sub_cands, step)]
+            }
+        } else {
+            chooser.choose(cands, step)
+        };
+        if sc.record {
+            record.push(k as u8);
+        }
+        let s = cands[k].slot as usize;
+        let inv = &slots[s];
+        if let Some(StepKind::Mem {
+            addr,
+            op,
+            record: rec,
+        }) = inv.pending.get()
+        {
+            let input = inv.input.get();
+            let lock = match (env.interlock, env.interlock_mode) {
+                (Some(l), Some(mode)) if inv.in_interlock.get() => {
+                    // Per-sample sections exclude only fragments sharing a covered sample.
+                    let samples = if mode.per_sample {
+                        input.coverage
+                    } else {
+                        0xff
+                    };
+                    Some(crate::hazard::LockKey::new(
+                        l.key(input.x, input.y),
+                        samples,
+                    ))
+                }
+                _ => None,
+            };
+            detector.access(
+                s,
+                input.seq,
+                addr,
+                op,
+                step,
+                lock,
+                rec.map(|r| (r.base, r.len, r.word)),
+            );
+        }
+        if let Some(m) = simt.as_mut() {
+            m.before_step(k, s, inv, env.memory);
+        }
+        inv.granted.set(true);
+        step += 1;
+        let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
+        if let Some(m) = simt.as_mut() {
+            m.after_step(env.memory);
+        }
+        if !done && inv.steps.get() > max_steps {
+            inv.replace_fault(FaultKind::Watchdog {
+                steps: inv.steps.get(),
+            });
+            retire!(s);
+        } else if done {
+            retire!(s);
+        } else if simple && inv.pending.get().is_none() {
+            // Suspended on something other than a step: it will never be granted one.
+            cands.remove(k);
+        }
+    }
+    step
+}
+
+/// One execution of an exploration, as shown to its callback.
+pub struct Execution<'r> {
+    /// Position in the exploration (0, 1, ...).
+    pub index: u64,
+    pub seed: u64,
+    pub steps: u64,
+    pub hazards: HazardCounts,
+    pub faults: u64,
+    /// The schedule (one byte per step), when recording.
+    pub schedule: &'r [u8],
+}
+
+/// Runs `inputs` once per seed under the scheduled executor, reusing every allocation
+/// across executions; `each` sees every execution and the memory after it (and must reset
+/// the memory for the next one); it returns false to stop. Returns the executions run.
+#[allow(clippy::too_many_arguments)] // mirrors Device::explore
+pub(crate) fn explore<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    sc: &ScheduleConfig,
+    max_steps: u64,
+    inputs: &[FragInput],
+    seeds: std::ops::Range<u64>,
+    mut each: impl FnMut(&Execution<'_>, &crate::memory::Memory) -> bool,
+) -> u64 {
+    let width = sc.window.max(1);
+    let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
+    let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
+    futs.resize_with(width, || None);
+    let mut scratch = SchedScratch::new(env.width, env.height);
+    let mut outs = vec![FragOut::default(); inputs.len()];
+    let mut colors = vec![[0u32; 4]; inputs.len() * 8];
+    let mut sc = sc.clone();
+    let mut n = 0;
+    for seed in seeds {
+        sc.seed = seed;
+        if let Some(l) = env.interlock {
+            l.reset();
+        }
+        let mut acc = Acc::default();
+        let steps = schedule_once(
+            &slots,
+            &mut futs,
+            |inv| invocation(kernel, Frag { inv, env }),
+            env,
+            &sc,
+            max_steps,
+            inputs,
+            &mut outs,
+            &mut colors,
+            8,
+            &mut scratch,
+            &mut acc,
+        );
+        let e = Execution {
+            index: n,
+            seed,
+            steps,
+            hazards: scratch.detector.counts(),
+            faults: acc.stats.faulted,
+            schedule: &scratch.record,
+        };
+        n += 1;
+        if !each(&e, env.memory) {
+            break;
+        }
+    }
+    n
+}
+
+/// The scheduled executor across the waves of one rasterized pass: fragments are admitted
+/// block by block (`ExecConfig::block` pixels a side, API order within a block), as a GPU's
+/// fine rasterizer hands out small screen tiles; each wave gets its own seed (the
+/// schedule's, advanced by the wave's number); an explicit `bytes:` schedule runs on across
+/// waves, each continuing where the previous one stopped reading it.
+#[derive(Default)]
+pub(crate) struct Waves {
+    /// Waves shaded so far.
+    index: u64,
+    /// Bytes of an explicit schedule read by the earlier waves.
+    bytes_used: usize,
+}
+
+impl Waves {
+    /// Shades one wave's `inputs` (API order) of a pass `width` pixels wide under `sc`,
+    /// writing `outs[i]` and `colors[i * targets .. (i + 1) * targets]`.
+    #[allow(clippy::too_many_arguments)] // the pieces of one wave, as `shade` takes them
+    pub(crate) fn shade<K: FragmentKernel>(
+        &mut self,
+        kernel: &K,
+        env: &PassEnv<'_>,
+        exec: &ExecConfig,
+        sc: &ScheduleConfig,
+        inputs: &[FragInput],
+        outs: &mut [FragOut],
+        colors: &mut [[u32; 4]],
+        targets: usize,
+    ) -> ShadeOutcome {
+        let mut sc = sc.clone();
+        sc.seed = sc
+            .seed
+            .wrapping_add(self.index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        if let super::Policy::Bytes(b) = &mut sc.policy {
+            b.drain(..self.bytes_used.min(b.len()));
+        }
+        // Admission order: pixel block by block, API order within a block.
+        let block = exec.block.max(1);
+        let blocks_per_row = env.width.div_ceil(block) as u64;
+        let mut order: Vec<usize> = (0..inputs.len()).collect();
+        order.sort_by_key(|&i| {
+            let f = &inputs[i];
+            (
+                (f.y / block) as u64 * blocks_per_row + (f.x / block) as u64,
+                i,
+            )
+        });
+        let sched: Vec<FragInput> = order.iter().map(|&i| inputs[i]).collect();
+        let mut s_outs = vec![FragOut::default(); sched.len()];
+        let mut s_colors = vec![[0u32; 4]; sched.len() * targets];
+        let mut outcome = ShadeOutcome::default();
+        run_scheduled(
+            kernel,
+            env,
+            &sc,
+            exec.max_steps,
+            &sched,
+            &mut s_outs,
+            &mut s_colors,
+            targets,
+            &mut outcome,
+            exec.reduce,
+            exec.simt,
+        );
+        for (k, &i) in order.iter().enumerate() {
+            outs[i] = s_outs[k];
+            colors[i * targets..(i + 1) * targets]
+                .copy_from_slice(&s_colors[k * targets..(k + 1) * targets]);
+        }
+        self.bytes_used += outcome.bytes_used;
+        self.index += 1;
+        outcome
+    }
+}

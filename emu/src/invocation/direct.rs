@@ -1,0 +1,170 @@
+//! [`DirectFrag`], the fused path's kernel context: every access is performed when it is
+//! made and never suspends.
+
+use std::future::Future;
+use std::pin::Pin;
+use std::task::{Context, Poll};
+
+use super::{DirectState, Frag, FragView, Route};
+use crate::fragment::{sealed, Fragment};
+use crate::framebuffer::Image;
+use crate::memory::{Buf, MemOp, Word};
+
+/// The context of the fused path of the direct executors: every access is performed when
+/// it is made and never suspends (see the module docs). The fragment's input, step count,
+/// discard flag, depth output and operation counters are a `DirectState` (crate-private)
+/// the executor keeps in a local (in registers, once the kernel is inlined); colour outputs
+/// and faults go to the invocation's slot, as under [`Frag`].
+#[derive(Clone, Copy)]
+pub struct DirectFrag<'a> {
+    frag: Frag<'a>,
+    state: &'a DirectState<'a>,
+}
+
+/// An access already performed: its outcome (`Pending` when the invocation faulted; the
+/// executor then drops it).
+#[must_use = "a memory access is awaited at once"]
+pub struct Performed<T>(Poll<T>);
+
+impl<T: Copy> Future for Performed<T> {
+    type Output = T;
+    #[inline(always)]
+    fn poll(self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<T> {
+        self.0
+    }
+}
+
+impl<'a> DirectFrag<'a> {
+    /// The context of the invocation in `frag`'s slot, whose per-fragment state is `state`.
+    #[inline(always)]
+    pub(crate) fn new(frag: Frag<'a>, state: &'a DirectState<'a>) -> Self {
+        DirectFrag { frag, state }
+    }
+    #[inline(always)]
+    fn as_frag(&self) -> &Frag<'a> {
+        &self.frag
+    }
+    #[inline(always)]
+    fn view(&self) -> FragView<'a> {
+        FragView {
+            input: self.state.input.get(),
+            env: self.frag.env,
+        }
+    }
+    #[inline(always)]
+    fn set_discarded(&self) {
+        self.state.discarded.set(true);
+    }
+    #[inline(always)]
+    fn set_depth_out(&self, z: f32) {
+        self.state.depth_out.set(Some(z));
+    }
+    #[inline(always)]
+    fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
+        let st = self.state;
+        // The fused path never keeps the contention table (`shade_direct` checks).
+        self.frag
+            .perform_counted::<T>(&st.steps, &st.ops, Route::Cached(&st.words), buf, index, op)
+    }
+    #[inline(always)]
+    fn op<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Performed<T> {
+        Performed(self.perform::<T>(buf, index, op))
+    }
+    #[inline(always)]
+    fn unit<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Performed<()> {
+        Performed(self.perform::<T>(buf, index, op).map(|_| ()))
+    }
+}
+
+impl Fragment for DirectFrag<'_> {
+    getters!();
+    word_accesses!(op, unit);
+
+    #[inline(always)]
+    fn atomic_compare_exchange<T: Word>(
+        &self,
+        buf: Buf<T>,
+        index: u32,
+        expected: T,
+        new: T,
+    ) -> impl Future<Output = Result<T, T>> {
+        let op = MemOp::CompareExchange(expected.to_bits(), new.to_bits());
+        Performed(self.perform::<T>(buf, index, op).map(|prev: T| {
+            if prev.to_bits() == expected.to_bits() {
+                Ok(prev)
+            } else {
+                Err(prev)
+            }
+        }))
+    }
+    #[inline(always)]
+    fn atomic_compare_exchange_weak<T: Word>(
+        &self,
+        buf: Buf<T>,
+        index: u32,
+        expected: T,
+        new: T,
+    ) -> impl Future<Output = Result<T, T>> {
+        if super::spurious_cas_failure(
+            self.frag.env,
+            self.state.input.get().seq,
+            self.state.steps.get(),
+        ) {
+            // A failed attempt reads the word, as a real failed CAS does.
+            return Performed(self.perform::<T>(buf, index, MemOp::AtomicLoad).map(Err));
+        }
+        let op = MemOp::CompareExchange(expected.to_bits(), new.to_bits());
+        Performed(self.perform::<T>(buf, index, op).map(|prev: T| {
+            if prev.to_bits() == expected.to_bits() {
+                Ok(prev)
+            } else {
+                Err(prev)
+            }
+        }))
+    }
+    #[inline(always)]
+    fn load_record<T: Word>(
+        &self,
+        buf: Buf<T>,
+        base: u32,
+        out: &mut [T],
+    ) -> impl Future<Output = ()> {
+        let mut done = Poll::Ready(());
+        for (w, slot) in out.iter_mut().enumerate() {
+            match self.perform::<T>(buf, base.wrapping_add(w as u32), MemOp::Load) {
+                Poll::Ready(v) => *slot = v,
+                Poll::Pending => {
+                    done = Poll::Pending;
+                    break;
+                }
+            }
+        }
+        Performed(done)
+    }
+    #[inline(always)]
+    fn store_record<T: Word>(
+        &self,
+        buf: Buf<T>,
+        base: u32,
+        values: &[T],
+    ) -> impl Future<Output = ()> {
+        let mut done = Poll::Ready(());
+        for (w, v) in values.iter().enumerate() {
+            let op = MemOp::Store(v.to_bits());
+            if self
+                .perform::<T>(buf, base.wrapping_add(w as u32), op)
+                .is_pending()
+            {
+                done = Poll::Pending;
+                break;
+            }
+        }
+        Performed(done)
+    }
+    #[inline(always)]
+    fn yield_now(&self) -> impl Future<Output = ()> {
+        Performed(self.frag.count_step(&self.state.steps))
+    }
+}
+
+impl sealed::Sealed for DirectFrag<'_> {}

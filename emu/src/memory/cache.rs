@@ -1,0 +1,123 @@
+//! What the fused path keeps to reach words fast: the words of the last buffers accessed
+//! ([`WordCache`]) and the addresses of the slots of a per-pixel array ([`PixelPrefetcher`]).
+
+use std::cell::Cell;
+use std::marker::PhantomData;
+
+use super::ops::{apply32, apply64, MemOp};
+use super::word::{Addr, PixelArray, Word};
+use super::{Memory, Words};
+use crate::sync::{AtomicU32, AtomicU64, Ordering};
+
+/// Where the slot of pixel (x, y) of a per-pixel array lies, for prefetches
+/// ([`Memory::pixel_prefetcher`]).
+pub(crate) struct PixelPrefetcher<'m> {
+    base: *const u8,
+    words: u64,
+    word_bytes: usize,
+    stride: u64,
+    width: u64,
+    _memory: PhantomData<&'m Memory>,
+}
+
+impl PixelPrefetcher<'_> {
+    /// The address of the first word of pixel (x, y)'s slot; `None` past the buffer's end
+    /// (a hint that does not fit the buffer is ignored, not followed).
+    #[inline(always)]
+    pub(crate) fn slot(&self, x: u32, y: u32) -> Option<*const u8> {
+        // Neither wraps: `y * width + x` < 2^64 for 32-bit operands.
+        let word = (y as u64 * self.width + x as u64).saturating_mul(self.stride);
+        // In range, so the offset is within the allocation.
+        (word < self.words).then(|| self.base.wrapping_add(word as usize * self.word_bytes))
+    }
+
+    /// Prefetches pixel (x, y)'s slot.
+    #[inline(always)]
+    pub(crate) fn pixel(&self, x: u32, y: u32) {
+        if let Some(p) = self.slot(x, y) {
+            crate::hint::prefetch(p);
+        }
+    }
+}
+
+/// The words of the last buffer of each width that a fragment context accessed, for the
+/// fused path of the direct executors (kept in `crate::invocation::DirectState`).
+///
+/// [`Memory::apply`] finds a word through the buffer table, the buffer's width tag and its
+/// slice: four dependent loads before the operation. On x86 a locked read-modify-write
+/// holds back the loads after it, so with one atomic per fragment those loads sat on the
+/// critical path of every fragment. Kernels touch few buffers, and the executor keeps this
+/// cache in registers across a unit's fragments, so an access is a compare of the buffer id
+/// and the operation. A miss finds the words as `apply` does (inline: a kernel that
+/// alternates between two buffers pays what it paid before, plus the compare). Buffers are
+/// neither added, resized nor replaced during a pass (that takes `&mut Memory`), so a slice
+/// found once stays the buffer's.
+pub(crate) struct WordCache<'m> {
+    w32: Cell<(u32, &'m [AtomicU32])>,
+    w64: Cell<(u32, &'m [AtomicU64])>,
+}
+
+impl<'m> WordCache<'m> {
+    #[inline(always)]
+    pub fn new() -> Self {
+        // Nothing cached: an id no buffer reaches in practice (were one to, its accesses
+        // would index the empty slice and panic, a reported fault, never another buffer).
+        WordCache {
+            w32: Cell::new((u32::MAX, &[])),
+            w64: Cell::new((u32::MAX, &[])),
+        }
+    }
+
+    /// [`Memory::apply`] through the cache: the same operation on the same word.
+    #[inline(always)]
+    pub fn apply<T: Word>(
+        &self,
+        memory: &'m Memory,
+        addr: Addr,
+        op: MemOp,
+        ordering: Ordering,
+    ) -> u64 {
+        let (b, i) = (addr.buffer(), addr.index() as usize);
+        if T::WIDE {
+            let (id, mut words) = self.w64.get();
+            if id != b {
+                words = memory.words64(b);
+                self.w64.set((b, words));
+            }
+            apply64(&words[i], op, ordering)
+        } else {
+            let (id, mut words) = self.w32.get();
+            if id != b {
+                words = memory.words32(b);
+                self.w32.set((b, words));
+            }
+            apply32::<T>(&words[i], op, ordering) as u64
+        }
+    }
+}
+
+impl Memory {
+    /// Prefetches of the slots of a per-pixel array (see [`KernelInfo::with_pixel_array`]);
+    /// `None` when `array` names no buffer.
+    ///
+    /// [`KernelInfo::with_pixel_array`]: crate::KernelInfo::with_pixel_array
+    pub(crate) fn pixel_prefetcher(
+        &self,
+        array: PixelArray,
+        width: u32,
+    ) -> Option<PixelPrefetcher<'_>> {
+        let b = self.buffers.get(array.buffer as usize)?;
+        let (base, words, word_bytes) = match &b.words {
+            Words::W32(w) => (w.as_ptr().cast::<u8>(), w.len(), 4),
+            Words::W64(w) => (w.as_ptr().cast::<u8>(), w.len(), 8),
+        };
+        Some(PixelPrefetcher {
+            base,
+            words: words as u64,
+            word_bytes,
+            stride: array.stride as u64,
+            width: width as u64,
+            _memory: PhantomData,
+        })
+    }
+}
