@@ -617,7 +617,7 @@ mod tests {
         for i in 0..10 {
             cover_all(&mut mesh, 0.8 - 0.15 * i as f32, 0.01);
         }
-        let frame = frame(&mesh, 8, 8);
+        let frame = frame_sized(&mesh, 8, 8);
         let truth = Truth::capture(&frame, 1).unwrap();
         let plain = Params::default();
         let culled = Params {
