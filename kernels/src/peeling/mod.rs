@@ -36,8 +36,11 @@
 //! linked list with atomics.
 
 mod dual;
+mod dual2p;
+mod dualb;
 mod dualll;
 mod f2b;
+mod f2b2;
 mod f2b2p;
 mod f2b3p;
 mod f2bb;
@@ -54,12 +57,17 @@ use crate::algo::Algorithm;
 pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
     vec![
         Box::new(f2b::F2b),
+        Box::new(f2b2::F2b2),
         Box::new(f2b2p::F2b2p),
         Box::new(f2b3p::F2b3p),
         Box::new(f2bll::F2bLl),
         Box::new(f2bb::F2bB::fab()),
         Box::new(f2bb::F2bB::kb()),
+        Box::new(f2bb::F2bB::kb_atomic()),
         Box::new(dual::Dual),
+        Box::new(dual2p::Dual2p),
+        Box::new(dualb::DualB::fab()),
+        Box::new(dualb::DualB::kb()),
         Box::new(dualll::DualLl),
     ]
 }
