@@ -10,6 +10,7 @@ use crate::algo::Frame;
 pub fn frame(mesh: &Mesh, width: u32, height: u32) -> Frame<'_> {
     Frame {
         mesh,
+        objects: &[],
         view_proj: Mat4::IDENTITY,
         width,
         height,

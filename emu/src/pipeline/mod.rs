@@ -229,7 +229,7 @@ impl Device {
             };
             let prepared = prepare(
                 &clip.0,
-                &draw.mesh.indices,
+                draw.indices(),
                 &bin_state,
                 viewport,
                 threads,
@@ -243,6 +243,7 @@ impl Device {
                 Geometry::Unbinned {
                     prepared: &prepared,
                     instance,
+                    first: draw.triangles.start,
                     single,
                 }
             } else {
@@ -256,6 +257,7 @@ impl Device {
                 Geometry::Binned {
                     binned: &binned,
                     instance,
+                    first: draw.triangles.start,
                     single,
                 }
             };
@@ -464,9 +466,10 @@ impl Device {
         // fused path (see `fused`): no fragment lists, one pass over each tile.
         let direct = matches!(exec.mode, ExecMode::Ordered | ExecMode::Parallel);
         let parallel = exec.mode == ExecMode::Parallel;
-        let fused_pass = |instance: u32, single: bool| fused::FusedPass {
+        let fused_pass = |instance: u32, first: u32, single: bool| fused::FusedPass {
             state,
             instance,
+            first,
             single,
             early,
             targets,
@@ -480,12 +483,13 @@ impl Device {
         if let Geometry::Unbinned {
             prepared,
             instance,
+            first,
             single,
         } = geo
         {
             // `Device::draw` makes unbinned geometry only for passes this path runs.
             debug_assert!(direct && info.interlock.is_none() && contention.is_none());
-            let pass = fused_pass(*instance, *single);
+            let pass = fused_pass(*instance, *first, *single);
             let (outcome, counts, rejected, imbalance) =
                 fused::run_unbinned(kernel, &env_base, &pass, prepared);
             report.imbalance += imbalance;
@@ -504,11 +508,12 @@ impl Device {
             Geometry::Binned {
                 binned,
                 instance,
+                first,
                 single,
             },
         ) = (direct, info.interlock, contention.as_ref(), geo)
         {
-            let pass = fused_pass(*instance, *single);
+            let pass = fused_pass(*instance, *first, *single);
             let (outcome, counts, imbalance) =
                 fused::run_fused(kernel, &env_base, &pass, binned, fb.tiles_mut());
             report.imbalance += imbalance;
@@ -813,6 +818,8 @@ enum Geometry<'a> {
     Binned {
         binned: &'a Binned,
         instance: u32,
+        /// The first triangle drawn: primitive id of setup source 0 (see `Draw::triangles`).
+        first: u32,
         single: bool,
     },
     /// Set up and rasterized chunk by chunk by the fused path's workers
@@ -820,6 +827,7 @@ enum Geometry<'a> {
     Unbinned {
         prepared: &'a Prepared<'a>,
         instance: u32,
+        first: u32,
         single: bool,
     },
     FullScreen,
@@ -921,6 +929,7 @@ impl RasterFront<'_> {
             Geometry::Binned {
                 binned,
                 instance,
+                first,
                 single,
             } => {
                 let positions = crate::raster::SampleCount::from_count(self.samples)
@@ -973,7 +982,7 @@ impl RasterFront<'_> {
                         x: f.x,
                         y: f.y,
                         tri: f.tri,
-                        primitive_id: f.source,
+                        primitive_id: f.source + *first,
                         instance_id: *instance,
                         coverage: cov,
                         front_facing: f.front_facing,

@@ -39,8 +39,8 @@
 //! `(1 - alpha)^n` for the `n` fragments the count target saw (blend and count agree).
 
 use fragrace_emu::{
-    BlendEquation, BlendFactor, BlendState, CompareFunc, DepthState, Draw, EarlyTests, Format,
-    Fragment, FragmentKernel, Framebuffer, Image, KernelInfo, PassReport, PassState, TargetState,
+    BlendEquation, BlendFactor, BlendState, CompareFunc, DepthState, EarlyTests, Format, Fragment,
+    FragmentKernel, Framebuffer, Image, KernelInfo, PassReport, PassState, TargetState,
 };
 
 use super::Peeled;
@@ -165,6 +165,10 @@ impl Algorithm for F2b2 {
         }
     }
 
+    fn takes_geometry_culling(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -173,7 +177,7 @@ impl Algorithm for F2b2 {
     ) -> Result<AlgoResult, AlgoError> {
         let mut peeled = Peeled::new(frame, params)?;
         let device = crate::common::fresh(exec);
-        let draw = Draw::new(frame.mesh, frame.view_proj);
+        let mut objects = super::culling::Objects::new(frame, params)?;
         let mut fb = peeled.framebuffer(&[Format::RGBA32F, Format::R32F])?;
         let (depth_state, shade_state) = states();
         let shade = ShadePass {
@@ -187,9 +191,9 @@ impl Algorithm for F2b2 {
         let mut blended = vec![0u32; peeled.lists.len()];
         while peeled.iterations < peeled.k {
             fb.clear_depth(f32::INFINITY);
-            let pass = device.draw(
+            let pass = objects.draw(
+                &device,
                 &mut fb,
-                &draw,
                 &depth_state,
                 &DepthPass {
                     prev: prev.as_ref(),
@@ -197,13 +201,14 @@ impl Algorithm for F2b2 {
                 exec,
             )?;
             report.merge(&pass);
-            generated = pass.stats.fragments_generated;
+            // The first pass draws every object (culling skips some later).
+            generated = generated.max(pass.stats.fragments_generated);
             if pass.stats.samples_passed == 0 {
                 exhausted = true;
                 break;
             }
             fb.clear_color(COUNT, [0; 4]);
-            let pass = device.draw(&mut fb, &draw, &shade_state, &shade, exec)?;
+            let pass = objects.draw(&device, &mut fb, &shade_state, &shade, exec)?;
             report.merge(&pass);
             shaded += pass.stats.samples_passed;
             peeled.iterations += 1;
@@ -226,6 +231,7 @@ impl Algorithm for F2b2 {
                 counted += u64::from(n);
             }
             prev = Some(layer);
+            objects.end_iteration(&device, &mut fb, exec, &mut report)?;
         }
         let composite = fb.image(COMPOSITE);
         let a = params.alpha;
@@ -262,6 +268,7 @@ impl Algorithm for F2b2 {
         ];
         let mut result = peeled.finish(report, checks, device.memory.bytes(), 28);
         result.image = Some(image);
+        result.geometry_culling = objects.summary();
         Ok(result)
     }
 }

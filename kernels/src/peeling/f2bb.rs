@@ -300,6 +300,10 @@ impl Algorithm for F2bB {
         }
     }
 
+    fn takes_geometry_culling(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -342,6 +346,7 @@ impl Algorithm for F2bB {
                 |p| Some(super::texel_f32(layer, p)[0]),
                 |p, frags| lists[p].extend(frags),
             )?;
+            layers.end_iteration(&device, exec, &mut report)?;
         }
         let dropped = s.dropped(&device)?;
         let kept = tally.kept;
@@ -370,6 +375,7 @@ impl Algorithm for F2bB {
         let bytes = device.memory.bytes();
         let mut result = peeled.finish(report, checks, bytes, 12);
         result.dropped = dropped;
+        result.geometry_culling = layers.culling();
         Ok(result)
     }
 }

@@ -35,6 +35,7 @@
 //! lost fragments with one atomic counter (`AlgoResult::dropped`). F2B-LL adds a per-pixel
 //! linked list with atomics.
 
+mod culling;
 mod dual;
 mod dual2p;
 mod dualb;
@@ -52,6 +53,8 @@ use crate::algo::{AlgoError, AlgoResult, Capture, CapturedFrag, Check, Frame, Pa
 use crate::common::{self, composite_frags, depth_order, pixels};
 
 use crate::algo::Algorithm;
+
+pub use culling::{CullIteration, GeometryCulling, ObjectCulling};
 
 /// The algorithms of this family.
 pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
