@@ -148,7 +148,8 @@ impl<'m> Objects<'m> {
         let on = params.geometry_culling == GeometryCulling::Queries;
         let n = frame.mesh.indices.len() as u32;
         let parts: Vec<Range<u32>> = if frame.objects.is_empty() {
-            vec![0..n]
+            // One object: every triangle.
+            std::iter::once(0..n).collect()
         } else {
             frame.objects.to_vec()
         };

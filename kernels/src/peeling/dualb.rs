@@ -9,8 +9,8 @@
 //! Each iteration is DUAL-LL's two passes (section 3.1.3) with Algorithm 3's storage in place
 //! of the lists: a range pass (MAX blending of `(-z, z)` over the fragments strictly inside
 //! the previous range, depth test off) finds each pixel's next near and far layer, and a
-//! capture pass stores every fragment at the near end into the pixel's front row of
-//! `K` = [`SLOTS`](super::f2bb::SLOTS) slots and every fragment at the far end into its back row (the near end
+//! capture pass stores every fragment at the near end into the pixel's front row of `K` = 8
+//! slots (`f2bb::SLOTS`) and every fragment at the far end into its back row (the near end
 //! wins when the range is one depth). The host takes both rows after each capture pass and
 //! clears them; the pixel's list is its front layers, then its back layers reversed. A layer
 //! end with more than `K` coplanar fragments loses the rest: robustness `sum K / C(Z_i)`
