@@ -1036,6 +1036,8 @@ pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
                 fragrace_kernels::occupancy::RangeSource::Bbox,
                 fragrace_kernels::occupancy::RangeSource::Hull,
             ][u.int_in_range(0..=2)?],
+            // Not drawn from the input (so that existing corpora decode as before).
+            geometry_culling: Default::default(),
         },
         exec: ExecConfig {
             mode,

@@ -140,9 +140,19 @@ struct RunArgs {
     /// A built-in scene (see `fragrace list`).
     #[arg(long, default_value = "cubes", conflicts_with = "obj")]
     scene: String,
-    /// An OBJ file (plain or .gz) instead of a built-in scene.
+    /// An OBJ file (plain or .gz) instead of a built-in scene; repeated, a scene of several
+    /// objects (one per file; see --geometry-culling).
     #[arg(long)]
-    obj: Option<PathBuf>,
+    obj: Vec<PathBuf>,
+    /// With several --obj: file i is moved by i times this vector (X,Y,Z, in the files'
+    /// units), e.g. the same file three times in a row.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, requires = "obj")]
+    obj_step: Option<[f32; 3]>,
+    /// Multi-pass front-to-back peelers: per iteration an occlusion query of each object's
+    /// bounding box against the last peeled layer, and conditional rendering of the objects
+    /// (completely peeled ones are culled; depth-fighting paper, section 3.3).
+    #[arg(long)]
+    geometry_culling: bool,
     #[arg(long, default_value = "truth")]
     algo: String,
     #[arg(long, default_value_t = 512)]
@@ -274,19 +284,33 @@ fn given(m: &ArgMatches) -> Vec<String> {
 /// option that the executor would ignore refused, before anything is loaded.
 fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
     fragrace::validate::options_for_exec(&a.exec, given.iter().map(String::as_str))?;
-    let scene = match &a.obj {
-        Some(p) => {
-            if !p.exists() {
-                bail!("{}: file not found", p.display());
-            }
-            let bytes =
-                std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))?;
+    let mut files = Vec::with_capacity(a.obj.len());
+    for p in &a.obj {
+        if !p.exists() {
+            bail!("{}: file not found", p.display());
+        }
+        let bytes = std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))?;
+        files.push(run::ObjFile {
+            path: p.clone(),
+            sha256: Some(fragrace::scene::obj::content_hash(&bytes)),
+        });
+    }
+    if a.obj_step.is_some() && files.len() < 2 {
+        bail!("--obj-step moves the second and later --obj files: give at least two");
+    }
+    let scene = match files.len() {
+        0 => SceneSpec::Builtin(a.scene.clone()),
+        1 => {
+            let f = files.remove(0);
             SceneSpec::Obj {
-                path: p.clone(),
-                sha256: Some(fragrace::scene::obj::content_hash(&bytes)),
+                path: f.path,
+                sha256: f.sha256,
             }
         }
-        None => SceneSpec::Builtin(a.scene.clone()),
+        _ => SceneSpec::Objs {
+            files,
+            step: a.obj_step.unwrap_or_default(),
+        },
     };
     let mut exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)?;
     exec.block = a.block;
@@ -316,6 +340,11 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
             spin_cap: a.spin_cap,
             occupancy: a.occupancy.get(takes_range(&a.algo))?,
             range: a.occupancy.range.unwrap_or_default(),
+            geometry_culling: if a.geometry_culling {
+                fragrace_kernels::peeling::GeometryCulling::Queries
+            } else {
+                fragrace_kernels::peeling::GeometryCulling::Off
+            },
             merge: {
                 let merge = fragrace_kernels::merging::MergeParams {
                     thickness: a.thickness,
@@ -745,6 +774,19 @@ fn cmd_list(json: bool) -> Result<()> {
 fn parse_thickness(s: &str) -> Result<fragrace_kernels::merging::Thickness, String> {
     s.parse()
         .map_err(|e: fragrace_kernels::merging::MergeParamError| e.to_string())
+}
+
+/// `--obj-step X,Y,Z`: three finite numbers.
+fn parse_step(s: &str) -> Result<[f32; 3], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("`{s}`: expected X,Y,Z (three numbers)"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!("`{s}`: expected X,Y,Z (three finite numbers)")),
+    }
 }
 
 fn parse_binning(s: &str) -> Result<fragrace::emu::Binning, String> {

@@ -22,6 +22,15 @@ pub enum SceneSpec {
         path: PathBuf,
         sha256: Option<String>,
     },
+    /// Several OBJ files (`--obj A --obj B ...`), one object each (geometry culling draws
+    /// and culls them one by one), normalised together. File `i` is moved by `i x step` in
+    /// the files' own units (`--obj-step X,Y,Z`: the same file three times in a row, as the
+    /// depth-fighting paper's three dragons of Figure 10).
+    Objs {
+        files: Vec<ObjFile>,
+        #[serde(default)]
+        step: [f32; 3],
+    },
     /// Triangles inline (fuzz and shrunk cases). With `radius`, the positions are taken as
     /// already normalised and the camera frames a sphere of that radius (so a subset of a
     /// scene's triangles renders exactly as they did in the whole scene); without it they
@@ -34,27 +43,52 @@ pub enum SceneSpec {
     },
 }
 
+/// One file of [`SceneSpec::Objs`]: its path and the sha256 of its bytes (checked on
+/// replay when present).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjFile {
+    pub path: PathBuf,
+    pub sha256: Option<String>,
+}
+
+/// Checks an OBJ file's bytes against the hash a case recorded.
+fn check_hash(path: &PathBuf, sha256: &Option<String>) -> Result<(), RunError> {
+    if let Some(want) = sha256 {
+        let bytes = std::fs::read(path).map_err(|source| RunError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let got = crate::scene::obj::content_hash(&bytes);
+        if &got != want {
+            return Err(RunError::HashMismatch {
+                path: path.clone(),
+                want: want.clone(),
+                got,
+            });
+        }
+    }
+    Ok(())
+}
+
 impl SceneSpec {
     /// Loads the scene (checking an OBJ's hash if one is given).
     pub fn load(&self) -> Result<Scene, RunError> {
         Ok(match self {
             SceneSpec::Builtin(name) => Scene::builtin(name).map_err(Box::new)?,
             SceneSpec::Obj { path, sha256 } => {
-                if let Some(want) = sha256 {
-                    let bytes = std::fs::read(path).map_err(|source| RunError::Io {
-                        path: path.clone(),
-                        source,
-                    })?;
-                    let got = crate::scene::obj::content_hash(&bytes);
-                    if &got != want {
-                        return Err(RunError::HashMismatch {
-                            path: path.clone(),
-                            want: want.clone(),
-                            got,
-                        });
-                    }
-                }
+                check_hash(path, sha256)?;
                 Scene::from_obj(path).map_err(Box::new)?
+            }
+            SceneSpec::Objs { files, step } => {
+                let mut parts = Vec::with_capacity(files.len());
+                for f in files {
+                    check_hash(&f.path, &f.sha256)?;
+                    parts.push((
+                        f.path.display().to_string(),
+                        crate::scene::load_obj(&f.path).map_err(Box::new)?,
+                    ));
+                }
+                Scene::from_objects(parts, glam::Vec3::from_array(*step)).map_err(Box::new)?
             }
             SceneSpec::Inline {
                 positions,
@@ -81,6 +115,7 @@ impl SceneSpec {
                             name: "inline".into(),
                             mesh,
                             radius: *r,
+                            objects: Vec::new(),
                         }
                     }
                     _ => Scene::from_mesh("inline", mesh).map_err(Box::new)?,
@@ -94,6 +129,11 @@ impl SceneSpec {
         match self {
             SceneSpec::Builtin(n) => n.clone(),
             SceneSpec::Obj { path, .. } => path.display().to_string(),
+            SceneSpec::Objs { files, .. } => files
+                .iter()
+                .map(|f| f.path.display().to_string())
+                .collect::<Vec<_>>()
+                .join("+"),
             SceneSpec::Inline { indices, .. } => format!("inline({} triangles)", indices.len()),
         }
     }
@@ -151,6 +191,16 @@ impl RunSpec {
         let scene = match &self.scene {
             SceneSpec::Builtin(n) => format!("--scene {n}"),
             SceneSpec::Obj { path, .. } => format!("--obj {}", path.display()),
+            SceneSpec::Objs { files, step } => {
+                let mut c: Vec<String> = files
+                    .iter()
+                    .map(|f| format!("--obj {}", f.path.display()))
+                    .collect();
+                if *step != [0.0; 3] {
+                    c.push(format!("--obj-step {},{},{}", step[0], step[1], step[2]));
+                }
+                c.join(" ")
+            }
             SceneSpec::Inline { .. } => return format!("{CLI} replay CASE.json"),
         };
         let mut c = format!(
@@ -171,6 +221,9 @@ impl RunSpec {
         } else if self.params.range != Default::default() {
             // The bucket schemes' depth range (`Params::range`).
             c += &format!(" --range {}", self.params.range.name());
+        }
+        if !self.params.geometry_culling.is_off() {
+            c += " --geometry-culling";
         }
         if self.params.merge != Params::default().merge {
             c += &format!(
@@ -246,6 +299,7 @@ impl Loaded {
     pub fn frame(&self, spec: &RunSpec) -> Frame<'_> {
         Frame {
             mesh: &self.scene.mesh,
+            objects: &self.scene.objects,
             view_proj: self.view_proj,
             width: spec.width,
             height: spec.height,
@@ -279,6 +333,20 @@ pub fn render(spec: &RunSpec, loaded: &Loaded) -> Result<Rendered, RunError> {
     let algo = fragrace_kernels::algorithm(&spec.algo)
         .ok_or_else(|| RunError::UnknownAlgo(spec.algo.clone()))?;
     crate::culling::validate(spec, &*algo)?;
+    if !spec.params.geometry_culling.is_off() && !algo.takes_geometry_culling() {
+        return Err(RunError::Algo(fragrace_kernels::AlgoError::Invalid(
+            format!(
+                "--geometry-culling: {} does not take it; the peelers that do: {}",
+                spec.algo,
+                fragrace_kernels::algorithms()
+                    .iter()
+                    .filter(|a| a.takes_geometry_culling())
+                    .map(|a| a.info().name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )));
+    }
     let info = algo.info();
     let frame = loaded.frame(spec);
     let t = Instant::now();
@@ -415,6 +483,8 @@ pub fn summary_json(
         "storage_bytes": r.storage_bytes,
         "bytes_per_pixel": r.storage_bytes as f64 / (spec.width as f64 * spec.height as f64),
         "passes": { "geometry": r.report.stats.geometry_passes, "fullscreen": r.report.stats.fullscreen_passes },
+        // Geometry passes per frame (the bucket paper's Table 2 measure); also in `passes`.
+        "geometry_passes": r.report.stats.geometry_passes,
         "stats": r.report.stats,
         "checks": r.checks,
         "hazard_class": rendered.info.hazard.name(),
@@ -432,6 +502,11 @@ pub fn summary_json(
         v["coplanarity"] = serde_json::json!(c.metrics.coplanarity);
         v["first_error"] = serde_json::json!(c.metrics.first_error);
         v["image"] = serde_json::json!(c.metrics.image);
+    }
+    if let Some(g) = &r.geometry_culling {
+        // Objects drawn and occlusion queries issued per iteration (depth-fighting paper,
+        // section 3.3).
+        v["geometry_culling"] = serde_json::json!(g);
     }
     if r.culling.is_some() {
         v["occupancy"] = crate::culling::summary(rendered, checked.map(|c| &c.metrics), None);

@@ -180,7 +180,7 @@ fn sweep(scene: &str, size: u32, azimuths: &[f32], seeds: u64) {
     );
     // Algorithms whose races need coplanar fragments (F2B-KB races only among the fragments
     // of one layer) are held to showing them on `coplanar-stack` instead of `hairball`.
-    const COPLANAR_RACES: &[&str] = &["f2b-kb"];
+    const COPLANAR_RACES: &[&str] = &["f2b-kb", "dual-kb"];
     let racy_scene = |name: &str| {
         if COPLANAR_RACES.contains(&name) {
             "coplanar-stack"

@@ -1,5 +1,7 @@
 //! Geometry input: indexed triangle meshes and draws.
 
+use std::ops::Range;
+
 use glam::{Mat4, Vec3};
 
 /// Why a mesh cannot be drawn.
@@ -115,15 +117,36 @@ pub struct Draw<'m> {
     /// One model matrix per instance (instance id = position in this list).
     pub instances: Vec<Mat4>,
     pub view_proj: Mat4,
+    /// The triangles drawn: a range of the mesh's (a draw of part of an index buffer, as
+    /// `glDrawElements` with an offset). Triangle `i` keeps primitive id `i` (its index in
+    /// the mesh) whatever range draws it.
+    pub triangles: Range<u32>,
 }
 
 impl<'m> Draw<'m> {
-    /// One instance with the identity model matrix.
+    /// One instance with the identity model matrix, every triangle.
     pub fn new(mesh: &'m Mesh, view_proj: Mat4) -> Draw<'m> {
         Draw {
             mesh,
             instances: vec![Mat4::IDENTITY],
             view_proj,
+            triangles: 0..mesh.indices.len() as u32,
         }
+    }
+
+    /// The same draw of `triangles` only (a range of the mesh's triangles, clamped to them).
+    pub fn part(&self, triangles: Range<u32>) -> Draw<'m> {
+        let n = self.mesh.indices.len() as u32;
+        Draw {
+            triangles: triangles.start.min(n)..triangles.end.min(n),
+            ..self.clone()
+        }
+    }
+
+    /// The index triples drawn.
+    pub fn indices(&self) -> &'m [[u32; 3]] {
+        let n = self.mesh.indices.len();
+        let end = (self.triangles.end as usize).min(n);
+        &self.mesh.indices[(self.triangles.start as usize).min(end)..end]
     }
 }

@@ -7,6 +7,10 @@ use glam::Mat4;
 #[derive(Clone, Copy, Debug)]
 pub struct Frame<'m> {
     pub mesh: &'m Mesh,
+    /// The scene's objects: ranges of the mesh's triangles, in order (empty: the whole mesh
+    /// is one object). Geometry culling ([`Params::geometry_culling`]) draws and culls them
+    /// one by one.
+    pub objects: &'m [std::ops::Range<u32>],
     pub view_proj: Mat4,
     pub width: u32,
     pub height: u32,
@@ -45,6 +49,14 @@ pub struct Params {
     /// (`--range`): the occupancy stage's range pass, run on its own.
     #[serde(default, skip_serializing_if = "is_default_range")]
     pub range: crate::occupancy::RangeSource,
+    /// Geometry culling of the multi-pass peelers that take it
+    /// ([`Algorithm::takes_geometry_culling`]; `--geometry-culling`): objects completely
+    /// peeled are culled by occlusion queries and conditional rendering.
+    #[serde(
+        default,
+        skip_serializing_if = "crate::peeling::GeometryCulling::is_off"
+    )]
+    pub geometry_culling: crate::peeling::GeometryCulling,
 }
 
 fn is_default_range(r: &crate::occupancy::RangeSource) -> bool {
@@ -64,6 +76,7 @@ impl Default for Params {
             occupancy: None,
             merge: crate::merging::MergeParams::default(),
             range: crate::occupancy::RangeSource::default(),
+            geometry_culling: crate::peeling::GeometryCulling::Off,
         }
     }
 }
@@ -218,6 +231,9 @@ pub struct AlgoResult {
     pub storage_bytes: u64,
     /// What occupancy culling did, when it ran ([`Params::occupancy`]).
     pub culling: Option<crate::occupancy::CullSummary>,
+    /// What geometry culling did, when it ran ([`Params::geometry_culling`]): objects drawn
+    /// and occlusion queries issued per iteration.
+    pub geometry_culling: Option<crate::peeling::ObjectCulling>,
     /// Bucket schemes only: per pixel (row-major), the fragments that lost their bucket to
     /// another fragment routed to the same one (deterministic, not races).
     pub collisions: Option<Vec<u32>>,
@@ -244,6 +260,13 @@ pub trait Algorithm: Send + Sync {
     /// [`Params::occupancy`] asks for it (the k-buffers whose capture is one geometry pass).
     /// Others refuse the parameter (the CLI checks this before running).
     fn takes_occupancy(&self) -> bool {
+        false
+    }
+
+    /// Whether the algorithm culls completely peeled objects when
+    /// [`Params::geometry_culling`] asks for it (the front-to-back peelers whose depth buffer
+    /// holds the last layer). Others refuse the parameter.
+    fn takes_geometry_culling(&self) -> bool {
         false
     }
 

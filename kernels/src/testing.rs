@@ -16,6 +16,7 @@ use crate::oracle::{self, Metrics};
 pub fn frame_sized(mesh: &Mesh, width: u32, height: u32) -> Frame<'_> {
     Frame {
         mesh,
+        objects: &[],
         view_proj: Mat4::IDENTITY,
         width,
         height,

@@ -61,6 +61,7 @@ fn lock_free_and_interlocked_algorithms_complete_and_match_the_truth() {
     let mesh = quads(6);
     let frame = Frame {
         mesh: &mesh,
+        objects: &[],
         view_proj: Mat4::IDENTITY,
         width: 10,
         height: 10,
@@ -92,6 +93,7 @@ fn the_spinlock_k_buffer_deadlocks_when_fragments_of_one_pixel_share_a_warp() {
     let mesh = quads(6);
     let frame = Frame {
         mesh: &mesh,
+        objects: &[],
         view_proj: Mat4::IDENTITY,
         width: 8,
         height: 8,
@@ -145,6 +147,7 @@ fn with_its_spin_cap_the_spinlock_k_buffer_drops_warp_mates_instead() {
     let mesh = quads(6);
     let frame = Frame {
         mesh: &mesh,
+        objects: &[],
         view_proj: Mat4::IDENTITY,
         width: 8,
         height: 8,

@@ -8,6 +8,8 @@
 //! (not the platform's libm, whose last bit varies). A case file that names a built-in
 //! therefore replays exactly anywhere.
 
+use std::ops::Range;
+
 use fragrace_emu::geometry::Mesh;
 use glam::{DVec3, Vec3};
 
@@ -23,11 +25,12 @@ pub const NAMES: &[&str] = &[
     "interpenetrating",
     "bunny",
     "teapot",
+    "object-grid",
     "random-triangles",
 ];
 
 /// How parameters are written: `name:param:param`.
-pub const USAGE: &str = "cubes | coplanar-stack[:N] | spheres | hairball | interpenetrating | bunny | teapot | random-triangles[:SEED[:N]]";
+pub const USAGE: &str = "cubes | coplanar-stack[:N] | spheres | hairball | interpenetrating | bunny | teapot | random-triangles[:SEED[:N]] | object-grid[:N]";
 
 /// Number of quads of `coplanar-stack` without a parameter.
 pub const COPLANAR_STACK_DEFAULT: usize = 8;
@@ -46,9 +49,36 @@ pub const BUNNY_OBJ_GZ: &[u8] = include_bytes!("../../assets/bunny.obj.gz");
 /// The Utah teapot (992 triangles), as shipped in `assets/`.
 pub const TEAPOT_OBJ_GZ: &[u8] = include_bytes!("../../assets/teapot.obj.gz");
 
+/// Spheres per side of `object-grid` without a parameter (27 objects).
+pub const OBJECT_GRID_DEFAULT: u32 = 3;
+
 /// Upper bound on parameterised sizes, so that a typo in a case file cannot ask for
 /// terabytes.
 const MAX_PARAM_TRIANGLES: usize = 1 << 24;
+
+/// The mesh of a built-in scene by name and its objects (ranges of its triangles; empty: one
+/// object), not normalised. `object-grid` is made of objects; the other built-ins are one.
+pub fn mesh_and_objects(name: &str) -> Result<(Mesh, Vec<Range<u32>>), SceneError> {
+    let mut parts = name.split(':');
+    if parts.next() != Some("object-grid") {
+        return Ok((mesh(name)?, Vec::new()));
+    }
+    const U: &str = "object-grid[:N] with 1 <= N <= 64 spheres per side";
+    let bad = || SceneError::BuiltinParams {
+        name: name.to_owned(),
+        usage: U,
+    };
+    let params: Vec<&str> = parts.collect();
+    let n: u32 = match params[..] {
+        [] => OBJECT_GRID_DEFAULT,
+        [n] => n.parse().map_err(|_| bad())?,
+        _ => return Err(bad()),
+    };
+    if n == 0 || n > 64 {
+        return Err(bad());
+    }
+    Ok(object_grid(n))
+}
 
 /// The mesh of a built-in scene by name (`name` or `name:params`), not normalised.
 pub fn mesh(name: &str) -> Result<Mesh, SceneError> {
@@ -86,6 +116,7 @@ pub fn mesh(name: &str) -> Result<Mesh, SceneError> {
             }
             Ok(coplanar_stack(n))
         }
+        "object-grid" => mesh_and_objects(name).map(|(m, _)| m),
         "random-triangles" => {
             const U: &str = "random-triangles[:SEED[:N]] with SEED a u64 and 1 <= N <= 16777216";
             let (mut seed, mut n) = RANDOM_TRIANGLES_DEFAULT;
@@ -274,6 +305,33 @@ pub fn spheres() -> Mesh {
     mesh.append(&uv_sphere(Vec3::new(0.125, 0.0625, 0.0), 0.65, 24, 48));
     mesh.append(&uv_sphere(Vec3::new(0.1875, 0.125, 0.0625), 0.3, 24, 48));
     mesh
+}
+
+/// `object-grid[:N]`: `N x N x N` small closed spheres (radius 0.3, 8 stacks, 12 slices:
+/// 168 triangles each) on a grid of spacing 1, each sphere one object (the depth-fighting
+/// paper's geometry culling, section 3.3, needs a scene of many objects). Seen from the
+/// default camera, the spheres of the front rows hide parts of those behind them: a
+/// front-to-back peel finishes them in the first iterations and culls them for the rest.
+pub fn object_grid(n: u32) -> (Mesh, Vec<Range<u32>>) {
+    let mut mesh = Mesh::default();
+    let mut objects = Vec::new();
+    let half = (n as f32 - 1.0) / 2.0;
+    for i in 0..n {
+        for j in 0..n {
+            for k in 0..n {
+                let c = Vec3::new(i as f32 - half, j as f32 - half, k as f32 - half);
+                let start = mesh.indices.len() as u32;
+                let sphere = uv_sphere(c, 0.3, 8, 12);
+                if mesh.positions.is_empty() {
+                    mesh = sphere;
+                } else {
+                    mesh.append(&sphere);
+                }
+                objects.push(start..mesh.indices.len() as u32);
+            }
+        }
+    }
+    (mesh, objects)
 }
 
 /// `hairball`: [`HAIRBALL_CURVES`] closed thin tubes (triangular prisms, radius

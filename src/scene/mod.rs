@@ -95,6 +95,9 @@ pub struct Scene {
     pub name: String,
     pub mesh: Mesh,
     pub radius: f32,
+    /// The scene's objects: consecutive ranges of the mesh's triangles (empty: the whole
+    /// mesh is one object). `object-grid` and scenes of several OBJ files have several.
+    pub objects: Vec<std::ops::Range<u32>>,
 }
 
 /// The names [`Scene::builtin`] accepts (without parameters; see [`builtin::USAGE`]).
@@ -107,8 +110,11 @@ impl Scene {
     /// `bunny`, `teapot`, `random-triangles[:SEED[:N]]`. Every built-in is deterministic and
     /// bit-identical on every platform, so a case file naming one replays exactly.
     pub fn builtin(name: &str) -> Result<Scene, SceneError> {
-        let mesh = builtin::mesh(name)?;
-        Scene::from_mesh(name, mesh)
+        let (mesh, objects) = builtin::mesh_and_objects(name)?;
+        Ok(Scene {
+            objects,
+            ..Scene::from_mesh(name, mesh)?
+        })
     }
 
     /// Loads an OBJ file (plain or gzip) and normalises it. The scene's name is the path.
@@ -116,6 +122,34 @@ impl Scene {
         let path = path.as_ref();
         let mesh = load_obj(path)?;
         Scene::from_mesh(path.display().to_string(), mesh)
+    }
+
+    /// A scene of several meshes, one object each, `parts[i]` moved by `i x step` (in the
+    /// meshes' own units), normalised together. Its name is the parts' names joined by `+`.
+    pub fn from_objects(parts: Vec<(String, Mesh)>, step: glam::Vec3) -> Result<Scene, SceneError> {
+        let name = parts
+            .iter()
+            .map(|(n, _)| n.as_str())
+            .collect::<Vec<_>>()
+            .join("+");
+        let mut mesh = Mesh::default();
+        let mut objects = Vec::with_capacity(parts.len());
+        for (i, (_, mut part)) in parts.into_iter().enumerate() {
+            for p in &mut part.positions {
+                *p += step * i as f32;
+            }
+            let start = mesh.indices.len() as u32;
+            if i == 0 {
+                mesh = part;
+            } else {
+                mesh.append(&part);
+            }
+            objects.push(start..mesh.indices.len() as u32);
+        }
+        Ok(Scene {
+            objects,
+            ..Scene::from_mesh(name, mesh)?
+        })
     }
 
     /// Normalises a mesh into a scene. The mesh must be valid, have at least one triangle and
@@ -134,7 +168,12 @@ impl Scene {
         if radius <= 0.0 {
             return Err(SceneError::DegenerateMesh { name });
         }
-        Ok(Scene { name, mesh, radius })
+        Ok(Scene {
+            name,
+            mesh,
+            radius,
+            objects: Vec::new(),
+        })
     }
 
     /// The view-projection matrix (OpenGL clip space) of `camera` looking at this scene in a

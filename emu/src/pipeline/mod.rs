@@ -152,7 +152,7 @@ impl Device {
             };
             let prepared = prepare(
                 &clip.0,
-                &draw.mesh.indices,
+                draw.indices(),
                 &bin_state,
                 viewport,
                 threads,
@@ -166,6 +166,7 @@ impl Device {
                 Geometry::Unbinned {
                     prepared: &prepared,
                     instance,
+                    first: draw.triangles.start,
                     single,
                 }
             } else {
@@ -179,6 +180,7 @@ impl Device {
                 Geometry::Binned {
                     binned: &binned,
                     instance,
+                    first: draw.triangles.start,
                     single,
                 }
             };

@@ -79,6 +79,7 @@ impl RasterFront<'_> {
             Geometry::Binned {
                 binned,
                 instance,
+                first,
                 single,
             } => {
                 let positions = crate::raster::SampleCount::from_count(self.samples)
@@ -131,7 +132,7 @@ impl RasterFront<'_> {
                         x: f.x,
                         y: f.y,
                         tri: f.tri,
-                        primitive_id: f.source,
+                        primitive_id: f.source + *first,
                         instance_id: *instance,
                         coverage: cov,
                         front_facing: f.front_facing,

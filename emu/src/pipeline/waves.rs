@@ -88,9 +88,10 @@ impl Device {
         // fused path (see `fused`): no fragment lists, one pass over each tile.
         let direct = matches!(exec.mode, ExecMode::Ordered | ExecMode::Parallel);
         let parallel = exec.mode == ExecMode::Parallel;
-        let fused_pass = |instance: u32, single: bool| crate::exec::fused::FusedPass {
+        let fused_pass = |instance: u32, first: u32, single: bool| crate::exec::fused::FusedPass {
             state,
             instance,
+            first,
             single,
             early,
             targets,
@@ -105,12 +106,13 @@ impl Device {
         if let Geometry::Unbinned {
             prepared,
             instance,
+            first,
             single,
         } = geo
         {
             // `Device::draw` makes unbinned geometry only for passes this path runs.
             debug_assert!(direct && info.interlock.is_none() && contention.is_none());
-            let pass = fused_pass(*instance, *single);
+            let pass = fused_pass(*instance, *first, *single);
             let (outcome, counts, rejected, imbalance) =
                 crate::exec::fused::run_unbinned(kernel, &env_base, &pass, prepared);
             report.imbalance += imbalance;
@@ -129,11 +131,12 @@ impl Device {
             Geometry::Binned {
                 binned,
                 instance,
+                first,
                 single,
             },
         ) = (direct, info.interlock, contention.as_ref(), geo)
         {
-            let pass = fused_pass(*instance, *single);
+            let pass = fused_pass(*instance, *first, *single);
             let (outcome, counts, imbalance) =
                 crate::exec::fused::run_fused(kernel, &env_base, &pass, binned, fb.tiles_mut());
             report.imbalance += imbalance;
@@ -374,6 +377,8 @@ pub(super) enum Geometry<'a> {
     Binned {
         binned: &'a Binned,
         instance: u32,
+        /// The first triangle drawn: primitive id of setup source 0 (see `Draw::triangles`).
+        first: u32,
         single: bool,
     },
     /// Set up and rasterized chunk by chunk by the fused path's workers
@@ -381,6 +386,7 @@ pub(super) enum Geometry<'a> {
     Unbinned {
         prepared: &'a Prepared<'a>,
         instance: u32,
+        first: u32,
         single: bool,
     },
     FullScreen,

@@ -681,6 +681,7 @@ mod tests {
             rev.indices.reverse();
             let frame = Frame {
                 mesh: &rev,
+                objects: &[],
                 ..frame
             };
             let r = algo.run(&frame, &params, &ExecConfig::ordered()).unwrap();

@@ -62,6 +62,7 @@ pub fn pass(
     let volume = volume(frame.mesh, source)?;
     let drawn = Frame {
         mesh: volume.as_ref().unwrap_or(frame.mesh),
+        objects: &[],
         ..*frame
     };
     let mut fb = framebuffer(frame, fragrace_emu::SampleCount::X1, &[])?;

@@ -40,9 +40,10 @@ const FRONT: u32 = 0;
 const DROPPED: u32 = 1;
 const BACK: u32 = 2;
 
-/// The range pass: the min-max depth of the fragments strictly inside the previous range.
-struct Range<'i> {
-    prev: Option<&'i Image>,
+/// The range pass: the min-max depth of the fragments strictly inside the previous range
+/// (shared with DUAL-B).
+pub(super) struct Range<'i> {
+    pub prev: Option<&'i Image>,
 }
 
 impl FragmentKernel for Range<'_> {

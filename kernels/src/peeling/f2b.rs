@@ -27,8 +27,8 @@
 //! companion).
 
 use fragrace_emu::{
-    Buf, CompareFunc, DepthState, Draw, Format, Fragment, FragmentKernel, Image, KernelInfo,
-    PassReport, PassState, TargetState,
+    Buf, CompareFunc, DepthState, Format, Fragment, FragmentKernel, Image, KernelInfo, PassReport,
+    PassState, TargetState,
 };
 
 use super::{texel_f32, Peeled};
@@ -101,6 +101,10 @@ impl Algorithm for F2b {
         }
     }
 
+    fn takes_geometry_culling(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -110,7 +114,7 @@ impl Algorithm for F2b {
         let mut peeled = Peeled::new(frame, params)?;
         let mut device = crate::common::fresh(exec);
         let coplanar = device.buffer::<u32>("f2b-coplanar", 1)?;
-        let draw = Draw::new(frame.mesh, frame.view_proj);
+        let mut objects = super::culling::Objects::new(frame, params)?;
         let mut fb = peeled.framebuffer(&[Format::RG32F])?;
         let state = peel_state();
         let mut report = PassReport::default();
@@ -123,9 +127,9 @@ impl Algorithm for F2b {
         while peeled.iterations < peeled.k {
             fb.clear_depth(f32::INFINITY);
             fb.clear_color(0, [f32::INFINITY.to_bits(), EMPTY, 0, 0]);
-            let pass = device.draw(
+            let pass = objects.draw(
+                &device,
                 &mut fb,
-                &draw,
                 &state,
                 &Peel {
                     prev: prev.as_ref(),
@@ -135,7 +139,8 @@ impl Algorithm for F2b {
             )?;
             report.merge(&pass);
             revisited += last_gained;
-            generated = pass.stats.fragments_generated;
+            // The first pass draws every object (culling skips some later).
+            generated = generated.max(pass.stats.fragments_generated);
             if pass.stats.samples_passed == 0 {
                 exhausted = true;
                 break;
@@ -160,6 +165,7 @@ impl Algorithm for F2b {
             last_gained = gained;
             kept += gained;
             prev = Some(layer);
+            objects.end_iteration(&device, &mut fb, exec, &mut report)?;
         }
         let at_layers = u64::from(device.memory.read(coplanar)?[0]);
         let lost = at_layers.saturating_sub(revisited);
@@ -174,6 +180,7 @@ impl Algorithm for F2b {
         let mut result = peeled.finish(report, checks, device.memory.bytes(), 20);
         // Coplanar companions of a peeled fragment: generated, never kept.
         result.dropped = lost;
+        result.geometry_culling = objects.summary();
         Ok(result)
     }
 }

@@ -33,11 +33,21 @@
 //!   never run the capture kernel together), so the hazard shows on coplanar scenes
 //!   (`cubes`, `coplanar-stack`) and never on scenes without coplanarity.
 //!
+//! - **F2B-KB-ATOMIC** (`f2b-kb-atomic`): the same search as Algorithm 3 writes it, with the
+//!   legend's atomic: slot `i` is claimed by an atomic compare-exchange of its depth word from
+//!   empty to the fragment's depth, and only the winner writes the slot's primitive. This is
+//!   the reading under which the paper's "RMWH-free" holds: no two fragments share a slot,
+//!   under every executor (hazard-free; what does not fit `K` is counted, as F2B-FAB).
+//!   Registered next to `f2b-kb` so that both readings can be compared.
+//!
+//! The slots ([`Slots`]) are shared with DUAL-B (`super::dualb`), which keeps a row per
+//! pixel and direction.
+//!
 //! **Invariants (checked on every run).** Slots are filled from the first with no gap, every
-//! kept fragment is at its layer's depth and once per pixel; F2B-FAB: kept + dropped = the
-//! fragments the capture passes let through.
+//! kept fragment is at its layer's depth and once per pixel; F2B-FAB and F2B-KB-ATOMIC: kept +
+//! dropped = the fragments the capture passes let through.
 
-use fragrace_emu::{Buf, Fragment, FragmentKernel, KernelInfo, PassReport};
+use fragrace_emu::{Buf, Device, Fragment, FragmentKernel, KernelInfo, PassReport};
 
 use super::f2bll::LayerPasses;
 use super::Peeled;
@@ -50,73 +60,190 @@ use crate::common::EMPTY;
 /// Slots per pixel and layer (the paper's K without attribute packing, Table 1).
 pub const SLOTS: u32 = 8;
 
-/// The per-pixel slots: `SLOTS` `(depth bits, primitive)` pairs, depth `EMPTY` when free.
+/// Rows of `SLOTS` `(depth bits, primitive)` pairs, depth `EMPTY` when free: one row per
+/// pixel (F2B-B), or per pixel and direction (DUAL-B: front rows, then back rows).
 #[derive(Clone, Copy)]
-struct Slots {
+pub(super) struct Slots {
     depth: Buf<u32>,
     prim: Buf<u32>,
-    /// F2B-FAB: per-pixel counters.
+    /// FAB: one counter per row.
     counters: Buf<u32>,
     /// One word: fragments that found no slot.
     dropped: Buf<u32>,
+    rows: u32,
 }
 
-/// F2B-FAB's capture: an atomic counter picks the slot.
-struct FabCapture {
-    s: Slots,
+/// How a fragment claims a slot of its row (Algorithm 3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Allocation {
+    /// FAB: an atomic per-row counter hands out the slots.
+    Counter,
+    /// KB: the first empty slot, found and filled with plain loads and stores.
+    Search,
+    /// KB as Algorithm 3's legend writes it ("← denotes an atomic memory operation"): the
+    /// first empty slot, claimed with an atomic compare-exchange on its depth word.
+    AtomicSearch,
 }
 
-impl FragmentKernel for FabCapture {
-    fn info(&self) -> KernelInfo {
-        KernelInfo::new("f2b-fab-capture")
+/// What the host found in the slots after a capture pass.
+#[derive(Default)]
+pub(super) struct SlotTally {
+    /// Fragments kept.
+    pub kept: u64,
+    /// Rows with a used slot after a free one.
+    pub gaps: u64,
+    /// Fragments whose depth is not their layer's.
+    pub off_layer: u64,
+    /// A primitive kept twice in one row.
+    pub twice: u64,
+}
+
+impl SlotTally {
+    /// The slots' check ("slots fill from the first, hold fragments of their layer, each
+    /// once").
+    pub fn check(&self) -> Check {
+        Check::new(
+            "slots fill from the first, hold fragments of their layer, each once",
+            self.gaps == 0 && self.off_layer == 0 && self.twice == 0,
+            format!(
+                "{} rows with a gap, {} fragments off the layer, {} repeats",
+                self.gaps, self.off_layer, self.twice
+            ),
+        )
     }
-    async fn shade(&self, f: impl Fragment) {
-        let s = &self.s;
-        let p = f.pixel_index();
-        let i = f.atomic_add(s.counters, p, 1).await;
-        if i >= SLOTS {
-            f.atomic_add(s.dropped, 0, 1).await;
-            return;
-        }
-        let at = p * SLOTS + i;
-        f.store(s.depth, at, f.depth().to_bits()).await;
-        f.store(s.prim, at, f.primitive_id()).await;
-    }
 }
 
-/// F2B-KB's capture: the first empty slot, found and filled with plain accesses.
-struct KbCapture {
-    s: Slots,
-}
-
-impl FragmentKernel for KbCapture {
-    fn info(&self) -> KernelInfo {
-        KernelInfo::new("f2b-kb-capture")
+impl Slots {
+    /// `rows` rows of [`SLOTS`] slots, with per-row counters when `alloc` needs them.
+    pub fn new(
+        device: &mut Device,
+        prefix: &str,
+        rows: u64,
+        alloc: Allocation,
+    ) -> Result<Slots, AlgoError> {
+        let words = rows * SLOTS as u64;
+        Ok(Slots {
+            depth: device.buffer::<u32>(&format!("{prefix}-depth"), words)?,
+            prim: device.buffer::<u32>(&format!("{prefix}-prim"), words)?,
+            counters: device.buffer::<u32>(
+                &format!("{prefix}-counters"),
+                if alloc == Allocation::Counter {
+                    rows
+                } else {
+                    1
+                },
+            )?,
+            dropped: device.buffer::<u32>(&format!("{prefix}-dropped"), 1)?,
+            rows: rows as u32,
+        })
     }
-    async fn shade(&self, f: impl Fragment) {
-        let s = &self.s;
-        let base = f.pixel_index() * SLOTS;
-        for i in 0..SLOTS {
-            if f.load(s.depth, base + i).await == EMPTY {
-                f.store(s.depth, base + i, f.depth().to_bits()).await;
-                f.store(s.prim, base + i, f.primitive_id()).await;
-                return;
+
+    /// Empties every slot (before a capture pass).
+    pub fn clear(&self, device: &Device) -> Result<(), AlgoError> {
+        device.memory.fill(self.depth, EMPTY)?;
+        device.memory.fill(self.prim, EMPTY)?;
+        device.memory.fill(self.counters, 0)?;
+        Ok(())
+    }
+
+    /// Algorithm 3: stores the fragment into a free slot of `row`, or counts it dropped.
+    pub async fn store(&self, f: &impl Fragment, alloc: Allocation, row: u32) {
+        let base = row * SLOTS;
+        let (z, id) = (f.depth().to_bits(), f.primitive_id());
+        match alloc {
+            Allocation::Counter => {
+                let i = f.atomic_add(self.counters, row, 1).await;
+                if i < SLOTS {
+                    f.store(self.depth, base + i, z).await;
+                    f.store(self.prim, base + i, id).await;
+                    return;
+                }
+            }
+            Allocation::Search => {
+                for i in 0..SLOTS {
+                    if f.load(self.depth, base + i).await == EMPTY {
+                        f.store(self.depth, base + i, z).await;
+                        f.store(self.prim, base + i, id).await;
+                        return;
+                    }
+                }
+            }
+            Allocation::AtomicSearch => {
+                for i in 0..SLOTS {
+                    if f.atomic_compare_exchange(self.depth, base + i, EMPTY, z)
+                        .await
+                        .is_ok()
+                    {
+                        // The slot is this fragment's alone: nobody else writes its id.
+                        f.store(self.prim, base + i, id).await;
+                        return;
+                    }
+                }
             }
         }
-        f.atomic_add(s.dropped, 0, 1).await;
+        f.atomic_add(self.dropped, 0, 1).await;
+    }
+
+    /// Fragments that found no slot, so far.
+    pub fn dropped(&self, device: &Device) -> Result<u64, AlgoError> {
+        Ok(u64::from(device.memory.read(self.dropped)?[0]))
+    }
+
+    /// Reads every row back: `take(row, fragments)` gets each row's fragments sorted by
+    /// primitive (all at one depth), which must be `layer(row)` (`None`: the row has no
+    /// layer and must be empty).
+    pub fn read(
+        &self,
+        device: &Device,
+        tally: &mut SlotTally,
+        layer: impl Fn(usize) -> Option<f32>,
+        mut take: impl FnMut(usize, Vec<CapturedFrag>),
+    ) -> Result<(), AlgoError> {
+        let depth = device.memory.read(self.depth)?;
+        let prim = device.memory.read(self.prim)?;
+        let k = SLOTS as usize;
+        for row in 0..self.rows as usize {
+            let at = row * k;
+            let slots = &depth[at..at + k];
+            let used = slots.iter().take_while(|&&d| d != EMPTY).count();
+            if slots[used..].iter().any(|&d| d != EMPTY) {
+                tally.gaps += 1;
+            }
+            if used == 0 {
+                continue;
+            }
+            let mut frags: Vec<CapturedFrag> = (0..used)
+                .map(|i| CapturedFrag::from_bits(depth[at + i], prim[at + i]))
+                .collect();
+            frags.sort_by_key(|f| f.prim);
+            let d = layer(row);
+            tally.off_layer += frags.iter().filter(|f| Some(f.depth) != d).count() as u64;
+            tally.twice += frags.windows(2).filter(|w| w[0].prim == w[1].prim).count() as u64;
+            tally.kept += used as u64;
+            take(row, frags);
+        }
+        Ok(())
     }
 }
 
-/// Which slot allocation.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Allocation {
-    /// Atomic per-pixel counter (F2B-FAB).
-    Counter,
-    /// Plain read-modify-write search (F2B-KB).
-    Search,
+/// The capture kernel of F2B-B: every fragment at the layer into its pixel's row.
+struct Capture {
+    s: Slots,
+    alloc: Allocation,
+    name: &'static str,
 }
 
-/// `f2b-fab` (`Allocation::Counter`) or `f2b-kb` (`Allocation::Search`).
+impl FragmentKernel for Capture {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new(self.name)
+    }
+    async fn shade(&self, f: impl Fragment) {
+        self.s.store(&f, self.alloc, f.pixel_index()).await;
+    }
+}
+
+/// `f2b-fab` (`Allocation::Counter`), `f2b-kb` (`Allocation::Search`) or `f2b-kb-atomic`
+/// (`Allocation::AtomicSearch`).
 pub struct F2bB(Allocation);
 
 impl F2bB {
@@ -125,6 +252,9 @@ impl F2bB {
     }
     pub const fn kb() -> F2bB {
         F2bB(Allocation::Search)
+    }
+    pub const fn kb_atomic() -> F2bB {
+        F2bB(Allocation::AtomicSearch)
     }
 }
 
@@ -160,7 +290,18 @@ impl Algorithm for F2bB {
                 hazard: HazardClass::HazardProne,
                 ..common
             },
+            Allocation::AtomicSearch => AlgoInfo {
+                name: "f2b-kb-atomic",
+                summary: "F2B-KB as Algorithm 3 writes it: the first empty of K = 8 slots claimed with an atomic \
+                          compare-exchange (\"<- denotes an atomic memory operation\"), so coplanar fragments in \
+                          flight together never share a slot; more than K at one layer are lost (counted)",
+                ..common
+            },
         }
+    }
+
+    fn takes_geometry_culling(&self) -> bool {
+        true
     }
 
     fn run(
@@ -172,96 +313,69 @@ impl Algorithm for F2bB {
         let mut peeled = Peeled::new(frame, params)?;
         let mut device = crate::common::fresh(exec);
         let n = peeled.lists.len() as u64;
-        let s = Slots {
-            depth: device.buffer::<u32>("f2b-b-depth", n * SLOTS as u64)?,
-            prim: device.buffer::<u32>("f2b-b-prim", n * SLOTS as u64)?,
-            counters: device.buffer::<u32>(
-                "f2b-b-counters",
-                if self.0 == Allocation::Counter { n } else { 1 },
-            )?,
-            dropped: device.buffer::<u32>("f2b-b-dropped", 1)?,
+        let s = Slots::new(&mut device, "f2b-b", n, self.0)?;
+        let name = match self.0 {
+            Allocation::Counter => "f2b-fab-capture",
+            Allocation::Search => "f2b-kb-capture",
+            Allocation::AtomicSearch => "f2b-kb-atomic-capture",
+        };
+        let kernel = Capture {
+            s,
+            alloc: self.0,
+            name,
         };
         let mut layers = LayerPasses::new(&peeled, frame)?;
         let mut report = PassReport::default();
-        let (mut let_through, mut kept) = (0u64, 0u64);
-        let (mut gaps, mut off_layer, mut twice) = (0u64, 0u64, 0u64);
+        let mut let_through = 0u64;
+        let mut tally = SlotTally::default();
         while peeled.iterations < peeled.k {
-            device.memory.fill(s.depth, EMPTY)?;
-            device.memory.fill(s.prim, EMPTY)?;
-            device.memory.fill(s.counters, 0)?;
+            s.clear(&device)?;
             if layers.next_layer(&device, exec, &mut report)?.is_none() {
                 break;
             }
-            let pass = match self.0 {
-                Allocation::Counter => {
-                    layers.capture(&device, &FabCapture { s }, exec, &mut report)?
-                }
-                Allocation::Search => {
-                    layers.capture(&device, &KbCapture { s }, exec, &mut report)?
-                }
-            };
+            let pass = layers.capture(&device, &kernel, exec, &mut report)?;
             peeled.iterations += 1;
             let_through += pass.stats.samples_passed;
-            let depth = device.memory.read(s.depth)?;
-            let prim = device.memory.read(s.prim)?;
             let Some(layer) = layers.layer() else {
                 break;
             };
-            for (p, list) in peeled.lists.iter_mut().enumerate() {
-                let at = p * SLOTS as usize;
-                let slots = &depth[at..at + SLOTS as usize];
-                let used = slots.iter().take_while(|&&d| d != EMPTY).count();
-                if slots[used..].iter().any(|&d| d != EMPTY) {
-                    gaps += 1;
-                }
-                let mut layer_frags: Vec<CapturedFrag> = (0..used)
-                    .map(|i| CapturedFrag::from_bits(depth[at + i], prim[at + i]))
-                    .collect();
-                layer_frags.sort_by_key(|f| f.prim);
-                let d = super::texel_f32(layer, p)[0];
-                off_layer += layer_frags.iter().filter(|f| f.depth != d).count() as u64;
-                twice += layer_frags
-                    .windows(2)
-                    .filter(|w| w[0].prim == w[1].prim)
-                    .count() as u64;
-                kept += used as u64;
-                list.extend(layer_frags);
-            }
+            let lists = &mut peeled.lists;
+            s.read(
+                &device,
+                &mut tally,
+                |p| Some(super::texel_f32(layer, p)[0]),
+                |p, frags| lists[p].extend(frags),
+            )?;
+            layers.end_iteration(&device, exec, &mut report)?;
         }
-        let dropped = u64::from(device.memory.read(s.dropped)?[0]);
-        let mut checks = vec![Check::new(
-            "slots fill from the first, hold fragments of their layer, each once",
-            gaps == 0 && off_layer == 0 && twice == 0,
-            format!(
-                "{gaps} pixels with a gap, {off_layer} fragments off the layer, {twice} repeats"
-            ),
-        )];
-        let accounted = kept + dropped == let_through;
-        match self.0 {
-            Allocation::Counter => {
-                checks.push(Check::new(
-                    "every fragment at a layer is kept or counted as dropped",
-                    accounted,
-                    format!("{kept} kept + {dropped} dropped of {let_through} at the layers"),
-                ));
-                checks.push(super::conservation(
-                    layers.exhausted,
-                    kept + dropped,
-                    layers.generated,
-                ));
-            }
-            Allocation::Search => checks.push(Check::new(
+        let dropped = s.dropped(&device)?;
+        let kept = tally.kept;
+        let mut checks = vec![tally.check()];
+        if self.0 == Allocation::Search {
+            checks.push(Check::new(
                 "fragments overwritten in a slot by a racing one (informational)",
                 true,
                 format!(
                     "{} of {let_through} at the layers: {kept} kept, {dropped} found no slot",
                     let_through.saturating_sub(kept + dropped)
                 ),
-            )),
+            ));
+        } else {
+            checks.push(Check::new(
+                "every fragment at a layer is kept or counted as dropped",
+                kept + dropped == let_through,
+                format!("{kept} kept + {dropped} dropped of {let_through} at the layers"),
+            ));
+            checks.push(super::conservation(
+                layers.exhausted,
+                kept + dropped,
+                layers.generated,
+            ));
         }
         let bytes = device.memory.bytes();
         let mut result = peeled.finish(report, checks, bytes, 12);
         result.dropped = dropped;
+        result.geometry_culling = layers.culling();
         Ok(result)
     }
 }
@@ -269,7 +383,11 @@ impl Algorithm for F2bB {
 
 /// The algorithms of this file, for its family's registry line.
 pub(super) fn algorithms() -> Vec<Box<dyn crate::algo::Algorithm>> {
-    vec![Box::new(F2bB::fab()), Box::new(F2bB::kb())]
+    vec![
+        Box::new(F2bB::fab()),
+        Box::new(F2bB::kb()),
+        Box::new(F2bB::kb_atomic()),
+    ]
 }
 
 #[cfg(test)]
@@ -316,5 +434,40 @@ mod tests {
             lost += m.error_pixels;
         }
         assert!(lost > 0, "racing coplanar fragments overwrite each other");
+    }
+
+    #[test]
+    fn kb_atomic_is_exact_under_every_executor_while_layers_fit() {
+        assert_exact_everywhere(&F2bB::kb_atomic(), &Params::default(), 1);
+    }
+
+    #[test]
+    fn kb_atomic_never_loses_racing_coplanar_fragments() {
+        // Where `f2b-kb` loses updates (the test above), the atomic claim loses none.
+        let mesh = crate::testing::coplanar_stack(6);
+        let f = frame(&mesh, 8);
+        let params = Params::default();
+        for seed in 0..3 {
+            let (r, m) = run(
+                &F2bB::kb_atomic(),
+                &f,
+                &params,
+                &scheduled(Policy::Random, seed),
+            );
+            assert_eq!(r.report.hazards.total(), 0, "seed {seed}");
+            assert_eq!(m.error_pixels, 0, "seed {seed}: {:?}", r.checks);
+            assert_eq!(r.dropped, 0);
+        }
+        // 11 coplanar fragments, 8 slots: 3 counted per pixel, as f2b-fab.
+        let mesh = crate::testing::coplanar_stack(11);
+        let f = frame(&mesh, 8);
+        let (r, m) = run(
+            &F2bB::kb_atomic(),
+            &f,
+            &params,
+            &scheduled(Policy::Random, 0),
+        );
+        assert_eq!(r.dropped, 3 * m.covered_pixels);
+        assert_eq!(m.captured, 8 * m.covered_pixels);
     }
 }

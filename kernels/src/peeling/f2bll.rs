@@ -28,10 +28,11 @@
 //! `R_h = 1` under every executor (asserted by the differential harness).
 
 use fragrace_emu::{
-    Buf, CompareFunc, DepthState, Device, Draw, EarlyTests, ExecConfig, Format, Fragment,
-    FragmentKernel, Framebuffer, Image, KernelInfo, PassReport, PassState, TargetState,
+    Buf, CompareFunc, DepthState, Device, EarlyTests, ExecConfig, Format, Fragment, FragmentKernel,
+    Framebuffer, Image, KernelInfo, PassReport, PassState, TargetState,
 };
 
+use super::culling::Objects;
 use super::Peeled;
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, CapturedFrag, Check, Frame, HazardClass,
@@ -68,7 +69,8 @@ impl FragmentKernel for DepthPass<'_> {
 /// that leaves the next layer in the depth buffer, and the capture pass that runs a kernel on
 /// the fragments at that layer (depth test `EQUAL`, early, no writes).
 pub(super) struct LayerPasses<'m> {
-    draw: Draw<'m>,
+    /// The scene, drawn whole or object by object (geometry culling).
+    objects: Objects<'m>,
     fb: Framebuffer,
     depth_state: PassState,
     capture_state: PassState,
@@ -97,7 +99,7 @@ impl<'m> LayerPasses<'m> {
         };
         capture.fragment.early = EarlyTests::ForceEarly;
         Ok(LayerPasses {
-            draw: Draw::new(frame.mesh, frame.view_proj),
+            objects: Objects::new(frame, peeled.params)?,
             fb: peeled.framebuffer(&[Format::R32F])?,
             depth_state,
             capture_state: capture,
@@ -119,9 +121,12 @@ impl<'m> LayerPasses<'m> {
         let kernel = DepthPass {
             prev: self.prev.as_ref(),
         };
-        let pass = device.draw(&mut self.fb, &self.draw, &self.depth_state, &kernel, exec)?;
+        let pass = self
+            .objects
+            .draw(device, &mut self.fb, &self.depth_state, &kernel, exec)?;
         report.merge(&pass);
-        self.generated = pass.stats.fragments_generated;
+        // The first pass draws every object (culling skips some later).
+        self.generated = self.generated.max(pass.stats.fragments_generated);
         if pass.stats.samples_passed == 0 {
             self.exhausted = true;
             return Ok(None);
@@ -143,9 +148,27 @@ impl<'m> LayerPasses<'m> {
         exec: &ExecConfig,
         report: &mut PassReport,
     ) -> Result<PassReport, AlgoError> {
-        let pass = device.draw(&mut self.fb, &self.draw, &self.capture_state, kernel, exec)?;
+        let pass = self
+            .objects
+            .draw(device, &mut self.fb, &self.capture_state, kernel, exec)?;
         report.merge(&pass);
         Ok(pass)
+    }
+
+    /// The end of an iteration: the occlusion queries of geometry culling, if on.
+    pub fn end_iteration(
+        &mut self,
+        device: &Device,
+        exec: &ExecConfig,
+        report: &mut PassReport,
+    ) -> Result<(), AlgoError> {
+        self.objects
+            .end_iteration(device, &mut self.fb, exec, report)
+    }
+
+    /// What geometry culling did (`None` when it was off).
+    pub fn culling(&mut self) -> Option<super::ObjectCulling> {
+        self.objects.summary()
     }
 }
 
@@ -289,6 +312,10 @@ impl Algorithm for F2bLl {
         }
     }
 
+    fn takes_geometry_culling(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -317,6 +344,7 @@ impl Algorithm for F2bLl {
             let captured = layers.capture(&device, &CapturePass { lists: l }, exec, &mut report)?;
             peeled.iterations += 1;
             pushed += captured.stats.samples_passed;
+            layers.end_iteration(&device, exec, &mut report)?;
         }
 
         let mut checks = vec![super::conservation(
@@ -347,7 +375,9 @@ impl Algorithm for F2bLl {
             ));
         }
         let bytes = device.memory.bytes();
-        Ok(peeled.finish(report, checks, bytes, 12))
+        let mut result = peeled.finish(report, checks, bytes, 12);
+        result.geometry_culling = layers.culling();
+        Ok(result)
     }
 }
 

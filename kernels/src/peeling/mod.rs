@@ -2,16 +2,20 @@
 //! layer, each geometry pass peeling the next layer behind the one before (DUAL: the next
 //! one at each end of the remaining depth range).
 //!
-//! The classic front-to-back peeling (F2B, Everitt 2001, \[12\] of the depth-fighting paper),
-//! the depth-fighting paper's coplanarity-aware variants of it (section 3.1: F2B-2P,
-//! Algorithm 1; F2B-LL, Algorithm 2), and dual depth peeling (DUAL, Bavoil & Myers 2008,
-//! \[13\] there, section 3.1.2). They share the peel loop's shape, which lives here:
+//! The classic front-to-back peeling (F2B, Everitt 2001, \[12\] of the depth-fighting paper)
+//! and its two-pass form F2B2 (section 4), the depth-fighting paper's coplanarity-aware
+//! variants of it (section 3.1: F2B-2P, Algorithm 1; F2B-3P; F2B-LL, Algorithm 2; section
+//! 3.2: F2B-B, Algorithm 3, with FAB, KB and atomic KB storage), and dual depth peeling (DUAL,
+//! Bavoil & Myers 2008, \[13\] there, section 3.1.2) with its variants DUAL-2P, DUAL-LL and
+//! DUAL-B. They share the peel loop's shape, which lives here:
 //!
 //! - every iteration is one to three geometry passes; the front-to-back peelers' host loop
 //!   ends when the occlusion query of the last depth or count pass (samples passed) is zero,
 //!   or after `k` iterations (the paper avoids reading the query back with conditional
-//!   rendering, section 3.3; here the read-back costs nothing, so the loop reads it); DUAL
-//!   and DUAL-LL end when the min-max target read back holds no range;
+//!   rendering, section 3.3; here the read-back costs nothing, so the loop reads it); the
+//!   dual peelers end when the min-max target read back holds no range; with geometry
+//!   culling (`culling.rs`, `Params::geometry_culling`) the front-to-back peelers draw the
+//!   scene object by object under conditional rendering;
 //! - the fragments extracted are gathered into per-pixel lists on the host (after each
 //!   iteration, or by walking the linked lists at the end), sorted by (depth, primitive),
 //!   and the front-to-back peelers keep the first `k`;
@@ -37,18 +41,25 @@
 
 crate::registry::family! {
     f2b,
+    f2b2,
     f2b2p,
     f2b3p,
     f2bll,
     f2bb,
     dual,
+    dual2p,
+    dualb,
     dualll,
 }
+
+mod culling;
 
 use fragrace_emu::{Format, Framebuffer, Image, SampleCount};
 
 use crate::algo::{AlgoError, AlgoResult, Capture, CapturedFrag, Check, Frame, Params};
 use crate::common::{self, composite_frags, depth_order, pixels};
+
+pub use culling::{CullIteration, GeometryCulling, ObjectCulling};
 
 /// Most layers a peeler may be asked for (k), so that a typo cannot ask for billions of
 /// geometry passes.

@@ -39,6 +39,8 @@ use crate::sync::split::SplitRange;
 pub(crate) struct FusedPass<'a> {
     pub state: &'a FragmentState,
     pub instance: u32,
+    /// Primitive id of setup source 0 (the draw's first triangle, `Draw::triangles`).
+    pub first: u32,
     /// Multisampling off on a multisampled target: one coverage bit covers every sample.
     pub single: bool,
     /// Depth and stencil tests before shading (otherwise after).
@@ -476,7 +478,7 @@ impl Row<'_> {
             x,
             y: span.y,
             tri: span.tri,
-            primitive_id: span.source,
+            primitive_id: span.source + rows.pass.first,
             instance_id: rows.pass.instance,
             coverage,
             front_facing: span.front_facing,

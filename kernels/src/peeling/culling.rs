@@ -1,0 +1,278 @@
+//! Geometry culling for multi-pass peeling: the depth-fighting paper's section 3.3, "GPU
+//! Optimizations for Multi-pass Rendering".
+//!
+//! "We propose to avoid rendering objects that are completely peeled from previous
+//! iterations. ... Similarly to occlusion culling, we substitute a geometrically complex
+//! object with its bounding box. If the bounding box of the object ends up entirely behind
+//! the last captured contents of depth buffer, we may cull this object at the geometry level
+//! ... This is easily realized by hardware occlusion queries. Due to the observation that
+//! objects that are culled during a specific iteration, will be always culled in the
+//! successive ones, we reuse the results of the occlusion queries from previous iterations.
+//! ... we avoid the synchronization cost between the CPU and GPU required to obtain the
+//! occlusion query result, by using conditional rendering. Note that conditional rendering
+//! can also be used to automatically halt the iterative procedure of multi-pass rendering
+//! methods." (3.3)
+//!
+//! [`Objects`] draws a scene pass object by object (each a range of the mesh's triangles,
+//! [`Frame::objects`], drawn with `Draw::part`, so primitive ids stay the mesh's). With
+//! culling on, at the end of every iteration each object not culled yet gets one occlusion
+//! query: its bounding box (12 triangles, enlarged by a thousandth of its diagonal so that
+//! rasterization and depth rounding stay conservative), drawn with the depth test
+//! `GREATER_EQUAL` against the depth buffer holding the layer just peeled, no depth or colour
+//! writes. No sample passes exactly when, in every pixel where the layer exists, the whole box
+//! lies in front of it: then every fragment of the object is in front of the layer, and every
+//! later pass of a front-to-back peeler (which discards what lies at or in front of its
+//! previous layer) would discard it. Pixels where the layer is empty hold the cleared depth
+//! `+inf`, which nothing passes: nothing is left to peel there. The object's later draws carry
+//! the query as their condition (`PassState::condition`, conditional rendering): a query that
+//! passed nothing skips them, and a culled object is never queried again. When every object
+//! is culled, the next pass draws nothing, its own occlusion query is zero and the peel loop
+//! ends: conditional rendering halts it.
+//!
+//! Culling changes no fragment the peelers keep (`GREATER_EQUAL` keeps objects with
+//! fragments at the layer itself, which F2B meets again to count its coplanar losses): the
+//! output is the same with and without it (`tests/geometry_culling.rs`). Queries are not
+//! counted in `geometry_passes` (a scene pass drawn object by object is one geometry pass);
+//! [`ObjectCulling`] reports objects drawn and queries issued per iteration.
+
+use std::ops::Range;
+
+use fragrace_emu::{
+    CompareFunc, DepthState, Device, Draw, ExecConfig, Fragment, FragmentKernel, Framebuffer,
+    KernelInfo, Mesh, OcclusionQuery, PassReport, PassState,
+};
+use glam::Vec3;
+
+use crate::algo::{AlgoError, Frame, Params};
+use crate::common::capture_state;
+
+/// Whether the multi-pass peelers cull completely peeled objects (`--geometry-culling`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum GeometryCulling {
+    /// Every pass draws the whole mesh at once.
+    #[default]
+    Off,
+    /// Per-object draws, bounding-box occlusion queries and conditional rendering.
+    Queries,
+}
+
+impl GeometryCulling {
+    pub fn is_off(&self) -> bool {
+        *self == GeometryCulling::Off
+    }
+}
+
+/// One iteration of a culled peel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct CullIteration {
+    /// Objects drawn by the iteration's first pass (the others were skipped by their
+    /// condition).
+    pub objects_drawn: u32,
+    /// Occlusion queries issued at its end (one per object not culled yet).
+    pub queries: u32,
+}
+
+/// What geometry culling did in a run.
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct ObjectCulling {
+    pub objects: u32,
+    pub iterations: Vec<CullIteration>,
+}
+
+/// The occlusion query's kernel: nothing to shade, the depth test counts.
+struct Query;
+
+impl FragmentKernel for Query {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("cull-query").without_interpolants()
+    }
+    async fn shade(&self, _f: impl Fragment) {}
+}
+
+/// The 12 triangles of the box `[lo, hi]`.
+fn box_mesh(lo: Vec3, hi: Vec3) -> Mesh {
+    let mut m = Mesh::default();
+    for i in 0..8u32 {
+        m.positions.push(Vec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        ));
+    }
+    // Two triangles per face; no face culling in the query pass, so winding is free.
+    for [a, b, c, d] in [
+        [0, 1, 3, 2],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 3, 7, 6],
+        [0, 2, 6, 4],
+        [1, 3, 7, 5],
+    ] {
+        m.indices.push([a, b, c]);
+        m.indices.push([a, c, d]);
+    }
+    m
+}
+
+/// The bounding box of `triangles` of `mesh`, enlarged by a thousandth of its diagonal (and
+/// a tiny absolute margin for flat objects).
+fn bounding_box(mesh: &Mesh, triangles: &Range<u32>) -> Option<Mesh> {
+    let tris = &mesh.indices[triangles.start as usize..triangles.end as usize];
+    let mut it = tris.iter().flatten().map(|&i| mesh.positions[i as usize]);
+    let first = it.next()?;
+    let (lo, hi) = it.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p)));
+    let margin = (hi - lo).length() * 1e-3 + 1e-5;
+    Some(box_mesh(lo - Vec3::splat(margin), hi + Vec3::splat(margin)))
+}
+
+/// A scene's objects, drawn one by one and culled by occlusion queries when asked to; or,
+/// with culling off, the whole mesh in one draw.
+pub(super) struct Objects<'m> {
+    draw: Draw<'m>,
+    on: bool,
+    parts: Vec<Range<u32>>,
+    /// Each object's bounding box (empty objects: `None`, never drawn).
+    boxes: Vec<Option<Mesh>>,
+    /// The last query of each object (`None`: not queried yet, drawn unconditionally).
+    condition: Vec<Option<OcclusionQuery>>,
+    query_state: PassState,
+    /// Objects the current iteration's first pass drew.
+    drawn: Option<u32>,
+    summary: ObjectCulling,
+}
+
+impl<'m> Objects<'m> {
+    pub fn new(frame: &Frame<'m>, params: &Params) -> Result<Objects<'m>, AlgoError> {
+        let draw = Draw::new(frame.mesh, frame.view_proj);
+        let on = params.geometry_culling == GeometryCulling::Queries;
+        let n = frame.mesh.indices.len() as u32;
+        let parts: Vec<Range<u32>> = if frame.objects.is_empty() {
+            // One object: every triangle.
+            std::iter::once(0..n).collect()
+        } else {
+            frame.objects.to_vec()
+        };
+        let mut next = 0;
+        for r in &parts {
+            if r.start != next || r.end < r.start || r.end > n {
+                return Err(AlgoError::Invalid(format!(
+                    "objects must be consecutive ranges covering the mesh's {n} triangles; got {r:?} after \
+                     triangle {next}"
+                )));
+            }
+            next = r.end;
+        }
+        if next != n {
+            return Err(AlgoError::Invalid(format!(
+                "the objects cover {next} of the mesh's {n} triangles"
+            )));
+        }
+        let boxes = if on {
+            parts.iter().map(|r| bounding_box(frame.mesh, r)).collect()
+        } else {
+            Vec::new()
+        };
+        let mut query_state = capture_state();
+        query_state.fragment.depth = DepthState {
+            test: true,
+            func: CompareFunc::GreaterEqual,
+            write: false,
+        };
+        Ok(Objects {
+            draw,
+            on,
+            condition: vec![None; parts.len()],
+            summary: ObjectCulling {
+                objects: parts.len() as u32,
+                iterations: Vec::new(),
+            },
+            parts,
+            boxes,
+            query_state,
+            drawn: None,
+        })
+    }
+
+    /// One geometry pass over the scene: the whole mesh, or (culling on) each object under
+    /// its condition. The report is one geometry pass, `skipped` when every object was.
+    pub fn draw<K: FragmentKernel>(
+        &mut self,
+        device: &Device,
+        fb: &mut Framebuffer,
+        state: &PassState,
+        kernel: &K,
+        exec: &ExecConfig,
+    ) -> Result<PassReport, AlgoError> {
+        if !self.on {
+            return Ok(device.draw(fb, &self.draw, state, kernel, exec)?);
+        }
+        let mut total = PassReport::default();
+        let mut drawn = 0u32;
+        for (r, condition) in self.parts.iter().zip(&self.condition) {
+            let st = PassState {
+                condition: *condition,
+                ..state.clone()
+            };
+            let pass = device.draw(fb, &self.draw.part(r.clone()), &st, kernel, exec)?;
+            drawn += u32::from(!pass.skipped);
+            total.merge(&pass);
+        }
+        total.stats.geometry_passes = 1;
+        total.skipped = drawn == 0;
+        self.drawn.get_or_insert(drawn);
+        Ok(total)
+    }
+
+    /// The end of an iteration: with culling on, an occlusion query of each object not
+    /// culled yet against `fb`'s depth buffer (the layer just peeled); their reports go into
+    /// `report` without counting as geometry passes.
+    pub fn end_iteration(
+        &mut self,
+        device: &Device,
+        fb: &mut Framebuffer,
+        exec: &ExecConfig,
+        report: &mut PassReport,
+    ) -> Result<(), AlgoError> {
+        if !self.on {
+            return Ok(());
+        }
+        let mut queries = 0;
+        for (b, condition) in self.boxes.iter().zip(&mut self.condition) {
+            if condition.is_some_and(|q| q.samples_passed == 0) {
+                continue;
+            }
+            let q = match b {
+                Some(mesh) => {
+                    let draw = Draw::new(mesh, self.draw.view_proj);
+                    let mut pass = device.draw(fb, &draw, &self.query_state, &Query, exec)?;
+                    queries += 1;
+                    pass.stats.geometry_passes = 0;
+                    // Its fragments are the box's, not the scene's.
+                    pass.stats.fragments_generated = 0;
+                    report.merge(&pass);
+                    pass.query()
+                }
+                None => OcclusionQuery { samples_passed: 0 },
+            };
+            *condition = Some(q);
+        }
+        self.summary.iterations.push(CullIteration {
+            objects_drawn: self.drawn.take().unwrap_or(0),
+            queries,
+        });
+        Ok(())
+    }
+
+    /// What culling did (`None` when it was off), the last pass (which found nothing left,
+    /// or ended the run at `k`) included.
+    pub fn summary(&mut self) -> Option<ObjectCulling> {
+        if let Some(drawn) = self.drawn.take() {
+            self.summary.iterations.push(CullIteration {
+                objects_drawn: drawn,
+                queries: 0,
+            });
+        }
+        self.on.then(|| self.summary.clone())
+    }
+}
