@@ -29,6 +29,10 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
     let mut check_times = Vec::new();
     let mut checked_times = Vec::new();
     let mut imbalance_times = Vec::new();
+    // Per pass (by position in the frame), and the frame's time outside its passes
+    // (allocation and clearing of buffers, readback, host work).
+    let mut phase_times: Vec<Vec<f64>> = Vec::new();
+    let mut outside_times = Vec::new();
     // Hazard-prone algorithms may fail a check under real races: reported, not fatal.
     let mut failed_checks = 0;
     let mut last = None;
@@ -44,6 +48,12 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
         checked_times.push(r.wall_ms + r.check_ms);
         pass_times.push(r.result.report.wall.as_secs_f64() * 1e3);
         imbalance_times.push(r.result.report.imbalance.as_secs_f64() * 1e3);
+        let passes = &r.result.report.passes;
+        phase_times.resize_with(phase_times.len().max(passes.len()), Vec::new);
+        for (times, p) in phase_times.iter_mut().zip(passes) {
+            times.push(p.wall.as_secs_f64() * 1e3);
+        }
+        outside_times.push(r.wall_ms - r.result.report.wall.as_secs_f64() * 1e3);
         last = Some(r);
     }
     let r = last.expect("one frame");
@@ -55,7 +65,32 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
     let pass_ms = fragrace::floor::median(&mut pass_times);
     // Threads waiting for the last one at the end of shading, summed over threads.
     let imbalance_ms = fragrace::floor::median(&mut imbalance_times);
+    let outside_ms = fragrace::floor::median(&mut outside_times);
+    let phases: Vec<(String, f64)> = r
+        .result
+        .report
+        .passes
+        .iter()
+        .zip(phase_times.iter_mut())
+        .map(|(p, times)| {
+            let kind = if p.full_screen {
+                "full-screen"
+            } else {
+                "geometry"
+            };
+            (
+                format!("{} ({kind})", p.kernel),
+                fragrace::floor::median(times),
+            )
+        })
+        .collect();
     let stats = &r.result.report.stats;
+    // The storage the algorithm allocated (buffers and render targets), per fragment
+    // rasterized and per pixel.
+    let storage = r.result.storage_bytes as f64;
+    let pixels = f64::from(spec.width) * f64::from(spec.height);
+    let bytes_per_fragment = storage / (stats.fragments_generated.max(1) as f64);
+    let bytes_per_pixel = storage / pixels.max(1.0);
     let tris = loaded.scene.mesh.triangle_count() as f64 * stats.geometry_passes.max(1) as f64;
     let floor = if a.floor {
         let counts = r.result.counts.as_deref().with_context(|| {
@@ -99,6 +134,14 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
         "triangles_per_s": tris / (ms / 1e3),
         "steps": stats.steps,
         "steps_per_s": stats.steps as f64 / (ms / 1e3),
+        "storage_bytes": r.result.storage_bytes,
+        "bytes_per_fragment": bytes_per_fragment,
+        "bytes_per_pixel": bytes_per_pixel,
+        "outside_passes_median_ms": outside_ms,
+        "phases": phases
+            .iter()
+            .map(|(pass, ms)| serde_json::json!({ "pass": pass, "median_ms": ms }))
+            .collect::<Vec<_>>(),
     });
     merge(&mut v, &memory);
     v["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
@@ -114,6 +157,18 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
             spec.algo, spec.scene.name(), loaded.scene.mesh.triangle_count(), spec.width, spec.height, spec.exec.mode.name(), spec.exec.threads,
             ms, times.len(), times[0], times[times.len() - 1], pass_ms, check_ms, checked_ms,
             stats.fragments_generated as f64 / (ms / 1e3) / 1e6, tris / (ms / 1e3) / 1e6, stats.steps as f64 / (ms / 1e3) / 1e6
+        );
+        println!(
+            "  storage {:.1} bytes per fragment, {:.1} bytes per pixel",
+            bytes_per_fragment, bytes_per_pixel
+        );
+        let phases_line: Vec<String> = phases
+            .iter()
+            .map(|(pass, ms)| format!("{pass} {ms:.2} ms"))
+            .collect();
+        println!(
+            "  where the frame goes (medians): outside the passes (buffers, clears, readback) {outside_ms:.2} ms; {}",
+            phases_line.join("; ")
         );
         if spec.exec.threads > 1 {
             println!(

@@ -18,7 +18,7 @@ mod tiles;
 mod vertex;
 mod waves;
 
-pub use report::{OcclusionQuery, PassError, PassReport, PassState};
+pub use report::{OcclusionQuery, PassError, PassReport, PassState, PassTime};
 use vertex::{transform, ClipPositions, CLIP};
 use waves::{absorb, explicit_inputs, mode_of, Geometry};
 
@@ -102,6 +102,11 @@ impl Device {
         if state.condition.is_some_and(|q| q.samples_passed == 0) {
             report.skipped = true;
             report.wall = start.elapsed();
+            report.passes.push(PassTime {
+                kernel: kernel.info().name,
+                full_screen: false,
+                wall: report.wall,
+            });
             return Ok(report);
         }
         let raster = RasterState {
@@ -195,6 +200,11 @@ impl Device {
             );
         }
         report.wall = start.elapsed();
+        report.passes.push(PassTime {
+            kernel: info.name,
+            full_screen: false,
+            wall: report.wall,
+        });
         Ok(report)
     }
 
@@ -317,6 +327,11 @@ impl Device {
             &mut report,
         );
         report.wall = start.elapsed();
+        report.passes.push(PassTime {
+            kernel: kernel.info().name,
+            full_screen: true,
+            wall: report.wall,
+        });
         Ok(report)
     }
 }

@@ -60,6 +60,20 @@ pub struct PassReport {
     /// with one thread and in the other executors). Timing, like `wall`: it varies from
     /// run to run.
     pub imbalance: Duration,
+    /// Each pass this report covers, in the order they ran, with its wall time (one for a
+    /// pass; a merged report lists the passes merged into it), so that a reader sees
+    /// where a frame goes.
+    pub passes: Vec<PassTime>,
+}
+
+/// The wall time of one pass, named by its kernel.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PassTime {
+    /// The kernel's [`KernelInfo::name`](crate::KernelInfo::name).
+    pub kernel: &'static str,
+    /// A full-screen pass (otherwise a geometry pass).
+    pub full_screen: bool,
+    pub wall: Duration,
 }
 
 impl PassReport {
@@ -89,5 +103,6 @@ impl PassReport {
         }
         self.wall += o.wall;
         self.imbalance += o.imbalance;
+        self.passes.extend(o.passes.iter().cloned());
     }
 }

@@ -101,6 +101,7 @@ impl Device {
             segment: (parallel && crate::exec::fused::commutes(state, targets))
                 .then_some(exec.segment.max(1)),
             seq_base: *seq_base,
+            flat_depth: f32::NAN,
         };
         let pixels = fb.width as u64 * fb.height as u64;
         if let Geometry::Unbinned {
@@ -146,6 +147,24 @@ impl Device {
             counts.add_to(&mut report.stats);
             absorb(report, outcome, &self.memory);
             return;
+        }
+        if let (true, None, None, Geometry::FullScreen) =
+            (direct, info.interlock, contention.as_ref(), geo)
+        {
+            if crate::exec::fused::fullscreen_fuses(state, env_base.samples) {
+                let pass = crate::exec::fused::FusedPass {
+                    flat_depth: 0.5,
+                    ..fused_pass(0, false)
+                };
+                let (outcome, counts, imbalance) =
+                    crate::exec::fused::run_fullscreen(kernel, &env_base, &pass, fb.tiles_mut());
+                report.imbalance += imbalance;
+                // Invocation ids by pixel, row-major (see `fused::Row`).
+                *seq_base = seq_base.wrapping_add(pixels);
+                counts.add_to(&mut report.stats);
+                absorb(report, outcome, &self.memory);
+                return;
+            }
         }
         let tile_count = fb.tiles().len();
         let mut waves = crate::exec::Waves::default();

@@ -55,6 +55,10 @@ pub(crate) struct FusedPass<'a> {
     pub segment: Option<u32>,
     /// Invocation ids of this pass start here (see [`FragInput::seq`]).
     pub seq_base: u64,
+    /// The depth of fragments without a setup record: NaN for rasterized ones (nothing
+    /// reads it: `Fragment::depth` interpolates their triangle's plane), 0.5 in full-screen
+    /// passes (their fragments' depth).
+    pub flat_depth: f32,
 }
 
 /// Where a unit of work's covered runs come from: a segment of a tile's bin lists
@@ -73,6 +77,33 @@ impl SpanSource for SegmentSpans<'_> {
     fn spans<'s>(&'s self, buf: &'s mut Vec<Span>) -> &'s [Span] {
         buf.clear();
         self.binned.raster_segment_spans(&self.seg, |s| buf.push(s));
+        buf
+    }
+}
+
+/// The pixels of one tile in a full-screen pass: a span per row, every sample covered, no
+/// setup record (`tri` = `u32::MAX`), primitive 0, front facing (as the general path's
+/// full-screen fragments).
+struct FullScreenSpans {
+    x0: u32,
+    y0: u32,
+    w: u32,
+    h: u32,
+    coverage: u8,
+}
+
+impl SpanSource for FullScreenSpans {
+    fn spans<'s>(&'s self, buf: &'s mut Vec<Span>) -> &'s [Span] {
+        buf.clear();
+        buf.extend((self.y0..self.y0 + self.h).map(|y| Span {
+            y,
+            x0: self.x0,
+            x1: self.x0 + self.w,
+            tri: u32::MAX,
+            coverage: self.coverage,
+            source: 0,
+            front_facing: true,
+        }));
         buf
     }
 }
@@ -226,6 +257,73 @@ pub(crate) fn run_fused<K: FragmentKernel>(
         acc.finish(&mut outcome);
         counts.add(&c);
     }
+    (outcome, counts, imbalance)
+}
+
+/// Whether a full-screen pass with `state` runs on the fused path: nothing tests a depth
+/// or stencil before or after shading (its fragments have no setup record for the tests to
+/// read; the general path tests them at depth 0.5), and the sample mask leaves some of the
+/// `samples` samples covered.
+pub(crate) fn fullscreen_fuses(state: &FragmentState, samples: u32) -> bool {
+    !state.depth.test && !state.stencil.enabled && state.sample_mask & all_samples(samples) != 0
+}
+
+/// The coverage mask of every sample of a pixel with `samples` samples.
+fn all_samples(samples: u32) -> u8 {
+    if samples >= 8 {
+        0xff
+    } else {
+        (1u8 << samples) - 1
+    }
+}
+
+/// Runs a full-screen pass on the fused path ([`fullscreen_fuses`]): every pixel of every
+/// tile, tiles handed out to the threads as in [`run_fused`] (one tile per worker at a
+/// time, so target writes need no lock), the pixels of a tile row by row.
+#[inline(never)]
+pub(crate) fn run_fullscreen<K: FragmentKernel>(
+    kernel: &K,
+    env: &PassEnv<'_>,
+    pass: &FusedPass<'_>,
+    tiles: &mut [TileMemory],
+) -> (ShadeOutcome, FusedCounts, Duration) {
+    debug_assert!(fullscreen_fuses(pass.state, env.samples) && env.tris.is_empty());
+    let count = tiles.len();
+    let threads = pass.threads.max(1).min(count.max(1));
+    let coverage = all_samples(env.samples);
+    let slots: Vec<pool::Mutex<Option<&mut TileMemory>>> = tiles
+        .iter_mut()
+        .map(|t| pool::Mutex::new(Some(t)))
+        .collect();
+    let queue = SplitRange::new(count, threads);
+    let work = |me: usize| {
+        let mut w = Worker::new(kernel, env, pass);
+        while let Some(index) = queue.next(me) {
+            let taken = slots[index]
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .take();
+            let Some(tile) = taken else { continue };
+            let src = FullScreenSpans {
+                x0: tile.x0,
+                y0: tile.y0,
+                w: tile.w,
+                h: tile.h,
+                coverage,
+            };
+            w.run_unit(&src, env, Some(TileAccess::Exclusive(tile)));
+        }
+        w.finish()
+    };
+    let (results, imbalance) = broadcast_timed(threads, work);
+    let mut outcome = ShadeOutcome::default();
+    let mut counts = FusedCounts::default();
+    for (acc, c) in results {
+        acc.finish(&mut outcome);
+        counts.add(&c);
+    }
+    // Full-screen invocations are not rasterized fragments: not counted as generated.
+    counts.generated = 0;
     (outcome, counts, imbalance)
 }
 
@@ -431,7 +529,7 @@ impl Row<'_> {
         counts: &mut FusedCounts,
     ) -> Option<(u8, f32)> {
         let Some(t) = self.planes else {
-            return Some((self.cov, f32::NAN));
+            return Some((self.cov, rows.pass.flat_depth));
         };
         let fx = x as f32;
         let depth = t.depth_at(fx + 0.5, self.fy + 0.5);

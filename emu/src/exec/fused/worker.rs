@@ -214,8 +214,10 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             };
             let samples = samples_of(row.cov);
             // Nothing culls: every pixel of the span is shaded, with the span's coverage
-            // and no depth (`Frag::depth` interpolates it on demand).
-            state.reset(row.input(&rows, span, span.x0, row.cov, f32::NAN));
+            // and no depth (`Frag::depth` interpolates it on demand; full-screen passes
+            // have a flat one).
+            let depth = rows.pass.flat_depth;
+            state.reset(row.input(&rows, span, span.x0, row.cov, depth));
             let discarded_before = tally.discarded;
             let mut faulted = 0u64;
             for x in span.x0..span.x1 {
@@ -226,7 +228,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                     // from the state, so that what the kernel does not read of it need not
                     // be kept across the loop.
                     faulted += 1;
-                    state.spill_results(slot, row.input(&rows, span, x, row.cov, f32::NAN));
+                    state.spill_results(slot, row.input(&rows, span, x, row.cov, depth));
                     acc.count(slot);
                 } else {
                     let steps = state.steps.get();
