@@ -97,6 +97,14 @@ struct FuzzArgs {
     /// half of the physical memory).
     #[arg(long, value_name = "SIZE")]
     memory_limit: Option<String>,
+    /// Run only the I-th of N disjoint slices of the campaign's iterations (I from 1): N
+    /// machines each run one slice, `--merge` combines their directories.
+    #[arg(long, value_name = "I/N", conflicts_with = "merge")]
+    shard: Option<String>,
+    /// Combine the case directories of a campaign's shards into --out (deduplicated by
+    /// signature, the smallest case of each kept) and print the merged summary.
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["time", "iterations", "resume"])]
+    merge: Vec<PathBuf>,
 }
 
 #[derive(Args)]
