@@ -28,6 +28,6 @@ mod test_scenes;
 
 pub use algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, Check, Frame, HazardClass,
-    Params,
+    Param, Params,
 };
 pub use registry::{algorithm, algorithms, names};

@@ -236,15 +236,18 @@ pub fn campaign(
         });
     }
     let shard = state.shard.unwrap_or(Shard::WHOLE);
+    let describe = |s: Shard| {
+        if s == Shard::WHOLE {
+            "the whole campaign".to_string()
+        } else {
+            format!("--shard {s}")
+        }
+    };
     if shard != cfg.shard {
         return Err(FuzzError::ShardMismatch {
             path: state_path.display().to_string(),
-            found: state
-                .shard
-                .map_or("the whole campaign".into(), |s| format!("--shard {s}")),
-            asked: (cfg.shard != Shard::WHOLE)
-                .then(|| format!("--shard {}", cfg.shard))
-                .unwrap_or("the whole campaign".into()),
+            found: describe(shard),
+            asked: describe(cfg.shard),
         });
     }
     for a in &state.algos {

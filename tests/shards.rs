@@ -1,6 +1,7 @@
 //! Campaigns split over machines: `fuzz --shard I/N` runs disjoint slices of the iterations,
 //! `fuzz --merge` combines the slices' directories, and the merged campaign reports the
-//! same findings as one run of the same iterations.
+//! same findings as one run of the same iterations. `report --views` splits the same way
+//! (`--shard`), and runs views in parallel (`--jobs`) with the same rows.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -209,4 +210,47 @@ fn the_cli_runs_shards_and_merges_them() {
         err.contains("--shard 3/2") && err.contains("INDEX from 1 to COUNT"),
         "{err}"
     );
+}
+
+/// The CSV rows of `report --views` (azimuth, then one EPR per algorithm).
+fn report_rows(extra: &[&str]) -> Vec<String> {
+    let mut args = vec![
+        "report",
+        "--views",
+        "5",
+        "--scenes",
+        "cubes",
+        "--size",
+        "24",
+        "--algo",
+        "kb-rmw,ll",
+        "--exec",
+        "ordered",
+    ];
+    args.extend_from_slice(extra);
+    let o = fragrace(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout).to_string();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("azimuth,kb-rmw,ll"), "{text}");
+    lines.map(String::from).collect()
+}
+
+#[test]
+fn report_views_in_parallel_and_in_shards_give_the_same_rows() {
+    let whole = report_rows(&[]);
+    assert_eq!(whole.len(), 5, "{whole:?}");
+    assert_eq!(report_rows(&["--jobs", "2"]), whole);
+    let mut sharded: Vec<String> = (1..=2)
+        .flat_map(|i| report_rows(&["--shard", &format!("{i}/2")]))
+        .collect();
+    sharded.sort_by(|a, b| {
+        let az = |s: &str| s.split(',').next().unwrap().parse::<f64>().unwrap();
+        az(a).total_cmp(&az(b))
+    });
+    assert_eq!(sharded, whole);
+    let o = fragrace(&["report", "--views", "3", "--jobs", "0"]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--jobs 0 is out of range"), "{err}");
 }
