@@ -103,7 +103,11 @@ struct FuzzArgs {
     shard: Option<String>,
     /// Combine the case directories of a campaign's shards into --out (deduplicated by
     /// signature, the smallest case of each kept) and print the merged summary.
-    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["time", "iterations", "resume"])]
+    /// The options of a campaign's runs have no effect on a merge, and are refused with it.
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = [
+        "time", "iterations", "resume", "algo", "jobs", "seed", "meshes", "shrink_secs",
+        "max_size", "scene", "memory_limit", "occupancy", "range", "occupancy_fill",
+    ])]
     merge: Vec<PathBuf>,
 }
 

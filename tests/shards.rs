@@ -202,6 +202,19 @@ fn the_cli_runs_shards_and_merges_them() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("merged 2 of 2 shards"), "{text}");
     assert!(text.contains("4 executions"), "{text}");
+    // A campaign's options mean nothing to a merge: refused, not ignored.
+    let o = fragrace(&[
+        "fuzz",
+        "--merge",
+        dir(1).to_str().unwrap(),
+        "--jobs",
+        "2",
+        "--out",
+        d.join("m2").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--jobs") && err.contains("--merge"), "{err}");
     // A bad shard names the value and its range.
     let o = fragrace(&["fuzz", "--iterations", "1", "--shard", "3/2"]);
     assert!(!o.status.success());
