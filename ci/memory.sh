@@ -11,10 +11,25 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 [ $# -ge 4 ] || { sed -n '5,9p' "$0"; exit 2; }
 verb=$1 scene=$2 size=$3 exec=$4; shift 4
+extra=("$@")
 cargo build --release -q
 F=target/release/fragrace
-for a in $($F list --json | python3 -c 'import json,sys; print(" ".join(a["name"] for a in json.load(sys.stdin)["algorithms"]))'); do
-    out=$($F "$verb" --scene "$scene" --algo "$a" --width "$size" --height "$size" --exec "$exec" --json "$@" 2>&1 | tail -n 1)
+# NAME:OPTION,OPTION per algorithm: the shared options it reads (`list --json`, "reads").
+for entry in $($F list --json | python3 -c 'import json,sys; print(" ".join(a["name"] + ":" + ",".join(a["reads"]) for a in json.load(sys.stdin)["algorithms"]))'); do
+    a=${entry%%:*} reads=",${entry#*:},"
+    # `--k N` and `--spin-cap N` only for the algorithms that read them (the others refuse
+    # them).
+    args=()
+    set -- "${extra[@]}"
+    while [ $# -gt 0 ]; do
+        case "$1" in
+            --k|--spin-cap)
+                if [[ "$reads" == *",${1#--},"* ]]; then args+=("$1" "$2"); fi
+                shift 2 ;;
+            *) args+=("$1"); shift ;;
+        esac
+    done
+    out=$($F "$verb" --scene "$scene" --algo "$a" --width "$size" --height "$size" --exec "$exec" --json "${args[@]}" 2>&1 | tail -n 1)
     python3 - "$a" "$out" <<'PY'
 import json, sys
 name, out = sys.argv[1], sys.argv[2]

@@ -12,11 +12,9 @@ pub mod case;
 pub mod culling;
 pub mod floor;
 pub mod fuzz;
-pub mod fuzzing;
 pub mod output;
 pub mod run;
 pub mod scene;
-pub mod shrink;
 pub mod validate;
 pub mod verdict;
 

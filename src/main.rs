@@ -97,6 +97,18 @@ struct FuzzArgs {
     /// half of the physical memory).
     #[arg(long, value_name = "SIZE")]
     memory_limit: Option<String>,
+    /// Run only the I-th of N disjoint slices of the campaign's iterations (I from 1): N
+    /// machines each run one slice, `--merge` combines their directories.
+    #[arg(long, value_name = "I/N", conflicts_with = "merge")]
+    shard: Option<String>,
+    /// Combine the case directories of a campaign's shards into --out (deduplicated by
+    /// signature, the smallest case of each kept) and print the merged summary.
+    /// The options of a campaign's runs have no effect on a merge, and are refused with it.
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = [
+        "time", "iterations", "resume", "algo", "jobs", "seed", "meshes", "shrink_secs",
+        "max_size", "scene", "memory_limit", "occupancy", "range", "occupancy_fill",
+    ])]
+    merge: Vec<PathBuf>,
 }
 
 #[derive(Args)]
@@ -123,6 +135,15 @@ struct ReportArgs {
     /// Instead of the table: EPR of each algorithm over this many azimuths (PNG plot to --out).
     #[arg(long)]
     views: Option<u32>,
+    /// Views computed at once (--views): a work-stealing pool of this many threads, each
+    /// view's runs using --threads as well. Memory: this many runs at once.
+    #[arg(long, default_value_t = 1, requires = "views")]
+    jobs: usize,
+    /// Only the I-th of N disjoint slices of the views (--views; I from 1): view v goes to
+    /// slice v % N + 1, so N machines can each compute one; the slices' CSV rows together
+    /// are the whole sweep's (sort them by azimuth).
+    #[arg(long, value_name = "I/N", requires = "views")]
+    shard: Option<String>,
     #[arg(long)]
     out: Option<PathBuf>,
     /// Occupancy culling for the algorithms that take it (their rows are named `NAME+occ`);
@@ -358,6 +379,8 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
         exec,
     };
     spec.validate()?;
+    // After the ranges: `--k 0` is out of range whatever the algorithm.
+    fragrace::validate::options_for_algo(&a.algo, given.iter().map(String::as_str))?;
     Ok(spec)
 }
 
@@ -735,6 +758,12 @@ fn cmd_list(json: bool) -> Result<()> {
         .map(|a| {
             let mut v = serde_json::to_value(a.info()).expect("AlgoInfo serializes");
             v["occupancy"] = serde_json::json!(a.takes_occupancy());
+            // The shared options it reads (`--k`, `--spin-cap`); the others are refused.
+            v["reads"] = [fragrace_kernels::Param::K, fragrace_kernels::Param::SpinCap]
+                .into_iter()
+                .filter(|&p| a.reads(p))
+                .map(|p| p.option())
+                .collect();
             v
         })
         .collect();

@@ -203,12 +203,22 @@ impl RunSpec {
             }
             SceneSpec::Inline { .. } => return format!("{CLI} replay CASE.json"),
         };
+        // `--k` and `--spin-cap` only where the algorithm reads them (elsewhere the command
+        // line refuses them).
+        let reads = |p| fragrace_kernels::algorithm(&self.algo).is_none_or(|a| a.reads(p));
+        let k = if reads(fragrace_kernels::Param::K) {
+            format!(" --k {}", self.params.k)
+        } else {
+            String::new()
+        };
         let mut c = format!(
-            "{CLI} {verb} {scene} --algo {} --width {} --height {} --azimuth {} --elevation {} --k {} --exec {}",
-            self.algo, self.width, self.height, self.camera.azimuth, self.camera.elevation, self.params.k,
+            "{CLI} {verb} {scene} --algo {} --width {} --height {} --azimuth {} --elevation {}{k} --exec {}",
+            self.algo, self.width, self.height, self.camera.azimuth, self.camera.elevation,
             self.exec.mode.name()
         );
-        if self.params.spin_cap != Params::default().spin_cap {
+        if self.params.spin_cap != Params::default().spin_cap
+            && reads(fragrace_kernels::Param::SpinCap)
+        {
             c += &format!(" --spin-cap {}", self.params.spin_cap);
         }
         if let Some(o) = self.params.occupancy {

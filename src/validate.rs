@@ -120,3 +120,41 @@ pub fn options_for_exec<'a>(
     }
     Ok(())
 }
+
+/// An option given on the command line that the chosen algorithm does not read.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error("--{option} has no effect on {algo}: it does not read it (leave it out); the algorithms that read --{option}: {readers}")]
+pub struct NoEffectOnAlgo {
+    pub option: &'static str,
+    pub algo: String,
+    pub readers: String,
+}
+
+/// Refuses the shared parameters given on the command line (`--k`, `--spin-cap`; named
+/// without `--`) that algorithm `algo` does not read ([`fragrace_kernels::Algorithm::reads`]),
+/// instead of ignoring them. An unknown algorithm passes (the run refuses it by name).
+pub fn options_for_algo<'a>(
+    algo: &str,
+    given: impl IntoIterator<Item = &'a str>,
+) -> Result<(), NoEffectOnAlgo> {
+    use fragrace_kernels::Param;
+    let Some(a) = fragrace_kernels::algorithm(algo) else {
+        return Ok(());
+    };
+    let given: Vec<&str> = given.into_iter().collect();
+    for p in [Param::K, Param::SpinCap] {
+        if given.contains(&p.option()) && !a.reads(p) {
+            let readers: Vec<&str> = fragrace_kernels::algorithms()
+                .iter()
+                .filter(|x| x.reads(p))
+                .map(|x| x.info().name)
+                .collect();
+            return Err(NoEffectOnAlgo {
+                option: p.option(),
+                algo: algo.to_string(),
+                readers: readers.join(", "),
+            });
+        }
+    }
+    Ok(())
+}

@@ -1,5 +1,5 @@
 //! Bounded smoke runs of the fuzz targets (`fuzz/`), so that CI exercises each target's
-//! logic (`fragrace::fuzzing`) without libFuzzer: a few hundred seeded random inputs per
+//! logic (`fragrace::fuzz::targets`) without libFuzzer: a few hundred seeded random inputs per
 //! target plus hand-written edge cases. Seeds are fixed: a failure here reproduces.
 //!
 //! Also the bound on the planted bug: the linked list publishing the head before writing
@@ -9,7 +9,7 @@ use std::io::Write;
 use std::time::Instant;
 
 use arbitrary::Unstructured;
-use fragrace::fuzzing::*;
+use fragrace::fuzz::targets::*;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 

@@ -312,6 +312,10 @@ fn piped_output_has_no_progress_bar() {
         vec![
             "report", "--scenes", "cubes", "--algo", "ll", "--size", "32",
         ],
+        vec![
+            "bench", "--scene", "cubes", "--algo", "ll", "--width", "32", "--height", "32",
+            "--frames", "3",
+        ],
     ] {
         let o = fragrace(&args);
         ok(&o);
@@ -361,4 +365,21 @@ fn fuzz_findings_are_deduplicated_by_signature_with_one_case_each() {
         assert!(out.join(case).exists(), "{case}");
     }
     assert_eq!(v["cases"].as_array().unwrap().len(), sigs.len());
+}
+
+#[test]
+fn bench_shows_its_frames_on_a_terminal() {
+    // `script` (util-linux) gives the command a terminal; the bar counts the frames there.
+    let cmd = format!(
+        "{} bench --scene cubes --algo ll --width 32 --height 32 --frames 4 --warmup 1",
+        env!("CARGO_BIN_EXE_fragrace")
+    );
+    let o = std::process::Command::new("script")
+        .args(["-qec", &cmd, "/dev/null"])
+        .output()
+        .expect("`script` (util-linux) runs: it gives the command a terminal");
+    ok(&o);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("/5 "), "no bar of 5 frames: {text:?}");
+    assert!(text.contains("median"), "{text:?}");
 }

@@ -1,5 +1,5 @@
 //! Every algorithm of the registry against the truth and its declared hazard class, on a
-//! small random scene under an arbitrary schedule (see `fragrace::fuzzing::kernel_oracle`).
+//! small random scene under an arbitrary schedule (see `fragrace::fuzz::targets::kernel_oracle`).
 //!
 //! One value of the first byte selects the linked list with its planted bug (the head is
 //! published before the node is written). Those inputs run too, but the bug is the expected
@@ -16,7 +16,7 @@
 
 use std::sync::OnceLock;
 
-use fragrace::fuzzing::{kernel_oracle, KernelOutcome};
+use fragrace::fuzz::targets::{kernel_oracle, KernelOutcome};
 use libfuzzer_sys::fuzz_target;
 
 fn hunt_planted_bug() -> bool {

@@ -252,9 +252,37 @@ pub enum AlgoError {
     Invalid(String),
 }
 
+/// A shared tunable parameter of [`Params`] that some algorithms read and others do not
+/// ([`Algorithm::reads`]): the command line refuses it for an algorithm that does not.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Param {
+    /// [`Params::k`] (`--k`).
+    K,
+    /// [`Params::spin_cap`] (`--spin-cap`).
+    SpinCap,
+}
+
+impl Param {
+    /// The command-line option.
+    pub fn option(self) -> &'static str {
+        match self {
+            Param::K => "k",
+            Param::SpinCap => "spin-cap",
+        }
+    }
+}
+
 /// A multi-fragment algorithm.
 pub trait Algorithm: Send + Sync {
     fn info(&self) -> AlgoInfo;
+
+    /// Whether the algorithm reads `p`. By default it reads `k` (it keeps or peels k
+    /// fragments per pixel) and not `spin_cap` (it has no spin lock); an algorithm for which
+    /// this is wrong says so here (`tests/params.rs` holds each declaration against runs
+    /// with different values).
+    fn reads(&self, p: Param) -> bool {
+        p == Param::K
+    }
 
     /// Whether the algorithm runs its capture pass behind occupancy culling when
     /// [`Params::occupancy`] asks for it (the k-buffers whose capture is one geometry pass).

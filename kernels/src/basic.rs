@@ -109,6 +109,11 @@ fn count_check(r: &mut AlgoResult, exec: &ExecConfig) {
 }
 
 impl Algorithm for Count {
+    /// Neither k (it counts every fragment) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "count",
@@ -144,6 +149,11 @@ impl Algorithm for Count {
 }
 
 impl Algorithm for CountPlain {
+    /// Neither k (it counts every fragment) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "count-plain",
@@ -204,6 +214,11 @@ impl FragmentKernel for OpaqueKernel {
 pub struct Opaque;
 
 impl Algorithm for Opaque {
+    /// Neither k (it keeps the nearest fragment) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "opaque",
@@ -372,6 +387,11 @@ impl Truth {
 }
 
 impl Algorithm for Truth {
+    /// Neither k (it keeps every fragment) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "truth",

@@ -30,6 +30,6 @@ mod testing;
 
 pub use algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, Check, Frame, HazardClass,
-    Params,
+    Param, Params,
 };
 pub use registry::{algorithm, algorithms, names};

@@ -18,9 +18,15 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
     }
     let loaded = run::load(&spec)?;
     let memory = within_budget(&spec, &loaded, false, a.run.memory_limit.as_deref())?;
+    // Progress on a terminal (nothing when piped), drawn between frames only: no ticking
+    // thread drawing while a frame is timed.
+    let bar = crate::progress((a.warmup + a.frames) as u64, "warm-up frames");
+    bar.disable_steady_tick();
     for _ in 0..a.warmup {
         run::render(&spec, &loaded)?;
+        bar.inc(1);
     }
+    bar.set_message("frames");
     // A frame is what the llvmpipe peer times as one (clears, passes, resolve); the
     // self-checks that read whole buffers back run after it, timed apart (the peer checks
     // untimed). Every frame is checked.
@@ -55,7 +61,9 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
         }
         outside_times.push(r.wall_ms - r.result.report.wall.as_secs_f64() * 1e3);
         last = Some(r);
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     let r = last.expect("one frame");
     let ms = fragrace::floor::median(&mut times);
     let check_ms = fragrace::floor::median(&mut check_times);

@@ -1,8 +1,9 @@
-//! `fragrace fuzz`: a campaign with a progress line.
+//! `fragrace fuzz`: a campaign (or one shard of it) with a progress line, or `--merge`.
 
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
+use fragrace::fuzz::{CampaignState, Shard};
 use fragrace::run;
 
 use crate::FuzzArgs;
@@ -49,6 +50,14 @@ fn fuzz_occupancy(a: &FuzzArgs) -> Result<Option<fragrace_kernels::occupancy::Oc
 pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
     use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
     use std::sync::Arc;
+    if !a.merge.is_empty() {
+        let state = fragrace::fuzz::merge(&a.merge, &a.out)?;
+        return print_summary(a, &state);
+    }
+    let shard = match &a.shard {
+        Some(s) => s.parse::<Shard>()?,
+        None => Shard::WHOLE,
+    };
     let cfg = fragrace::fuzz::FuzzConfig {
         out: a.out.clone(),
         time: a.time.as_deref().map(parse_duration).transpose()?,
@@ -62,6 +71,7 @@ pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
         max_size: a.max_size,
         scenes: a.scene.clone(),
         occupancy: fuzz_occupancy(a)?,
+        shard,
     };
     if cfg.time.is_none() && cfg.iterations.is_none() {
         bail!("give --time or --iterations (a campaign needs a budget)");
@@ -111,9 +121,35 @@ pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
         h.join().expect("campaign thread")
     })?;
     bar.finish_and_clear();
+    print_summary(a, &state)
+}
+
+/// The campaign's summary: counts, then one line per finding signature with its case.
+fn print_summary(a: &FuzzArgs, state: &CampaignState) -> Result<()> {
     if a.json {
         println!("{}", serde_json::to_string(&state)?);
         return Ok(());
+    }
+    if let Some(s) = state.shard {
+        println!("shard {s} of the campaign of seed {}", state.seed);
+    }
+    if !state.merged_shards.is_empty() {
+        let count = state.merged_shards[0].count;
+        let missing: Vec<String> = (1..=count)
+            .map(|i| Shard { index: i, count })
+            .filter(|s| !state.merged_shards.contains(s))
+            .map(|s| s.to_string())
+            .collect();
+        println!(
+            "merged {} of {count} shards of the campaign of seed {}{}",
+            state.merged_shards.len(),
+            state.seed,
+            if missing.is_empty() {
+                String::new()
+            } else {
+                format!(" (missing: {})", missing.join(", "))
+            }
+        );
     }
     println!(
         "{} executions in {:.1} s ({:.1}/s): {} violations, {} expected findings, {} case files in {}",

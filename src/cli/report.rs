@@ -1,8 +1,11 @@
-//! `fragrace report`: tables of measured EPR, R_h, bytes per pixel and time, and EPR over views.
+//! `fragrace report`: tables of measured EPR, R_h, bytes per pixel and time, and EPR over
+//! views (in parallel with `--jobs`, one slice of them with `--shard I/N`).
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
+use fragrace::fuzz::Shard;
 use fragrace::run::{self, RunSpec, SceneSpec};
 use fragrace::scene::Camera;
+use rayon::prelude::*;
 
 use crate::{within_budget, ReportArgs};
 
@@ -44,37 +47,76 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
     }
     if let Some(views) = a.views {
         let scene = a.scenes.first().context("one scene for --views")?;
-        let bar = crate::progress(u64::from(views) * (algos.len() as u64 + 1), "views");
-        let mut series: Vec<(String, Vec<f64>)> =
-            algos.iter().map(|n| (n.clone(), Vec::new())).collect();
-        for v in 0..views {
+        fragrace::validate::at_least_one("views", views.into())?;
+        let shard = match &a.shard {
+            Some(s) => s.parse::<Shard>()?,
+            None => Shard::WHOLE,
+        };
+        let max_jobs = fragrace_emu::exec::max_threads();
+        if !(1..=max_jobs).contains(&a.jobs) {
+            bail!(
+                "--jobs {} is out of range: it must be from 1 to {max_jobs}",
+                a.jobs
+            );
+        }
+        let mine: Vec<u32> = (0..views).filter(|&v| shard.contains(v.into())).collect();
+        let azimuth = |v: u32| 360.0 * v as f32 / views as f32;
+        let view_spec = |v: u32| {
             let mut spec = RunSpec::new(scene_spec(scene), "truth");
             spec.width = a.size;
             spec.height = a.size;
-            spec.camera = Camera::new(360.0 * v as f32 / views as f32, 0.0);
+            spec.camera = Camera::new(azimuth(v), 0.0);
             spec.exec = exec.clone();
             spec.params.k = a.k;
+            spec
+        };
+        // Every view's runs within the budget, `jobs` of them at once, before any runs.
+        if let Some(&v) = mine.first() {
+            let spec = view_spec(v);
             let loaded = run::load(&spec)?;
-            report_budget(&spec, &loaded, &algos, a.memory_limit.as_deref())?;
-            bar.set_message(format!("view {} of {views}: the truth", v + 1));
-            let truth = run::truth(&spec, &loaded)?;
-            bar.inc(1);
-            for (name, eprs) in &mut series {
-                let mut s = spec.clone();
-                s.algo = name.clone();
-                s.params.occupancy = culled(name).0;
-                bar.set_message(format!("view {} of {views}: {name}", v + 1));
-                eprs.push(run::check_with(&s, &loaded, &truth)?.metrics.epr);
-                bar.inc(1);
-            }
+            report_budget(&spec, &loaded, &algos, a.memory_limit.as_deref(), a.jobs)?;
         }
+        let bar = crate::progress(mine.len() as u64 * (algos.len() as u64 + 1), "views");
+        // The views are independent runs: a work-stealing pool (rayon) shares them out.
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(a.jobs)
+            .build()
+            .context("starting the pool of --jobs threads")?;
+        let rows: Vec<Vec<f64>> = pool.install(|| {
+            mine.par_iter()
+                .map(|&v| -> Result<Vec<f64>> {
+                    let spec = view_spec(v);
+                    let loaded = run::load(&spec)?;
+                    bar.set_message(format!("view {} of {views}: the truth", v + 1));
+                    let truth = run::truth(&spec, &loaded)?;
+                    bar.inc(1);
+                    algos
+                        .iter()
+                        .map(|name| {
+                            let mut s = spec.clone();
+                            s.algo = name.clone();
+                            s.params.occupancy = culled(name).0;
+                            bar.set_message(format!("view {} of {views}: {name}", v + 1));
+                            let epr = run::check_with(&s, &loaded, &truth)?.metrics.epr;
+                            bar.inc(1);
+                            Ok(epr)
+                        })
+                        .collect()
+                })
+                .collect::<Result<Vec<_>>>()
+        })?;
         bar.finish_and_clear();
         println!("azimuth,{}", algos.join(","));
-        for v in 0..views as usize {
-            let row: Vec<String> = series.iter().map(|(_, e)| format!("{:.6}", e[v])).collect();
-            println!("{:.1},{}", 360.0 * v as f32 / views as f32, row.join(","));
+        for (v, row) in mine.iter().zip(&rows) {
+            let row: Vec<String> = row.iter().map(|e| format!("{e:.6}")).collect();
+            println!("{:.1},{}", azimuth(*v), row.join(","));
         }
         if let Some(out) = &a.out {
+            let series: Vec<(String, Vec<f64>)> = algos
+                .iter()
+                .enumerate()
+                .map(|(i, n)| (n.clone(), rows.iter().map(|r| r[i]).collect()))
+                .collect();
             fragrace::output::write_plot(out, "EPR over azimuth", &series)?;
         }
         return Ok(());
@@ -89,7 +131,7 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         spec.exec = exec.clone();
         spec.params.k = a.k;
         let loaded = run::load(&spec)?;
-        report_budget(&spec, &loaded, &algos, a.memory_limit.as_deref())?;
+        report_budget(&spec, &loaded, &algos, a.memory_limit.as_deref(), 1)?;
         bar.set_message(format!("{scene}: the truth"));
         let truth = run::truth(&spec, &loaded)?;
         bar.inc(1);
@@ -126,18 +168,38 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
 }
 
 /// Checks every algorithm of a report against the budget before its scene's truth is
-/// computed (each is checked against the truth, one after the other).
+/// computed (each is checked against the truth, one after the other; `jobs` such runs at
+/// once).
 fn report_budget(
     spec: &RunSpec,
     loaded: &run::Loaded,
     algos: &[String],
     limit: Option<&str>,
+    jobs: usize,
 ) -> Result<()> {
+    let (limit_bytes, source) = fragrace::budget::limit(limit)?;
     for name in algos {
         let mut s = spec.clone();
         s.algo = name.clone();
         s.validate()?;
-        within_budget(&s, loaded, true, limit).with_context(|| format!("algorithm {name}"))?;
+        if jobs == 1 {
+            within_budget(&s, loaded, true, limit).with_context(|| format!("algorithm {name}"))?;
+            continue;
+        }
+        let one = fragrace::budget::estimate(&s, loaded, true);
+        let all = fragrace::budget::MemoryEstimate {
+            bytes: one.bytes.saturating_mul(jobs as u64),
+            fragments: one.fragments,
+            parts: vec![(
+                format!(
+                    "--jobs {jobs} x {} for one view",
+                    fragrace::budget::human(one.bytes)
+                ),
+                one.bytes.saturating_mul(jobs as u64),
+            )],
+        };
+        fragrace::budget::check(&all, limit_bytes, &source)
+            .with_context(|| format!("algorithm {name}"))?;
     }
     Ok(())
 }

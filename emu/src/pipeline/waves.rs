@@ -154,7 +154,7 @@ impl Device {
             if crate::exec::fused::fullscreen_fuses(state, env_base.samples) {
                 let pass = crate::exec::fused::FusedPass {
                     flat_depth: 0.5,
-                    ..fused_pass(0, false)
+                    ..fused_pass(0, 0, false)
                 };
                 let (outcome, counts, imbalance) =
                     crate::exec::fused::run_fullscreen(kernel, &env_base, &pass, fb.tiles_mut());

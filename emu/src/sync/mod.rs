@@ -15,5 +15,9 @@ pub use loom::sync::{Arc, Mutex};
 #[cfg(loom)]
 pub use loom::thread;
 
+/// A value on its own cache line (128 bytes on x86-64 and aarch64, where the prefetcher
+/// pairs lines): crossbeam's, under loom too (it is only alignment).
+pub use crossbeam_utils::CachePadded;
+
 pub mod pool;
 pub mod split;

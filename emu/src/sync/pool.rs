@@ -181,6 +181,8 @@ const SPIN: std::time::Duration = std::time::Duration::from_micros(100);
 /// Blocking and waking a thread costs tens of microseconds on the VMs this is measured on
 /// (a frame's parallel sections start and end a few times per frame); spinning costs only
 /// the idle core's time, and for a bounded while.
+/// Not crossbeam's `Backoff`: that one bounds the spin by a count of doubling steps and then
+/// yields; this bound is a time, the measured cost of waking a blocked thread.
 fn spin_for<T>(mut event: impl FnMut() -> Option<T>) -> Option<T> {
     let start = std::time::Instant::now();
     loop {

@@ -17,7 +17,7 @@
 //! parts may cover the same pixels, and stolen items run beside their part's owner): the
 //! order of work is one a GPU could produce, as with one counter.
 
-use super::{AtomicU64, Ordering};
+use super::{AtomicU64, CachePadded, Ordering};
 
 /// The parts: `(front, end)` of each, packed in one word so that the owner's take from
 /// the front and a thief's take from the back never hand out the same index.
@@ -27,8 +27,7 @@ pub struct SplitRange {
 
 /// One part's `front << 32 | end`, on its own cache line (the owner updates it at every
 /// take; two parts on one line would be the contention this type avoids).
-#[repr(align(128))]
-struct Part(AtomicU64);
+type Part = CachePadded<AtomicU64>;
 
 #[inline]
 fn pack(front: u32, end: u32) -> u64 {
@@ -53,7 +52,7 @@ impl SplitRange {
                 // Part i is [n * i / t, n * (i + 1) / t): the lengths differ by at most one.
                 let front = (u64::from(n) * i / t) as u32;
                 let end = (u64::from(n) * (i + 1) / t) as u32;
-                Part(AtomicU64::new(pack(front, end)))
+                CachePadded::new(AtomicU64::new(pack(front, end)))
             })
             .collect();
         SplitRange { parts }
@@ -63,7 +62,7 @@ impl SplitRange {
     /// with the most left); `None` once every index has been taken.
     pub fn next(&self, me: usize) -> Option<usize> {
         if let Some(own) = self.parts.get(me) {
-            if let Some(i) = take(&own.0, Side::Front) {
+            if let Some(i) = take(own, Side::Front) {
                 return Some(i as usize);
             }
         }
@@ -73,13 +72,13 @@ impl SplitRange {
                 .parts
                 .iter()
                 .map(|p| {
-                    let (front, end) = unpack(p.0.load(Ordering::Relaxed));
+                    let (front, end) = unpack(p.load(Ordering::Relaxed));
                     (end.saturating_sub(front), p)
                 })
                 .filter(|&(left, _)| left > 0)
                 .max_by_key(|&(left, _)| left)?
                 .1;
-            if let Some(i) = take(&victim.0, Side::Back) {
+            if let Some(i) = take(victim, Side::Back) {
                 return Some(i as usize);
             }
             // Emptied meanwhile: look again.

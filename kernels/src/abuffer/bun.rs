@@ -119,6 +119,11 @@ impl FragmentKernel for BunInsert {
 pub struct BunLl;
 
 impl Algorithm for BunLl {
+    /// Neither k (it keeps every fragment) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "bun-ll",

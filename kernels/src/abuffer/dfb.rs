@@ -150,6 +150,11 @@ impl FragmentKernel for DfbStore {
 pub struct Dfb;
 
 impl Algorithm for Dfb {
+    /// Neither k (it keeps every fragment) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "dfb",

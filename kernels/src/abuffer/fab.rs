@@ -52,6 +52,11 @@ impl FragmentKernel for FabStore {
 pub struct Fab;
 
 impl Algorithm for Fab {
+    /// Neither k (it keeps up to `fab_capacity` fragments) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "fab",

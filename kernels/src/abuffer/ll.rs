@@ -372,6 +372,11 @@ impl LinkedList {
 }
 
 impl Algorithm for LinkedList {
+    /// Neither k (it keeps every fragment) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: self.name(),

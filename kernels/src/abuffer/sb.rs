@@ -121,6 +121,11 @@ impl FragmentKernel for SbStore {
 pub struct SBuffer;
 
 impl Algorithm for SBuffer {
+    /// Neither k (it keeps every fragment) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "sb",

@@ -161,6 +161,11 @@ impl KbSpinlock {
 }
 
 impl Algorithm for KbSpinlock {
+    /// k, and the cap of its spin lock.
+    fn reads(&self, p: crate::Param) -> bool {
+        matches!(p, crate::Param::K | crate::Param::SpinCap)
+    }
+
     /// Its capture passes run through `KbRun::capture`, which puts them behind occupancy
     /// culling when asked.
     fn takes_occupancy(&self) -> bool {

@@ -221,6 +221,11 @@ fn fb_bytes(fb: &Framebuffer) -> u64 {
 }
 
 impl Algorithm for Srab {
+    /// Neither k (it keeps as many fragments as the samples (K = 8)) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "srab",

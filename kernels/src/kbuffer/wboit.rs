@@ -108,6 +108,11 @@ impl FragmentKernel for Resolve<'_> {
 }
 
 impl Algorithm for Wboit {
+    /// Neither k (it blends every fragment) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "wboit",

@@ -99,6 +99,11 @@ impl FragmentKernel for Peel<'_> {
 pub struct Dual;
 
 impl Algorithm for Dual {
+    /// Neither k (it peels every layer) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "dual",

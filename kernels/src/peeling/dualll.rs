@@ -106,6 +106,11 @@ impl FragmentKernel for Capture<'_> {
 pub struct DualLl;
 
 impl Algorithm for DualLl {
+    /// Neither k (it peels every layer) nor a spin cap.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "dual-ll",

@@ -1,13 +1,6 @@
-//! Fuzz campaigns: random scenes x random algorithms and parameters x random executors,
-//! policies and seeds, each run checked against the truth and against the algorithm's
-//! declared hazard class. A hazard-free algorithm that differs from the truth, shows a
-//! hazard, faults or breaks an invariant is a *violation*; a hazard-prone one showing its
-//! hazard is an *expected finding*. Every new (algorithm, policy, anomaly) signature is
-//! shrunk and written as a case file.
-//!
-//! Campaigns lose nothing when killed: cases and the campaign state are written atomically
-//! as they happen, and iteration `i` is a pure function of (campaign seed, i), so
-//! `--resume` continues where the state file says.
+//! A campaign: its configuration, its persistent state, the workers that run its
+//! iterations, how a run's outcome becomes a finding and its signature, and the case file
+//! written for each new signature.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -15,15 +8,13 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use fragrace_emu::{ExecConfig, ExecMode, Policy, ScheduleConfig};
-use fragrace_kernels::{HazardClass, Params};
-use rand::rngs::SmallRng;
-use rand::{Rng, SeedableRng};
+use fragrace_emu::{ExecConfig, Policy};
+use fragrace_kernels::HazardClass;
 use serde::{Deserialize, Serialize};
 
+use super::generate::{iteration_spec, policy_name, Shard};
 use crate::case::{self, Case, Observation};
 use crate::run::{self, Checked, RunSpec, SceneSpec};
-use crate::scene::Camera;
 
 /// What a campaign runs.
 #[derive(Clone, Debug)]
@@ -46,6 +37,8 @@ pub struct FuzzConfig {
     pub scenes: Vec<String>,
     /// Occupancy culling for every algorithm that takes it (`--occupancy`); `None`: none.
     pub occupancy: Option<fragrace_kernels::occupancy::Occupancy>,
+    /// The slice of the iterations this run takes ([`Shard::WHOLE`]: all of them).
+    pub shard: Shard,
 }
 
 /// The campaign's persistent state (`DIR/campaign.json`).
@@ -53,8 +46,16 @@ pub struct FuzzConfig {
 pub struct CampaignState {
     pub seed: u64,
     pub algos: Vec<String>,
-    /// Iterations below this are done.
+    /// The shard's slots below this are done (slot `j` runs iteration
+    /// [`Shard::iteration`]`(j)`: iteration `j` itself without `--shard`).
     pub next_iteration: u64,
+    /// The slice of the iterations this campaign runs (`--shard`); `None`: all of them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<Shard>,
+    /// The shards combined into this campaign by `fuzz --merge`, in order (empty: not a
+    /// merged campaign).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub merged_shards: Vec<Shard>,
     pub executions: u64,
     pub violations: u64,
     pub expected_findings: u64,
@@ -86,6 +87,16 @@ pub enum FuzzError {
     },
     #[error("unknown algorithm `{0}`")]
     UnknownAlgo(String),
+    #[error("{path}: the campaign there ran {found}, not {asked}: resume it with its own --shard")]
+    ShardMismatch {
+        path: String,
+        found: String,
+        asked: String,
+    },
+    #[error("{path}: a merged campaign cannot be resumed (resume its shards, then merge again)")]
+    ResumeMerged { path: String },
+    #[error("fuzz --merge: {0}")]
+    Merge(String),
     #[error("{name} = {value} is out of range: it must be from {min} to {max}")]
     OutOfRange {
         name: &'static str,
@@ -173,99 +184,10 @@ impl FuzzConfig {
     }
 }
 
-fn io(path: &Path) -> impl Fn(std::io::Error) -> FuzzError + '_ {
+pub(super) fn io(path: &Path) -> impl Fn(std::io::Error) -> FuzzError + '_ {
     move |source| FuzzError::Io {
         path: path.display().to_string(),
         source,
-    }
-}
-
-/// The run of iteration `i`.
-pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i: u64) -> RunSpec {
-    let mut rng = SmallRng::seed_from_u64(cfg.seed ^ i.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-    let pick = rng.gen_range(0..10);
-    let scene = if !cfg.scenes.is_empty() {
-        SceneSpec::Builtin(cfg.scenes[pick % cfg.scenes.len()].clone())
-    } else {
-        match pick {
-            0 => SceneSpec::Builtin("cubes".into()),
-            1 => SceneSpec::Builtin(format!("coplanar-stack:{}", rng.gen_range(2..12))),
-            2 => SceneSpec::Builtin("spheres".into()),
-            3 => SceneSpec::Builtin("hairball".into()),
-            4 if !meshes.is_empty() => SceneSpec::Obj {
-                path: meshes[rng.gen_range(0..meshes.len())].clone(),
-                sha256: None,
-            },
-            4 | 5 => SceneSpec::Builtin(["bunny", "teapot"][rng.gen_range(0..2)].into()),
-            _ => SceneSpec::Builtin(format!(
-                "random-triangles:{}:{}",
-                rng.gen::<u32>(),
-                rng.gen_range(1..48)
-            )),
-        }
-    };
-    let algo = algos[rng.gen_range(0..algos.len())].clone();
-    let size = rng.gen_range(8..=cfg.max_size);
-    let policies = Policy::all();
-    let exec = if rng.gen_bool(0.85) {
-        let policy = if rng.gen_bool(0.15) {
-            Policy::Bytes((0..rng.gen_range(0..64)).map(|_| rng.gen()).collect())
-        } else {
-            policies[rng.gen_range(0..policies.len())].clone()
-        };
-        let window = [2, 4, 8, 16, 32, 64][rng.gen_range(0..6)];
-        ExecConfig {
-            mode: ExecMode::Scheduled(ScheduleConfig {
-                policy,
-                seed: rng.gen(),
-                window,
-                record: false,
-            }),
-            threads: 1,
-            ..ExecConfig::default()
-        }
-    } else {
-        ExecConfig::parallel(2)
-    };
-    let k = [1, 2, 4, 8, 16][rng.gen_range(0..5)];
-    let camera = Camera::new(rng.gen_range(0.0..360.0), rng.gen_range(-60.0..60.0));
-    let mut exec = exec;
-    // Drawn last, so the rest of every spec is what it was before the mode existed.
-    if exec.mode != ExecMode::Parallel && rng.gen_bool(0.1) {
-        exec.simt = [4, 32][rng.gen_range(0..2)];
-    }
-    // Occupancy culling, for the algorithms that take it, when the campaign asks for it.
-    let takes = fragrace_kernels::algorithm(&algo).is_some_and(|a| a.takes_occupancy());
-    let occupancy = cfg.occupancy.filter(|_| takes);
-    RunSpec {
-        scene,
-        camera,
-        width: size,
-        height: size,
-        algo,
-        params: Params {
-            k,
-            occupancy,
-            ..Params::default()
-        },
-        exec,
-    }
-}
-
-fn policy_name(spec: &RunSpec) -> String {
-    let name: String = match &spec.exec.mode {
-        ExecMode::Scheduled(s) => match &s.policy {
-            Policy::Bytes(_) => "bytes".into(),
-            Policy::Pct { .. } => "pct".into(),
-            Policy::Warp { .. } => "warp".into(),
-            p => p.to_string(),
-        },
-        m => m.name().into(),
-    };
-    if spec.exec.simt > 0 {
-        name + "+simt"
-    } else {
-        name
     }
 }
 
@@ -304,9 +226,30 @@ pub fn campaign(
         CampaignState {
             seed: cfg.seed,
             algos,
+            shard: (cfg.shard != Shard::WHOLE).then_some(cfg.shard),
             ..Default::default()
         }
     };
+    if !state.merged_shards.is_empty() {
+        return Err(FuzzError::ResumeMerged {
+            path: state_path.display().to_string(),
+        });
+    }
+    let shard = state.shard.unwrap_or(Shard::WHOLE);
+    let describe = |s: Shard| {
+        if s == Shard::WHOLE {
+            "the whole campaign".to_string()
+        } else {
+            format!("--shard {s}")
+        }
+    };
+    if shard != cfg.shard {
+        return Err(FuzzError::ShardMismatch {
+            path: state_path.display().to_string(),
+            found: describe(shard),
+            asked: describe(cfg.shard),
+        });
+    }
     for a in &state.algos {
         if fragrace_kernels::algorithm(a).is_none() {
             return Err(FuzzError::UnknownAlgo(a.clone()));
@@ -333,13 +276,18 @@ pub fn campaign(
     let start = Instant::now();
     let elapsed_before = state.elapsed_s;
     let next = AtomicU64::new(state.next_iteration);
-    let first_iteration = state.next_iteration;
+    // `--iterations n` counts the campaign's iterations, not the shard's: the shards of
+    // `--iterations n` together run iterations `first..first + n` once each.
+    let first_iteration = state.next_iteration * shard.count;
     let shared = Mutex::new((state, std::collections::BTreeSet::<u64>::new()));
     let save = |st: &CampaignState| -> Result<(), FuzzError> {
         let json = serde_json::to_vec_pretty(st).expect("state serialises");
         crate::output::write_atomic(&state_path, &json).map_err(io(&state_path))
     };
     let jobs = cfg.jobs;
+    // `jobs` workers each take the next slot until the time or the iterations are spent:
+    // a queue of unknown length (the time budget) and one lock for the state, so plain
+    // scoped threads rather than a work-stealing pool (there is nothing to steal).
     let result: Result<(), FuzzError> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..jobs)
             .map(|_| {
@@ -350,7 +298,8 @@ pub fn campaign(
                         {
                             return Ok(());
                         }
-                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        let slot = next.fetch_add(1, Ordering::Relaxed);
+                        let i = shard.iteration(slot);
                         if cfg.iterations.is_some_and(|n| i >= first_iteration + n) {
                             return Ok(());
                         }
@@ -369,8 +318,8 @@ pub fn campaign(
                         *st.coverage
                             .entry(format!("{} x {}", spec.algo, policy_name(&spec)))
                             .or_default() += 1;
-                        // The state's next iteration is the first one not yet finished.
-                        done.insert(i);
+                        // The state's next slot is the first one not yet finished.
+                        done.insert(slot);
                         while done.remove(&st.next_iteration) {
                             st.next_iteration += 1;
                         }
@@ -524,7 +473,7 @@ fn write_case(
     verdict: &str,
     i: u64,
 ) -> Result<String, FuzzError> {
-    let shrunk = crate::shrink::shrink(spec, obs, cfg.shrink_budget);
+    let shrunk = super::shrink::shrink(spec, obs, cfg.shrink_budget);
     let case = match shrunk {
         Some(s) => Case {
             version: case::VERSION,
