@@ -12,6 +12,7 @@ pub mod floor;
 pub mod fuzz;
 pub mod fuzzing;
 pub mod output;
+pub mod racebench;
 pub mod run;
 pub mod scene;
 pub mod shrink;
