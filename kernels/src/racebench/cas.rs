@@ -111,15 +111,17 @@ impl FreeList {
         }
     }
 
-    /// Each fragment borrows two scratch nodes and gives them back.
+    /// Each fragment borrows two scratch nodes and gives them back, the first first (so
+    /// that the head is the first node again while the second is still held: the A of
+    /// ABA).
     async fn shade(&self, f: &impl Fragment) {
         let a = self.pop(f).await;
         let b = self.pop(f).await;
-        if let Some(b) = b {
-            self.push(f, b).await;
-        }
         if let Some(a) = a {
             self.push(f, a).await;
+        }
+        if let Some(b) = b {
+            self.push(f, b).await;
         }
     }
 
