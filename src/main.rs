@@ -54,6 +54,8 @@ enum Command {
     },
     /// Tables of measured EPR, R_h, bytes per pixel and time (markdown), and EPR over views.
     Report(ReportArgs),
+    /// The hazard detector measured on labelled racy and race-free kernels, per policy.
+    Racebench(cli::racebench::RacebenchArgs),
 }
 
 #[derive(Args)]
@@ -458,6 +460,7 @@ fn real_main() -> Result<()> {
             memory_limit,
         } => cmd_replay(&case, json, memory_limit.as_deref()),
         Command::Report(a) => cmd_report(&a, &given),
+        Command::Racebench(a) => cli::racebench::cmd_racebench(&a),
     }
 }
 

@@ -23,6 +23,7 @@ pub mod occupancy;
 pub mod oracle;
 pub mod peeling;
 pub mod protocols;
+pub mod racebench;
 pub mod registry;
 pub(crate) mod resolve;
 #[cfg(test)]

@@ -3,4 +3,5 @@
 pub(crate) mod bench;
 pub(crate) mod fuzz;
 pub(crate) mod outputs;
+pub(crate) mod racebench;
 pub(crate) mod report;
