@@ -177,21 +177,9 @@ fn merged_algorithms_blend_coplanar_stack_the_same_under_every_schedule() {
     // fragments survive the races, so its image varies from schedule to schedule.
     let s = spec("coplanar-stack", "skb-ofm");
     let loaded = run::load(&s).unwrap();
-    let frame = loaded.frame(&s);
     let vary = |name: &str| {
         let algo = fragrace_kernels::algorithm(name).unwrap();
-        let images: Vec<Vec<[f32; 4]>> = (0..4)
-            .map(|seed| {
-                let r = algo
-                    .run(&frame, &s.params, &scheduled(Policy::Random, seed))
-                    .unwrap();
-                image(&r).to_vec()
-            })
-            .collect();
-        images[1..]
-            .iter()
-            .map(|i| max_diff(i, &images[0]))
-            .fold(0.0, f32::max)
+        schedule_variation(algo.as_ref(), &loaded, &s)
     };
     for name in ["skb-ofm", "dfb-sfm"] {
         assert_eq!(vary(name), 0.0, "{name}");
