@@ -5,7 +5,9 @@ use fragrace::run::{self, RunSpec, SceneSpec};
 use fragrace_kernels::Param;
 
 /// The digest of a run of `algo` with `set` applied to its parameters, on scenes deep
-/// enough that k fragments per pixel (and the spin lock's give-ups) matter.
+/// enough that k fragments per pixel (and the spin lock's give-ups) matter, under the
+/// ordered executor: whether an algorithm reads a parameter is a property of the algorithm,
+/// and the parallel executor's arrival order would make racy ones differ run to run.
 fn digests(algo: &str, set: impl Fn(&mut fragrace_kernels::Params)) -> Vec<String> {
     digests_under(algo, false, set)
 }
@@ -23,9 +25,11 @@ fn digests_under(
             s.width = 24;
             s.height = 24;
             set(&mut s.params);
-            if scheduled {
-                s.exec = fragrace_emu::ExecConfig::scheduled(fragrace_emu::Policy::Random, 0);
-            }
+            s.exec = if scheduled {
+                fragrace_emu::ExecConfig::scheduled(fragrace_emu::Policy::Random, 0)
+            } else {
+                fragrace_emu::ExecConfig::ordered()
+            };
             let loaded = run::load(&s).unwrap();
             run::digest(&run::render(&s, &loaded).unwrap().result)
         })

@@ -196,6 +196,11 @@ fn max_target(format: Format) -> TargetState {
 pub struct Dual2p;
 
 impl Algorithm for Dual2p {
+    /// Peels until the range is empty; k does not apply.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         AlgoInfo {
             name: "dual-2p",

@@ -97,6 +97,11 @@ impl DualB {
 }
 
 impl Algorithm for DualB {
+    /// Peels until the range is empty with K = 8 slots per end; k does not apply.
+    fn reads(&self, _: crate::Param) -> bool {
+        false
+    }
+
     fn info(&self) -> AlgoInfo {
         let common = AlgoInfo {
             name: "dual-fab",
