@@ -110,13 +110,7 @@ pub fn compare(
             // The peel pass keeps `z <= bound` (early LEQUAL test); truth is sorted, so the
             // culled ones are a suffix and a violation is one among the first k.
             let bound = b.get(p).copied().unwrap_or(f32::NAN);
-            // Passes iff `depth <= bound`; a NaN on either side fails, as the test does.
-            let fails = |f: &&CapturedFrag| {
-                !matches!(
-                    f.depth.partial_cmp(&bound),
-                    Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
-                )
-            };
+            let fails = |f: &&CapturedFrag| !crate::occupancy::bits::passes(f.depth, bound);
             let culled = tp.iter().filter(fails).count();
             let violations = tp.iter().take(k).filter(fails).count();
             m.culled_heat[p] = culled as u32;

@@ -150,10 +150,7 @@ impl FragmentKernel for Capture8 {
             // The culling test, before the late stencil test: a fragment beyond the bound
             // leaves the routing counters alone (`depth <= bound` passes, as LEQUAL does).
             let bound = f.load(c.bound, f.pixel_index()).await;
-            if !matches!(
-                f.depth().partial_cmp(&bound),
-                Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
-            ) {
+            if !crate::occupancy::bits::passes(f.depth(), bound) {
                 f.atomic_add(c.culled, f.pixel_index(), 1).await;
                 f.discard();
                 return;
@@ -308,7 +305,7 @@ fn run(
 
     // Occupancy culling (when asked): the stage's passes find each pixel's bound, which
     // the capture kernel tests itself (module notes).
-    let mut culling = match params.occupancy {
+    let culling = match params.occupancy {
         Some(_) => {
             let mut bound_fb = framebuffer(frame, SampleCount::X1, &[])?;
             Culling::prepare(&mut device, &mut bound_fb, frame, params, exec)?
@@ -354,7 +351,7 @@ fn run(
         None => vec![0; n],
     };
     let culled_total: u64 = culled.iter().map(|&c| c as u64).sum();
-    let culling = culling.take().map(|mut c| {
+    let culling = culling.map(|mut c| {
         c.add_shader_peel(&capture, culled_total);
         let (stage, summary) = c.finish();
         report.merge(&stage);

@@ -25,6 +25,13 @@ pub const BITS_PER_WORD: u32 = 32;
 /// `LEQUAL`, as clipping keeps window depths in `[0, 1]`).
 pub const NO_CULLING: f32 = 1.0;
 
+/// The culling test: a fragment at `depth` passes its pixel's `bound` as the peel pass's
+/// early `LEQUAL` depth test lets it through (`depth <= bound`; a NaN on either side fails).
+/// The oracle and kernels that test the bound themselves use this one definition.
+pub fn passes(depth: f32, bound: f32) -> bool {
+    depth <= bound
+}
+
 /// The sub-interval of depth `z` in `[zn, zf]` cut into `s` parts, clamped to `[0, s - 1]`.
 /// An empty or inverted range (`zf <= zn`, or a NaN) puts everything in sub-interval 0.
 #[inline(always)]
