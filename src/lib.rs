@@ -13,6 +13,7 @@ pub mod culling;
 pub mod floor;
 pub mod fuzz;
 pub mod output;
+pub mod plot;
 pub mod racebench;
 pub mod run;
 pub mod scene;

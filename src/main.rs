@@ -134,7 +134,9 @@ struct ReportArgs {
     threads: Option<usize>,
     #[arg(long, default_value_t = 8)]
     k: u32,
-    /// Instead of the table: EPR of each algorithm over this many azimuths (PNG plot to --out).
+    /// Instead of the table: EPR of each algorithm over this many azimuths, as CSV on stdout
+    /// and a plot to --out (.svg or .png). In a sweep, `--algo NAME@EXEC` runs one algorithm
+    /// under another executor (e.g. `kb-rmw,kb-rmw@scheduled`).
     #[arg(long)]
     views: Option<u32>,
     /// Views computed at once (--views): a work-stealing pool of this many threads, each
@@ -429,6 +431,8 @@ impl OccupancyArgs {
 fn takes_range(algos: &str) -> bool {
     algos
         .split(',')
+        // `NAME@EXEC` (report's view sweeps) names the algorithm before the `@`.
+        .map(|n| n.split('@').next().unwrap_or(n))
         .any(|n| fragrace_kernels::algorithm(n).is_some_and(|x| x.takes_range()))
 }
 
@@ -477,6 +481,7 @@ fn within_budget(
     fragrace::budget::check(&est, limit, &source)?;
     Ok(serde_json::json!({
         "memory_estimate_bytes": est.bytes,
+        "memory_estimate_parts": est.parts,
         "memory_limit_bytes": limit,
         "fragments_estimate": est.fragments,
     }))

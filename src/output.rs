@@ -74,69 +74,6 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     std::fs::rename(&tmp, path)
 }
 
-/// A line plot of several series over the same x (0..n), as a PNG (no plotting crate: axes,
-/// one colour per series, a legend of coloured swatches in series order).
-pub fn write_plot(path: &Path, _title: &str, series: &[(String, Vec<f64>)]) -> std::io::Result<()> {
-    let (w, h) = (800u32, 400u32);
-    let (ml, mr, mt, mb) = (40i64, 150i64, 20i64, 30i64);
-    let mut buf = vec![255u8; (w * h * 4) as usize];
-    let mut put = |x: i64, y: i64, c: [u8; 3]| {
-        if x >= 0 && y >= 0 && (x as u32) < w && (y as u32) < h {
-            let i = ((y as u32 * w + x as u32) * 4) as usize;
-            buf[i..i + 3].copy_from_slice(&c);
-        }
-    };
-    let (pw, ph) = (w as i64 - ml - mr, h as i64 - mt - mb);
-    for x in 0..=pw {
-        put(ml + x, mt + ph, [0, 0, 0]);
-    }
-    for y in 0..=ph {
-        put(ml, mt + y, [0, 0, 0]);
-    }
-    let ymax = series
-        .iter()
-        .flat_map(|s| s.1.iter().copied())
-        .fold(0.0f64, f64::max)
-        .max(1e-9);
-    let palette = [
-        [228, 26, 28],
-        [55, 126, 184],
-        [77, 175, 74],
-        [152, 78, 163],
-        [255, 127, 0],
-        [166, 86, 40],
-        [247, 129, 191],
-        [153, 153, 153],
-    ];
-    for (si, (_, ys)) in series.iter().enumerate() {
-        let c = palette[si % palette.len()];
-        let n = ys.len().max(2) - 1;
-        let pt = |i: usize| {
-            (
-                ml + (i as i64 * pw) / n as i64,
-                mt + ph - ((ys[i] / ymax) * ph as f64) as i64,
-            )
-        };
-        for i in 1..ys.len() {
-            let (a, b) = (pt(i - 1), pt(i));
-            let steps = (b.0 - a.0).abs().max((b.1 - a.1).abs()).max(1);
-            for t in 0..=steps {
-                put(
-                    a.0 + (b.0 - a.0) * t / steps,
-                    a.1 + (b.1 - a.1) * t / steps,
-                    c,
-                );
-            }
-        }
-        for dy in 0..8 {
-            for dx in 0..20 {
-                put(w as i64 - mr + 10 + dx, mt + 14 * si as i64 + dy, c);
-            }
-        }
-    }
-    write_png(path, w, h, buf)
-}
-
 /// An output that cannot be written, named.
 #[derive(Debug, thiserror::Error)]
 #[error("{}: cannot write {what} there: {cause}", path.display())]

@@ -132,14 +132,14 @@ fn several_obj_files_are_one_object_each() {
 fn algorithms_without_culling_refuse_it_by_name() {
     let s = spec(
         SceneSpec::Builtin("object-grid".into()),
-        "dual",
+        "kb-rmw",
         GeometryCulling::Queries,
         ExecConfig::ordered(),
     );
     let loaded = run::load(&s).expect("scene loads");
     let e = run::render(&s, &loaded).err().expect("refused").to_string();
     assert!(
-        e.contains("--geometry-culling") && e.contains("dual") && e.contains("f2b2"),
+        e.contains("--geometry-culling") && e.contains("kb-rmw") && e.contains("dual-2p"),
         "{e}"
     );
 }

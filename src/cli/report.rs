@@ -10,7 +10,23 @@ use rayon::prelude::*;
 use crate::{within_budget, ReportArgs};
 
 pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
-    fragrace::validate::options_for_exec(&a.exec, given.iter().map(String::as_str))?;
+    // `NAME@EXEC` runs one algorithm of a view sweep under another executor than --exec;
+    // the scheduled executor's options then apply to it.
+    let overridden = a
+        .algo
+        .iter()
+        .filter_map(|n| n.split_once('@').map(|(_, e)| e));
+    let execs: Vec<&str> = std::iter::once(a.exec.as_str()).chain(overridden).collect();
+    if a.views.is_none() && execs.len() > 1 {
+        bail!("NAME@EXEC in --algo is for --views sweeps only; the table runs every algorithm under --exec {}", a.exec);
+    }
+    let scheduled = execs.contains(&"scheduled");
+    let checked = if scheduled {
+        "scheduled"
+    } else {
+        a.exec.as_str()
+    };
+    fragrace::validate::options_for_exec(checked, given.iter().map(String::as_str))?;
     let algos: Vec<String> = if a.algo.is_empty() {
         fragrace_kernels::names()
             .into_iter()
@@ -20,6 +36,18 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         a.algo.clone()
     };
     let exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, 64)?;
+    // Each algorithm (row or line) with its executor.
+    let runs: Vec<(String, fragrace_emu::ExecConfig)> = algos
+        .iter()
+        .map(|spec| match spec.split_once('@') {
+            Some((name, e)) => Ok((
+                name.to_string(),
+                run::exec_config(e, &a.policy, a.seed, a.threads, 64)
+                    .with_context(|| format!("--algo {spec}"))?,
+            )),
+            None => Ok((spec.clone(), exec.clone())),
+        })
+        .collect::<Result<_>>()?;
     let occupancy = a.occupancy.get(crate::takes_range(&a.algo.join(",")))?;
     if let Some(o) = occupancy {
         o.validate(a.k)?;
@@ -74,7 +102,7 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         if let Some(&v) = mine.first() {
             let spec = view_spec(v);
             let loaded = run::load(&spec)?;
-            report_budget(&spec, &loaded, &algos, a.memory_limit.as_deref(), a.jobs)?;
+            report_budget(&spec, &loaded, &runs, a.memory_limit.as_deref(), a.jobs)?;
         }
         let bar = crate::progress(mine.len() as u64 * (algos.len() as u64 + 1), "views");
         // The views are independent runs: a work-stealing pool (rayon) shares them out.
@@ -90,11 +118,11 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
                     bar.set_message(format!("view {} of {views}: the truth", v + 1));
                     let truth = run::truth(&spec, &loaded)?;
                     bar.inc(1);
-                    algos
-                        .iter()
-                        .map(|name| {
+                    runs.iter()
+                        .map(|(name, exec)| {
                             let mut s = spec.clone();
                             s.algo = name.clone();
+                            s.exec = exec.clone();
                             s.params.occupancy = culled(name).0;
                             bar.set_message(format!("view {} of {views}: {name}", v + 1));
                             let epr = run::check_with(&s, &loaded, &truth)?.metrics.epr;
@@ -112,12 +140,29 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
             println!("{:.1},{}", azimuth(*v), row.join(","));
         }
         if let Some(out) = &a.out {
-            let series: Vec<(String, Vec<f64>)> = algos
+            let series = algos
                 .iter()
                 .enumerate()
-                .map(|(i, n)| (n.clone(), rows.iter().map(|r| r[i]).collect()))
+                .map(|(i, n)| fragrace::plot::Series {
+                    name: n.clone(),
+                    points: mine
+                        .iter()
+                        .zip(&rows)
+                        .map(|(&v, r)| (azimuth(v) as f64, r[i]))
+                        .collect(),
+                })
                 .collect();
-            fragrace::output::write_plot(out, "EPR over azimuth", &series)?;
+            let mut plot = fragrace::plot::LinePlot::new(
+                &format!(
+                    "Error pixel rate over {views} views of {scene} ({0}x{0}, k = {1})",
+                    a.size, a.k
+                ),
+                "azimuth (degrees)",
+                "error pixel rate (EPR)",
+                series,
+            );
+            plot.size = (1000, 560);
+            plot.write(out)?;
         }
         return Ok(());
     }
@@ -131,7 +176,7 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         spec.exec = exec.clone();
         spec.params.k = a.k;
         let loaded = run::load(&spec)?;
-        report_budget(&spec, &loaded, &algos, a.memory_limit.as_deref(), 1)?;
+        report_budget(&spec, &loaded, &runs, a.memory_limit.as_deref(), 1)?;
         bar.set_message(format!("{scene}: the truth"));
         let truth = run::truth(&spec, &loaded)?;
         bar.inc(1);
@@ -173,14 +218,15 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
 fn report_budget(
     spec: &RunSpec,
     loaded: &run::Loaded,
-    algos: &[String],
+    runs: &[(String, fragrace_emu::ExecConfig)],
     limit: Option<&str>,
     jobs: usize,
 ) -> Result<()> {
     let (limit_bytes, source) = fragrace::budget::limit(limit)?;
-    for name in algos {
+    for (name, exec) in runs {
         let mut s = spec.clone();
         s.algo = name.clone();
+        s.exec = exec.clone();
         s.validate()?;
         if jobs == 1 {
             within_budget(&s, loaded, true, limit).with_context(|| format!("algorithm {name}"))?;

@@ -29,6 +29,18 @@
 //! is culled, the next pass draws nothing, its own occlusion query is zero and the peel loop
 //! ends: conditional rendering halts it.
 //!
+//! The peelers that keep their layer in a colour target rather than in the depth buffer
+//! (`f2b-2p`, the dual peelers) query against that image instead ([`Remaining`]): the box is
+//! drawn with no depth test, and its query kernel discards the samples the layer's test
+//! would fail, so the samples that pass are those a depth test would have let through. A dual
+//! peeler's pixels keep a range `[near, far]` still to peel from both ends; an object is done
+//! when its box lies entirely in front of `near` or entirely behind `far`, which two queries
+//! per object find (samples at or behind `near`, samples at or in front of `far`): the object
+//! is culled when either passes nothing. (This is conservative: an object whose box is in front
+//! of the range in some pixels and behind it in others is not culled. A GPU combines the two
+//! queries with two conditional draws, or reads them back; the emulator's condition is their
+//! minimum.)
+//!
 //! Culling changes no fragment the peelers keep (`GREATER_EQUAL` keeps objects with
 //! fragments at the layer itself, which F2B meets again to count its coplanar losses): the
 //! output is the same with and without it (`tests/geometry_culling.rs`). Queries are not
@@ -39,7 +51,7 @@ use std::ops::Range;
 
 use fragrace_emu::{
     CompareFunc, DepthState, Device, Draw, ExecConfig, Fragment, FragmentKernel, Framebuffer,
-    KernelInfo, Mesh, OcclusionQuery, PassReport, PassState,
+    Image, KernelInfo, Mesh, OcclusionQuery, PassReport, PassState, SampleCount,
 };
 use glam::Vec3;
 
@@ -69,7 +81,8 @@ pub struct CullIteration {
     /// Objects drawn by the iteration's first pass (the others were skipped by their
     /// condition).
     pub objects_drawn: u32,
-    /// Occlusion queries issued at its end (one per object not culled yet).
+    /// Objects queried at its end (those not culled yet): one occlusion query each, two for
+    /// the dual peelers (see [`Remaining::Range`]).
     pub queries: u32,
 }
 
@@ -88,6 +101,70 @@ impl FragmentKernel for Query {
         KernelInfo::new("cull-query").without_interpolants()
     }
     async fn shade(&self, _f: impl Fragment) {}
+}
+
+/// The occlusion query of a layer kept in an image: a box sample passes iff `passes(z, texel)`.
+struct ImageQuery<'i, F> {
+    image: &'i Image,
+    passes: F,
+}
+
+impl<F: Fn(f32, [u32; 4]) -> bool + Sync> FragmentKernel for ImageQuery<'_, F> {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("cull-query").with_discard()
+    }
+    async fn shade(&self, f: impl Fragment) {
+        let texel = f.texel(self.image, f.x(), f.y(), 0);
+        if !(self.passes)(f.depth(), texel) {
+            f.discard();
+        }
+    }
+}
+
+/// What is left to peel, which an iteration's occlusion queries test each object's box
+/// against ([`Objects::end_iteration`]).
+pub(super) enum Remaining<'i> {
+    /// The depth buffer of the peel's framebuffer holds the layer just peeled: a box sample
+    /// passes at or behind it (`GREATER_EQUAL`).
+    DepthBuffer(&'i mut Framebuffer),
+    /// A front-to-back layer kept in an image: a box sample passes at or behind
+    /// `depth(texel)` (`+inf` where nothing is left).
+    Front {
+        image: &'i Image,
+        depth: fn([u32; 4]) -> f32,
+    },
+    /// A dual peeler's range kept in an image: `range(texel) = (near, far)`, what is left
+    /// to peel from both ends (`near > far` where nothing is left).
+    Range {
+        image: &'i Image,
+        range: fn([u32; 4]) -> (f32, f32),
+    },
+}
+
+/// A query kernel of any type, drawn through one call (the queries of one object differ in
+/// kernel type).
+trait QueryKernel {
+    fn draw(
+        &self,
+        device: &Device,
+        fb: &mut Framebuffer,
+        draw: &Draw<'_>,
+        state: &PassState,
+        exec: &ExecConfig,
+    ) -> Result<PassReport, AlgoError>;
+}
+
+impl<K: FragmentKernel> QueryKernel for K {
+    fn draw(
+        &self,
+        device: &Device,
+        fb: &mut Framebuffer,
+        draw: &Draw<'_>,
+        state: &PassState,
+        exec: &ExecConfig,
+    ) -> Result<PassReport, AlgoError> {
+        Ok(device.draw(fb, draw, state, self, exec)?)
+    }
 }
 
 /// The 12 triangles of the box `[lo, hi]`.
@@ -137,6 +214,8 @@ pub(super) struct Objects<'m> {
     /// The last query of each object (`None`: not queried yet, drawn unconditionally).
     condition: Vec<Option<OcclusionQuery>>,
     query_state: PassState,
+    /// The framebuffer of image queries (no target, no depth test), with culling on.
+    query_fb: Option<Framebuffer>,
     /// Objects the current iteration's first pass drew.
     drawn: Option<u32>,
     summary: ObjectCulling,
@@ -190,6 +269,11 @@ impl<'m> Objects<'m> {
             parts,
             boxes,
             query_state,
+            query_fb: if on {
+                Some(crate::common::framebuffer(frame, SampleCount::X1, &[])?)
+            } else {
+                None
+            },
             drawn: None,
         })
     }
@@ -225,12 +309,11 @@ impl<'m> Objects<'m> {
     }
 
     /// The end of an iteration: with culling on, an occlusion query of each object not
-    /// culled yet against `fb`'s depth buffer (the layer just peeled); their reports go into
-    /// `report` without counting as geometry passes.
+    /// culled yet against what is left to peel (`remaining`: a depth buffer, or an image); their reports go into `report` without counting as geometry passes.
     pub fn end_iteration(
         &mut self,
         device: &Device,
-        fb: &mut Framebuffer,
+        mut remaining: Remaining<'_>,
         exec: &ExecConfig,
         report: &mut PassReport,
     ) -> Result<(), AlgoError> {
@@ -238,23 +321,53 @@ impl<'m> Objects<'m> {
             return Ok(());
         }
         let mut queries = 0;
+        let view_proj = self.draw.view_proj;
+        let no_depth = crate::common::capture_state();
         for (b, condition) in self.boxes.iter().zip(&mut self.condition) {
             if condition.is_some_and(|q| q.samples_passed == 0) {
                 continue;
             }
-            let q = match b {
-                Some(mesh) => {
-                    let draw = Draw::new(mesh, self.draw.view_proj);
-                    let mut pass = device.draw(fb, &draw, &self.query_state, &Query, exec)?;
-                    queries += 1;
-                    pass.stats.geometry_passes = 0;
-                    // Its fragments are the box's, not the scene's.
-                    pass.stats.fragments_generated = 0;
-                    report.merge(&pass);
-                    pass.query()
-                }
-                None => OcclusionQuery { samples_passed: 0 },
+            let Some(mesh) = b else {
+                *condition = Some(OcclusionQuery { samples_passed: 0 });
+                continue;
             };
+            let draw = Draw::new(mesh, view_proj);
+            let mut query = |fb: &mut Framebuffer, state: &PassState, kernel: &dyn QueryKernel| {
+                let mut pass = kernel.draw(device, fb, &draw, state, exec)?;
+                pass.stats.geometry_passes = 0;
+                // Its fragments are the box's, not the scene's.
+                pass.stats.fragments_generated = 0;
+                report.merge(&pass);
+                Ok::<_, AlgoError>(pass.query())
+            };
+            let q = match &mut remaining {
+                Remaining::DepthBuffer(fb) => query(fb, &self.query_state, &Query)?,
+                Remaining::Front { image, depth } => {
+                    let qfb = self.query_fb.as_mut().expect("made with culling on");
+                    let kernel = ImageQuery {
+                        image,
+                        passes: |z: f32, t: [u32; 4]| z >= depth(t),
+                    };
+                    query(qfb, &no_depth, &kernel)?
+                }
+                Remaining::Range { image, range } => {
+                    let qfb = self.query_fb.as_mut().expect("made with culling on");
+                    let behind_near = ImageQuery {
+                        image,
+                        passes: |z: f32, t: [u32; 4]| z >= range(t).0,
+                    };
+                    let before_far = ImageQuery {
+                        image,
+                        passes: |z: f32, t: [u32; 4]| z <= range(t).1,
+                    };
+                    let a = query(qfb, &no_depth, &behind_near)?;
+                    let b = query(qfb, &no_depth, &before_far)?;
+                    OcclusionQuery {
+                        samples_passed: a.samples_passed.min(b.samples_passed),
+                    }
+                }
+            };
+            queries += 1;
             *condition = Some(q);
         }
         self.summary.iterations.push(CullIteration {

@@ -32,7 +32,7 @@
 //! the kept fragments plus the lost ones are the fragments met at the layers' ends.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, Buf, Draw, Format, Fragment, FragmentKernel, Image, KernelInfo,
+    BlendEquation, BlendState, Buf, Format, Fragment, FragmentKernel, Image, KernelInfo,
     PassReport, TargetState,
 };
 
@@ -95,6 +95,12 @@ impl FragmentKernel for Peel<'_> {
     }
 }
 
+/// A dual range texel `(-near, far)` as `(near, far)`; `near > far` (`+inf`, `-inf`) where
+/// nothing is left.
+pub(super) fn dual_range(t: [u32; 4]) -> (f32, f32) {
+    (-f32::from_bits(t[0]), f32::from_bits(t[1]))
+}
+
 /// `dual`: see the module documentation.
 pub struct Dual;
 
@@ -120,6 +126,10 @@ impl Algorithm for Dual {
         }
     }
 
+    fn takes_geometry_culling(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -131,7 +141,7 @@ impl Algorithm for Dual {
         let mut peeled = Peeled::unbounded(frame, params);
         let mut device = crate::common::fresh(exec);
         let at_ends = device.buffer::<u32>("dual-at-ends", 1)?;
-        let draw = Draw::new(frame.mesh, frame.view_proj);
+        let mut objects = super::culling::Objects::new(frame, params)?;
         let mut fb = peeled.framebuffer(&[Format::RG32F; 3])?;
         let max = TargetState {
             blend: Some(BlendState::equation(BlendEquation::Max)),
@@ -149,9 +159,9 @@ impl Algorithm for Dual {
             for t in 0..3 {
                 fb.clear_color(t, [NONE.to_bits(), NONE.to_bits(), 0, 0]);
             }
-            let pass = device.draw(
+            let pass = objects.draw(
+                &device,
                 &mut fb,
-                &draw,
                 &state,
                 &Peel {
                     range: range.as_ref(),
@@ -210,6 +220,16 @@ impl Algorithm for Dual {
                 unfinished = true;
                 break;
             }
+            // Geometry culling: objects entirely outside every pixel's range are done.
+            objects.end_iteration(
+                &device,
+                super::culling::Remaining::Range {
+                    image: &next,
+                    range: dual_range,
+                },
+                exec,
+                &mut report,
+            )?;
             range = Some(next);
         }
         for (list, mut back) in peeled.lists.iter_mut().zip(backs) {
@@ -245,6 +265,7 @@ impl Algorithm for Dual {
         ];
         let mut result = peeled.finish(report, checks, device.memory.bytes(), 32);
         result.dropped = lost;
+        result.geometry_culling = objects.summary();
         Ok(result)
     }
 }

@@ -40,7 +40,7 @@
 //! No shared memory: the same under every executor.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, Draw, Format, Fragment, FragmentKernel, Image, KernelInfo,
+    BlendEquation, BlendState, Format, Fragment, FragmentKernel, Image, KernelInfo,
     PassReport, TargetState,
 };
 
@@ -219,6 +219,10 @@ impl Algorithm for Dual2p {
         }
     }
 
+    fn takes_geometry_culling(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -228,7 +232,7 @@ impl Algorithm for Dual2p {
         check_ids_fit_floats(frame)?;
         let mut peeled = Peeled::unbounded(frame, params);
         let device = crate::common::fresh(exec);
-        let draw = Draw::new(frame.mesh, frame.view_proj);
+        let mut objects = super::culling::Objects::new(frame, params)?;
         let mut peel_fb = peeled.framebuffer(&[Format::RG32F, Format::RGBA32F])?;
         let mut count_fb = peeled.framebuffer(&[Format::RGBA32F, Format::RGBA32F])?;
         let mut peel_state = capture_state();
@@ -245,23 +249,25 @@ impl Algorithm for Dual2p {
         let none4 = NO_IDS.map(f32::to_bits);
         let mut report = PassReport::default();
         let mut peel = |state: Option<State<'_>>,
+                        objects: &mut super::culling::Objects<'_>,
                         report: &mut PassReport|
          -> Result<(Image, Image, PassReport), AlgoError> {
             peel_fb.clear_color(0, none4);
             peel_fb.clear_color(1, [NONE.to_bits(); 4]);
-            let pass = device.draw(&mut peel_fb, &draw, &peel_state, &Peel { state }, exec)?;
+            let pass = objects.draw(&device, &mut peel_fb, &peel_state, &Peel { state }, exec)?;
             report.merge(&pass);
             Ok((peel_fb.image(0), peel_fb.image(1), pass))
         };
         let mut count = |next: &Image,
                          prev: Option<State<'_>>,
+                         objects: &mut super::culling::Objects<'_>,
                          report: &mut PassReport|
          -> Result<(Image, Image), AlgoError> {
             count_fb.clear_color(0, none4);
             count_fb.clear_color(1, none4);
-            report.merge(&device.draw(
+            report.merge(&objects.draw(
+                &device,
                 &mut count_fb,
-                &draw,
                 &count_state,
                 &Count { next, prev },
                 exec,
@@ -270,9 +276,9 @@ impl Algorithm for Dual2p {
         };
         let left = |r: &Image| r.texels.iter().any(|t| f32::from_bits(t[1]) != NONE);
 
-        let (mut range, _, first) = peel(None, &mut report)?;
+        let (mut range, _, first) = peel(None, &mut objects, &mut report)?;
         let generated = first.stats.fragments_generated;
-        let (mut front, mut back) = count(&range, None, &mut report)?;
+        let (mut front, mut back) = count(&range, None, &mut objects, &mut report)?;
         let pixels = peeled.lists.len();
         let mut backs: Vec<Vec<CapturedFrag>> = vec![Vec::new(); pixels];
         let mut extraction = IdExtraction::default();
@@ -284,7 +290,7 @@ impl Algorithm for Dual2p {
                 front: &front,
                 back: &back,
             };
-            let (next, extracted, _) = peel(Some(state), &mut report)?;
+            let (next, extracted, _) = peel(Some(state), &mut objects, &mut report)?;
             peeled.iterations += 1;
             for (p, (list, backs)) in peeled.lists.iter_mut().zip(&mut backs).enumerate() {
                 let [neg_near, far, ..] = texel_f32(&range, p);
@@ -319,7 +325,17 @@ impl Algorithm for Dual2p {
                 range = next;
                 break;
             }
-            (front, back) = count(&next, Some(state), &mut report)?;
+            // Geometry culling: objects entirely outside every pixel's next range are done.
+            objects.end_iteration(
+                &device,
+                super::culling::Remaining::Range {
+                    image: &next,
+                    range: super::dual::dual_range,
+                },
+                exec,
+                &mut report,
+            )?;
+            (front, back) = count(&next, Some(state), &mut objects, &mut report)?;
             range = next;
         }
         let exhausted = !left(&range);
@@ -333,7 +349,9 @@ impl Algorithm for Dual2p {
             out_of_order == 0,
             format!("{out_of_order} back extractions out of order"),
         ));
-        Ok(peeled.finish(report, checks, device.memory.bytes(), 96))
+        let mut result = peeled.finish(report, checks, device.memory.bytes(), 96);
+        result.geometry_culling = objects.summary();
+        Ok(result)
     }
 }
 

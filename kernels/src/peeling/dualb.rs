@@ -33,7 +33,7 @@
 //! generated.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, Draw, Format, Fragment, FragmentKernel, Image, KernelInfo,
+    BlendEquation, BlendState, Format, Fragment, FragmentKernel, Image, KernelInfo,
     PassReport, TargetState,
 };
 
@@ -133,6 +133,10 @@ impl Algorithm for DualB {
         }
     }
 
+    fn takes_geometry_culling(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -142,7 +146,7 @@ impl Algorithm for DualB {
         check_ids_fit_floats(frame)?;
         let mut peeled = Peeled::unbounded(frame, params);
         let mut device = crate::common::fresh(exec);
-        let draw = Draw::new(frame.mesh, frame.view_proj);
+        let mut objects = super::culling::Objects::new(frame, params)?;
         let mut fb = peeled.framebuffer(&[Format::RG32F])?;
         let mut range_state = capture_state();
         range_state.fragment.targets = vec![TargetState {
@@ -155,15 +159,37 @@ impl Algorithm for DualB {
         let mut report = PassReport::default();
         let range_pass = |fb: &mut fragrace_emu::Framebuffer,
                           device: &fragrace_emu::Device,
+                          objects: &mut super::culling::Objects<'_>,
                           prev: Option<&Image>,
                           report: &mut PassReport|
          -> Result<(Image, PassReport), AlgoError> {
             fb.clear_color(0, [NONE.to_bits(), NONE.to_bits(), 0, 0]);
-            let pass = device.draw(fb, &draw, &range_state, &Range { prev }, exec)?;
+            let pass = objects.draw(device, fb, &range_state, &Range { prev }, exec)?;
             report.merge(&pass);
             Ok((fb.image(0), pass))
         };
-        let (mut range, first) = range_pass(&mut fb, &device, None, &mut report)?;
+        let (mut range, first) = range_pass(&mut fb, &device, &mut objects, None, &mut report)?;
+        // Geometry culling: after each range pass, objects entirely outside every pixel's
+        // range are done (queried only while a range is left).
+        let cull = |objects: &mut super::culling::Objects<'_>,
+                    device: &fragrace_emu::Device,
+                    range: &Image,
+                    report: &mut PassReport|
+         -> Result<(), AlgoError> {
+            if range.texels.iter().any(|t| f32::from_bits(t[1]) != NONE) {
+                objects.end_iteration(
+                    device,
+                    super::culling::Remaining::Range {
+                        image: range,
+                        range: super::dual::dual_range,
+                    },
+                    exec,
+                    report,
+                )?;
+            }
+            Ok(())
+        };
+        cull(&mut objects, &device, &range, &mut report)?;
         let generated = first.stats.fragments_generated;
         let mut backs: Vec<Vec<CapturedFrag>> = vec![Vec::new(); pixels];
         let (mut met, mut not_shrinking) = (0u64, 0u64);
@@ -177,7 +203,7 @@ impl Algorithm for DualB {
                 alloc: self.0,
                 pixels: pixels as u32,
             };
-            let pass = device.draw(&mut fb, &draw, &capture, &kernel, exec)?;
+            let pass = objects.draw(&device, &mut fb, &capture, &kernel, exec)?;
             report.merge(&pass);
             met += pass.stats.samples_passed;
             peeled.iterations += 1;
@@ -197,13 +223,14 @@ impl Algorithm for DualB {
                     }
                 },
             )?;
-            let (next, _) = range_pass(&mut fb, &device, Some(&range), &mut report)?;
+            let (next, _) = range_pass(&mut fb, &device, &mut objects, Some(&range), &mut report)?;
             for p in 0..pixels {
                 let ([n0, f0, ..], [n1, f1, ..]) = (texel_f32(&range, p), texel_f32(&next, p));
                 if f1 != NONE && (-n1 <= -n0 || f1 >= f0) {
                     not_shrinking += 1;
                 }
             }
+            cull(&mut objects, &device, &next, &mut report)?;
             range = next;
         }
         let unfinished = left(&range);
@@ -248,6 +275,7 @@ impl Algorithm for DualB {
         }
         let bytes = device.memory.bytes();
         let mut result = peeled.finish(report, checks, bytes, 16);
+        result.geometry_culling = objects.summary();
         result.dropped = dropped;
         Ok(result)
     }

@@ -22,7 +22,7 @@
 //! through); the front and back allocations never meet; nothing is dropped.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, Draw, Format, Fragment, FragmentKernel, Image, KernelInfo,
+    BlendEquation, BlendState, Format, Fragment, FragmentKernel, Image, KernelInfo,
     PassReport, TargetState,
 };
 
@@ -128,6 +128,10 @@ impl Algorithm for DualLl {
         }
     }
 
+    fn takes_geometry_culling(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -136,7 +140,7 @@ impl Algorithm for DualLl {
     ) -> Result<AlgoResult, AlgoError> {
         let mut peeled = Peeled::unbounded(frame, params);
         let mut device = crate::common::fresh(exec);
-        let draw = Draw::new(frame.mesh, frame.view_proj);
+        let mut objects = super::culling::Objects::new(frame, params)?;
         let mut fb = peeled.framebuffer(&[Format::RG32F])?;
         let mut range_state = capture_state();
         range_state.fragment.targets = vec![TargetState {
@@ -148,15 +152,37 @@ impl Algorithm for DualLl {
         let mut report = PassReport::default();
         let range_pass = |fb: &mut fragrace_emu::Framebuffer,
                           device: &fragrace_emu::Device,
+                          objects: &mut super::culling::Objects<'_>,
                           prev: Option<&Image>,
                           report: &mut PassReport|
          -> Result<(Image, PassReport), AlgoError> {
             fb.clear_color(0, [NONE.to_bits(), NONE.to_bits(), 0, 0]);
-            let pass = device.draw(fb, &draw, &range_state, &Range { prev }, exec)?;
+            let pass = objects.draw(device, fb, &range_state, &Range { prev }, exec)?;
             report.merge(&pass);
             Ok((fb.image(0), pass))
         };
-        let (mut range, first) = range_pass(&mut fb, &device, None, &mut report)?;
+        let (mut range, first) = range_pass(&mut fb, &device, &mut objects, None, &mut report)?;
+        // Geometry culling: after each range pass, objects entirely outside every pixel's
+        // range are done (queried only while a range is left).
+        let cull = |objects: &mut super::culling::Objects<'_>,
+                    device: &fragrace_emu::Device,
+                    range: &Image,
+                    report: &mut PassReport|
+         -> Result<(), AlgoError> {
+            if range.texels.iter().any(|t| f32::from_bits(t[1]) != NONE) {
+                objects.end_iteration(
+                    device,
+                    super::culling::Remaining::Range {
+                        image: range,
+                        range: super::dual::dual_range,
+                    },
+                    exec,
+                    report,
+                )?;
+            }
+            Ok(())
+        };
+        cull(&mut objects, &device, &range, &mut report)?;
         // Every fragment is captured once: the first pass's fragments bound the pool.
         let lists = Lists::new(
             &mut device,
@@ -174,17 +200,18 @@ impl Algorithm for DualLl {
                 lists,
                 pixels: pixels as u32,
             };
-            let pass = device.draw(&mut fb, &draw, &capture, &kernel, exec)?;
+            let pass = objects.draw(&device, &mut fb, &capture, &kernel, exec)?;
             report.merge(&pass);
             let_through += pass.stats.samples_passed;
             peeled.iterations += 1;
-            let (next, _) = range_pass(&mut fb, &device, Some(&range), &mut report)?;
+            let (next, _) = range_pass(&mut fb, &device, &mut objects, Some(&range), &mut report)?;
             for p in 0..pixels as usize {
                 let ([n0, f0, ..], [n1, f1, ..]) = (texel_f32(&range, p), texel_f32(&next, p));
                 if f1 != NONE && (-n1 <= -n0 || f1 >= f0) {
                     not_shrinking += 1;
                 }
             }
+            cull(&mut objects, &device, &next, &mut report)?;
             range = next;
         }
         let unfinished = left(&range);
@@ -231,7 +258,9 @@ impl Algorithm for DualLl {
             ),
         ];
         let bytes = device.memory.bytes();
-        Ok(peeled.finish(report, checks, bytes, 16))
+        let mut result = peeled.finish(report, checks, bytes, 16);
+        result.geometry_culling = objects.summary();
+        Ok(result)
     }
 }
 

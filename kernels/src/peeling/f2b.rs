@@ -165,7 +165,12 @@ impl Algorithm for F2b {
             last_gained = gained;
             kept += gained;
             prev = Some(layer);
-            objects.end_iteration(&device, &mut fb, exec, &mut report)?;
+            objects.end_iteration(
+                &device,
+                super::culling::Remaining::DepthBuffer(&mut fb),
+                exec,
+                &mut report,
+            )?;
         }
         let at_layers = u64::from(device.memory.read(coplanar)?[0]);
         let lost = at_layers.saturating_sub(revisited);

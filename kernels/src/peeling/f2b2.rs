@@ -231,7 +231,12 @@ impl Algorithm for F2b2 {
                 counted += u64::from(n);
             }
             prev = Some(layer);
-            objects.end_iteration(&device, &mut fb, exec, &mut report)?;
+            objects.end_iteration(
+                &device,
+                super::culling::Remaining::DepthBuffer(&mut fb),
+                exec,
+                &mut report,
+            )?;
         }
         let composite = fb.image(COMPOSITE);
         let a = params.alpha;

@@ -36,7 +36,7 @@
 //! (asserted by the differential harness). No shared memory: the same under every executor.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, Draw, Format, Fragment, FragmentKernel, Image, KernelInfo,
+    BlendEquation, BlendState, Format, Fragment, FragmentKernel, Image, KernelInfo,
     PassReport, PassState, TargetState,
 };
 
@@ -143,6 +143,10 @@ impl Algorithm for F2b2p {
         }
     }
 
+    fn takes_geometry_culling(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -152,7 +156,7 @@ impl Algorithm for F2b2p {
         check_ids_fit_floats(frame)?;
         let mut peeled = Peeled::new(frame, params)?;
         let device = crate::common::fresh(exec);
-        let draw = Draw::new(frame.mesh, frame.view_proj);
+        let mut objects = super::culling::Objects::new(frame, params)?;
         let mut peel_fb = peeled.framebuffer(&[Format::RG32F, Format::R32F])?;
         let mut count_fb = peeled.framebuffer(&[Format::RGBA32F])?;
         let peel_state = PassState {
@@ -172,13 +176,14 @@ impl Algorithm for F2b2p {
         }];
         let mut report = PassReport::default();
         let mut peel = |current: Option<(&Image, &Image)>,
+                        objects: &mut super::culling::Objects<'_>,
                         report: &mut PassReport|
          -> Result<(Image, Image), AlgoError> {
             peel_fb.clear_color(0, [NONE.to_bits(), NONE.to_bits(), 0, 0]);
             peel_fb.clear_color(1, [NONE.to_bits(), 0, 0, 0]);
-            report.merge(&device.draw(
+            report.merge(&objects.draw(
+                &device,
                 &mut peel_fb,
-                &draw,
                 &peel_state,
                 &Peel { current },
                 exec,
@@ -187,12 +192,13 @@ impl Algorithm for F2b2p {
         };
         let mut count = |layer: &Image,
                          prev: Option<&Image>,
+                         objects: &mut super::culling::Objects<'_>,
                          report: &mut PassReport|
          -> Result<(Image, PassReport), AlgoError> {
             count_fb.clear_color(0, [NONE.to_bits(), NONE.to_bits(), 0, 0]);
-            let pass = device.draw(
+            let pass = objects.draw(
+                &device,
                 &mut count_fb,
-                &draw,
                 &count_state,
                 &Count { layer, prev },
                 exec,
@@ -200,14 +206,17 @@ impl Algorithm for F2b2p {
             report.merge(&pass);
             Ok((count_fb.image(0), pass))
         };
+        // Geometry culling: an object is done when its box lies in front of the current
+        // layer (`-depth` in R32F; `-inf`, i.e. `+inf`, where nothing is left).
+        let layer_depth = |t: [u32; 4]| -f32::from_bits(t[0]);
 
-        let (_, mut layer) = peel(None, &mut report)?;
-        let (mut ids, mut counted) = count(&layer, None, &mut report)?;
+        let (_, mut layer) = peel(None, &mut objects, &mut report)?;
+        let (mut ids, mut counted) = count(&layer, None, &mut objects, &mut report)?;
         let mut extraction = super::IdExtraction::default();
         let mut stalled = 0u64;
         let generated = counted.stats.fragments_generated;
         while counted.stats.samples_passed > 0 && peeled.iterations < peeled.k {
-            let (extracted, next) = peel(Some((&layer, &ids)), &mut report)?;
+            let (extracted, next) = peel(Some((&layer, &ids)), &mut objects, &mut report)?;
             peeled.iterations += 1;
             for (p, list) in peeled.lists.iter_mut().enumerate() {
                 let d = -texel_f32(&layer, p)[0];
@@ -219,13 +228,24 @@ impl Algorithm for F2b2p {
                 }
             }
             layer = next;
+            objects.end_iteration(
+                &device,
+                super::culling::Remaining::Front {
+                    image: &layer,
+                    depth: layer_depth,
+                },
+                exec,
+                &mut report,
+            )?;
             if peeled.iterations < peeled.k {
-                (ids, counted) = count(&layer, Some(&ids), &mut report)?;
+                (ids, counted) = count(&layer, Some(&ids), &mut objects, &mut report)?;
             }
         }
         let exhausted = counted.stats.samples_passed == 0;
         let checks = extraction.checks(&peeled.lists, exhausted, generated, stalled);
-        Ok(peeled.finish(report, checks, device.memory.bytes(), 52))
+        let mut result = peeled.finish(report, checks, device.memory.bytes(), 52);
+        result.geometry_culling = objects.summary();
+        Ok(result)
     }
 }
 

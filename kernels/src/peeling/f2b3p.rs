@@ -27,7 +27,7 @@
 //! pass per iteration.
 
 use fragrace_emu::{
-    BlendEquation, BlendState, CompareFunc, DepthState, Draw, EarlyTests, Format, Fragment,
+    BlendEquation, BlendState, CompareFunc, DepthState, EarlyTests, Format, Fragment,
     FragmentKernel, Image, KernelInfo, PassReport, PassState, TargetState,
 };
 
@@ -175,6 +175,10 @@ impl Algorithm for F2b3p {
         }
     }
 
+    fn takes_geometry_culling(&self) -> bool {
+        true
+    }
+
     fn run(
         &self,
         frame: &Frame<'_>,
@@ -184,7 +188,7 @@ impl Algorithm for F2b3p {
         check_ids_fit_floats(frame)?;
         let mut peeled = Peeled::new(frame, params)?;
         let device = crate::common::fresh(exec);
-        let draw = Draw::new(frame.mesh, frame.view_proj);
+        let mut objects = super::culling::Objects::new(frame, params)?;
         let mut fb = peeled.framebuffer(&[Format::R32F, Format::RGBA32F, Format::RG32F])?;
         let mut depth_state = capture_state();
         depth_state.fragment.depth = DepthState {
@@ -216,30 +220,31 @@ impl Algorithm for F2b3p {
             fb.clear_color(LAYER, [f32::INFINITY.to_bits(), 0, 0, 0]);
             fb.clear_color(IDS, [NONE.to_bits(), NONE.to_bits(), 0, 0]);
             fb.clear_color(EXTRACTED, [NONE.to_bits(), NONE.to_bits(), 0, 0]);
-            let depth = device.draw(
+            let depth = objects.draw(
+                &device,
                 &mut fb,
-                &draw,
                 &depth_state,
                 &DepthPass { last: view },
                 exec,
             )?;
             report.merge(&depth);
-            generated = depth.stats.fragments_generated;
+            // The first pass draws every object (culling skips some later).
+            generated = generated.max(depth.stats.fragments_generated);
             if depth.stats.samples_passed == 0 {
                 exhausted = true;
                 break;
             }
-            report.merge(&device.draw(
+            report.merge(&objects.draw(
+                &device,
                 &mut fb,
-                &draw,
                 &count_state,
                 &CountPass { last: view },
                 exec,
             )?);
             let ids = fb.image(IDS);
-            report.merge(&device.draw(
+            report.merge(&objects.draw(
+                &device,
                 &mut fb,
-                &draw,
                 &extract_state,
                 &ExtractPass { ids: &ids },
                 exec,
@@ -251,10 +256,19 @@ impl Algorithm for F2b3p {
                 extraction.take(list, d, texel_f32(&ids, p), texel_f32(&extracted, p));
             }
             last = Some((layer, ids));
+            // Geometry culling: the depth buffer holds the layer just peeled.
+            objects.end_iteration(
+                &device,
+                super::culling::Remaining::DepthBuffer(&mut fb),
+                exec,
+                &mut report,
+            )?;
         }
         // The depth pass picks the layer itself: it cannot leave one early (`stalled` 0).
         let checks = extraction.checks(&peeled.lists, exhausted, generated, 0);
-        Ok(peeled.finish(report, checks, device.memory.bytes(), 52))
+        let mut result = peeled.finish(report, checks, device.memory.bytes(), 52);
+        result.geometry_culling = objects.summary();
+        Ok(result)
     }
 }
 

@@ -163,7 +163,12 @@ impl<'m> LayerPasses<'m> {
         report: &mut PassReport,
     ) -> Result<(), AlgoError> {
         self.objects
-            .end_iteration(device, &mut self.fb, exec, report)
+            .end_iteration(
+                device,
+                super::culling::Remaining::DepthBuffer(&mut self.fb),
+                exec,
+                report,
+            )
     }
 
     /// What geometry culling did (`None` when it was off).
