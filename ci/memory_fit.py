@@ -19,7 +19,7 @@ import sys
 
 import numpy as np
 
-F = "target/release/fragrace"
+F = __import__("os").environ.get("FRAGRACE", "target/release/fragrace")
 ALGO_PARTS = ("per-pixel storage", "per-fragment storage")
 
 

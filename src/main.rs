@@ -173,9 +173,9 @@ struct RunArgs {
     /// units), e.g. the same file three times in a row.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, requires = "obj")]
     obj_step: Option<[f32; 3]>,
-    /// Multi-pass front-to-back peelers: per iteration an occlusion query of each object's
-    /// bounding box against the last peeled layer, and conditional rendering of the objects
-    /// (completely peeled ones are culled; depth-fighting paper, section 3.3).
+    /// Multi-pass peelers (front-to-back and dual): per iteration an occlusion query of each
+    /// object's bounding box against what is left to peel, and conditional rendering of the
+    /// objects (completely peeled ones are culled; depth-fighting paper, section 3.3).
     #[arg(long)]
     geometry_culling: bool,
     #[arg(long, default_value = "truth")]

@@ -211,7 +211,7 @@ fn sweep(scene: &str, size: u32, azimuths: &[f32], seeds: u64) {
 // algorithm x executor x policy on the two scenes where the hazard-prone algorithms are held
 // to showing their races (hairball; coplanar-stack for F2B-KB), at 32x32 with 2 seeds per
 // policy. The long tier (`#[ignore]`d; .ci/run runs it after the README's command:
-// `cargo test --test differential -- --ignored long_`) runs them at 48x48 with 3 seeds per
+// `cargo test --test integration -- --ignored long_`) runs them at 48x48 with 3 seeds per
 // policy and adds cubes from two views, spheres and the bunny. Both tiers are the one
 // oracle above (`sweep`).
 
@@ -239,38 +239,38 @@ fn every_algorithm_on_coplanar_stack() {
 }
 
 #[test]
-#[ignore = "long tier: cargo test --test differential -- --ignored long_"]
+#[ignore = "long tier: cargo test --test integration -- --ignored long_"]
 fn long_every_algorithm_on_hairball() {
     sweep("hairball", size(LONG), &[0.0], seeds(LONG));
 }
 
 #[test]
-#[ignore = "long tier: cargo test --test differential -- --ignored long_"]
+#[ignore = "long tier: cargo test --test integration -- --ignored long_"]
 fn long_every_algorithm_on_coplanar_stack() {
     sweep("coplanar-stack", size(LONG), &[20.0], seeds(LONG));
 }
 
 #[test]
-#[ignore = "long tier: cargo test --test differential -- --ignored long_"]
+#[ignore = "long tier: cargo test --test integration -- --ignored long_"]
 fn long_every_algorithm_on_cubes() {
     sweep("cubes", size(LONG), &[0.0, 135.0], seeds(LONG));
 }
 
 #[test]
-#[ignore = "long tier: cargo test --test differential -- --ignored long_"]
+#[ignore = "long tier: cargo test --test integration -- --ignored long_"]
 fn long_every_algorithm_on_spheres() {
     sweep("spheres", size(LONG), &[0.0], seeds(LONG));
 }
 
 #[test]
-#[ignore = "long tier: cargo test --test differential -- --ignored long_"]
+#[ignore = "long tier: cargo test --test integration -- --ignored long_"]
 fn long_every_algorithm_on_bunny() {
     sweep("bunny", size(LONG), &[90.0], env_or("FRAGRACE_SEEDS", 2));
 }
 
 /// The acceptance sweep on a real mesh: `dragon_res2` (202K triangles) from 8 views. Needs
 /// `../shared/models` (not shipped), so it is ignored by default:
-/// `FRAGRACE_SEEDS=50 cargo test --release --test differential -- --ignored dragon`
+/// `FRAGRACE_SEEDS=50 cargo test --release --test integration -- --ignored dragon`
 /// (not in .ci/run's long tier, which runs the `long_` tests only).
 #[test]
 #[ignore = "long tier, needs ../shared/models"]

@@ -292,8 +292,8 @@ pub trait Algorithm: Send + Sync {
     }
 
     /// Whether the algorithm culls completely peeled objects when
-    /// [`Params::geometry_culling`] asks for it (the front-to-back peelers whose depth buffer
-    /// holds the last layer). Others refuse the parameter.
+    /// [`Params::geometry_culling`] asks for it (every multi-pass peeler, front-to-back and
+    /// dual). Others refuse the parameter.
     fn takes_geometry_culling(&self) -> bool {
         false
     }

@@ -14,8 +14,8 @@
 //!   or after `k` iterations (the paper avoids reading the query back with conditional
 //!   rendering, section 3.3; here the read-back costs nothing, so the loop reads it); the
 //!   dual peelers end when the min-max target read back holds no range; with geometry
-//!   culling (`culling.rs`, `Params::geometry_culling`) the front-to-back peelers draw the
-//!   scene object by object under conditional rendering;
+//!   culling (`culling.rs`, `Params::geometry_culling`) every peeler draws the scene object
+//!   by object under conditional rendering;
 //! - the fragments extracted are gathered into per-pixel lists on the host (after each
 //!   iteration, or by walking the linked lists at the end), sorted by (depth, primitive),
 //!   and the front-to-back peelers keep the first `k`;
