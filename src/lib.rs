@@ -14,6 +14,7 @@ pub mod floor;
 pub mod fuzz;
 pub mod output;
 pub mod racebench;
+pub mod render;
 pub mod run;
 pub mod scene;
 pub mod validate;

@@ -161,8 +161,12 @@ struct ReportArgs {
 #[derive(Args, Clone)]
 struct RunArgs {
     /// A built-in scene (see `fragrace list`).
-    #[arg(long, default_value = "cubes", conflicts_with = "obj")]
+    #[arg(long, default_value = "cubes", conflicts_with_all = ["obj", "scene_file"])]
     scene: String,
+    /// A scene file (JSON: OBJ objects with placements, colours and opacities, and a
+    /// camera; README "Scene files").
+    #[arg(long, value_name = "PATH", conflicts_with = "obj")]
+    scene_file: Option<PathBuf>,
     /// An OBJ file (plain or .gz) instead of a built-in scene; repeated, a scene of several
     /// objects (one per file; see --geometry-culling).
     #[arg(long)]
@@ -187,6 +191,40 @@ struct RunArgs {
     azimuth: f32,
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     elevation: f32,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    fov: f32,
+    /// Distance from the eye to the point looked at (default: the bounding sphere fills
+    /// 80 % of the view), in units of the normalised scene (largest extent 1).
+    #[arg(long)]
+    distance: Option<f32>,
+    /// The point looked at (default the scene's centre, the origin).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, allow_negative_numbers = true)]
+    look_at: Option<[f32; 3]>,
+    /// Parallel projection instead of perspective.
+    #[arg(long)]
+    orthographic: bool,
+    /// How --out shades kept fragments: lit (headlight, Lambert and Blinn-Phong, materials'
+    /// colour and opacity), translucent (Beer-Lambert absorption through the layers),
+    /// fresnel (translucent times Fresnel transmittance), id (the algorithm's own composite in
+    /// the peer's hash colours at --alpha). Default: lit for `render` (id for the algorithms
+    /// that keep only an image), id for `check`.
+    #[arg(long)]
+    shade: Option<fragrace::render::Shade>,
+    /// Translucent and fresnel shading: absorption per unit of the normalised scene; a
+    /// channel absorbs sigma (1 - its colour).
+    #[arg(long, default_value_t = fragrace::render::Look::default().sigma)]
+    sigma: f32,
+    /// Colour R,G,B (each in [0, 1]) of every object, or repeated: of each object in order.
+    #[arg(long, value_name = "R,G,B", value_parser = parse_step)]
+    color: Vec<[f32; 3]>,
+    /// Opacity in [0, 1] of every object, or repeated: of each object in order (lit shading).
+    #[arg(long, allow_negative_numbers = true)]
+    opacity: Vec<f32>,
+    /// Render N views around the scene (azimuth + 360 i / N) to --out: an animated GIF
+    /// when it ends in .gif, else numbered PNGs (NAME-000.png, ...).
+    #[arg(long, value_name = "N", requires = "out")]
+    turntable: Option<u32>,
     /// ordered | parallel | scheduled
     #[arg(long, default_value = "parallel")]
     exec: String,
@@ -321,7 +359,54 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
     if a.obj_step.is_some() && files.len() < 2 {
         bail!("--obj-step moves the second and later --obj files: give at least two");
     }
+    let mut camera = Camera {
+        fovy: a.fov,
+        distance: a.distance,
+        look_at: a.look_at,
+        projection: if a.orthographic {
+            fragrace::scene::Projection::Orthographic
+        } else {
+            fragrace::scene::Projection::Perspective
+        },
+        ..Camera::new(a.azimuth, a.elevation)
+    };
+    if let Some(path) = &a.scene_file {
+        // The file's camera, where the command line says nothing.
+        let bytes =
+            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        let file = fragrace::scene::file::SceneFile::parse(&bytes, path)?;
+        let from_file = file.camera(camera);
+        let set = |name: &str| given.iter().any(|g| g == name);
+        camera = Camera {
+            azimuth: if set("azimuth") {
+                camera.azimuth
+            } else {
+                from_file.azimuth
+            },
+            elevation: if set("elevation") {
+                camera.elevation
+            } else {
+                from_file.elevation
+            },
+            fovy: if set("fov") {
+                camera.fovy
+            } else {
+                from_file.fovy
+            },
+            distance: camera.distance.or(from_file.distance),
+            look_at: camera.look_at.or(from_file.look_at),
+            ..from_file
+        };
+    }
     let scene = match files.len() {
+        0 if a.scene_file.is_some() => {
+            let path = a.scene_file.clone().expect("checked");
+            let bytes = std::fs::read(&path)?;
+            SceneSpec::File {
+                sha256: Some(fragrace::scene::obj::content_hash(&bytes)),
+                path,
+            }
+        }
         0 => SceneSpec::Builtin(a.scene.clone()),
         1 => {
             let f = files.remove(0);
@@ -353,7 +438,7 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
     }
     let spec = RunSpec {
         scene,
-        camera: Camera::new(a.azimuth, a.elevation),
+        camera,
         width: a.width,
         height: a.height,
         algo: a.algo.clone(),
@@ -513,11 +598,12 @@ fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
     let spec = spec_of(a, given)?;
     check_outputs(a, &spec.algo)?;
     let loaded = run::load(&spec)?;
+    cli::outputs::warn_scene(&loaded);
     let memory = within_budget(&spec, &loaded, false, a.memory_limit.as_deref())?;
     let bar = progress(0, "rendering");
     let rendered = run::render(&spec, &loaded)?;
     bar.finish_and_clear();
-    let written = write_outputs(a, &spec, &rendered, None)?;
+    let written = write_outputs(a, &spec, &loaded, &rendered, None)?;
     let mut summary = run::summary_json(&spec, &loaded, None, &rendered);
     if let Some(base) = fragrace::culling::baseline(&spec, &loaded)? {
         summary["occupancy"] = fragrace::culling::summary(&rendered, None, Some(&base));
@@ -627,6 +713,7 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     fragrace::validate::at_least_one("schedules", a.schedules)?;
     check_outputs(&a.run, &spec.algo)?;
     let loaded = run::load(&spec)?;
+    cli::outputs::warn_scene(&loaded);
     let memory = within_budget(&spec, &loaded, true, a.run.memory_limit.as_deref())?;
     // More than one schedule only under the scheduled executor (`spec_of` refuses
     // --schedules elsewhere).
@@ -660,7 +747,7 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     }
     bar.finish_and_clear();
     let (wspec, w) = worst.expect("at least one run");
-    let written = write_outputs(&a.run, &wspec, &w.rendered, Some(&w))?;
+    let written = write_outputs(&a.run, &wspec, &loaded, &w.rendered, Some((&w, &truth)))?;
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
     if let Some(base) = fragrace::culling::baseline(&wspec, &loaded)? {
         summary["occupancy"] =

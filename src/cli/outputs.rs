@@ -3,15 +3,120 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use fragrace::render::{self, Look, Overrides, Shade};
 use fragrace::run::{self, RunSpec};
+use fragrace_kernels::AlgoResult;
 
 use crate::RunArgs;
+
+/// The renderer's settings of the command line; `default` when `--shade` is not given.
+pub(crate) fn look_of(a: &RunArgs, default: Shade) -> Result<Look> {
+    let look = Look {
+        shade: a.shade.unwrap_or(default),
+        sigma: a.sigma,
+        ..Look::default()
+    };
+    look.validate()?;
+    Ok(look)
+}
+
+/// `--color` and `--opacity`.
+pub(crate) fn overrides_of(a: &RunArgs) -> Overrides {
+    Overrides {
+        colors: a.color.clone(),
+        opacities: a.opacity.clone(),
+    }
+}
+
+/// Prints what loading the scene left out (unusable normals, missing or malformed MTL files).
+pub(crate) fn warn_scene(loaded: &run::Loaded) {
+    if let Some(s) = &loaded.scene.surface {
+        for w in &s.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
+}
+
+/// `--out` of `render` (`truth: None`) or of `check` (the three panels): the picture of this
+/// run, or with `--turntable N` of N views around the scene (each view run again).
+fn write_picture(
+    a: &RunArgs,
+    spec: &RunSpec,
+    loaded: &run::Loaded,
+    r: &run::Rendered,
+    checked: Option<(&run::Checked, &AlgoResult)>,
+    path: &Path,
+) -> Result<Vec<PathBuf>> {
+    let default = match checked {
+        Some(_) => Shade::Id,
+        None => render::run::default_shade(r.info.capacity),
+    };
+    let look = look_of(a, default)?;
+    let surface = render::run::surface(loaded, &overrides_of(a))?;
+    let picture = |spec: &RunSpec,
+                   loaded: &run::Loaded,
+                   r: &AlgoResult,
+                   checked: Option<(&run::Checked, &AlgoResult)>|
+     -> Result<render::picture::Canvas> {
+        let view = render::run::view(spec, loaded, &surface);
+        Ok(match checked {
+            Some((c, truth)) => render::run::compare(spec, &view, c, truth, &look)?,
+            None => {
+                let (canvas, stats) = render::run::picture(spec, &view, r, &look)?;
+                if stats.without_primitive > 0 {
+                    eprintln!(
+                        "note: {} of {} fragments have no primitive id ({} keeps depths only): shaded with the first material, facing the eye",
+                        stats.without_primitive, stats.fragments, spec.algo
+                    );
+                }
+                canvas
+            }
+        })
+    };
+    let Some(n) = a.turntable else {
+        let canvas = picture(spec, loaded, &r.result, checked)?;
+        canvas
+            .write_png(path)
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+        return Ok(vec![path.to_path_buf()]);
+    };
+    let mut frames = Vec::with_capacity(n as usize);
+    let mut view_loaded = run::Loaded {
+        scene: loaded.scene.clone(),
+        view_proj: loaded.view_proj,
+    };
+    for az in render::turntable::azimuths(spec.camera.azimuth, n) {
+        let mut s = spec.clone();
+        s.camera.azimuth = az;
+        view_loaded.view_proj = view_loaded.scene.view_proj(&s.camera, s.width, s.height);
+        let frame = match checked {
+            Some(_) => {
+                let truth = run::truth(&s, &view_loaded)?;
+                let c = run::check_with(&s, &view_loaded, &truth)?;
+                picture(&s, &view_loaded, &c.rendered.result, Some((&c, &truth)))?
+            }
+            None => {
+                let r = run::render(&s, &view_loaded)?;
+                picture(&s, &view_loaded, &r.result, None)?
+            }
+        };
+        frames.push(frame);
+    }
+    Ok(render::turntable::write(path, &frames, 100)?)
+}
 
 /// Checks that the outputs asked for can be written, before any computation.
 pub(crate) fn check_outputs(a: &RunArgs, algo: &str) -> Result<()> {
     use fragrace::output::{check_dir, check_writable};
     if let Some(p) = &a.out {
         check_writable(p, "the image (--out)")?;
+    }
+    // The renderer's settings, before any computation (the shading mode's default does not
+    // matter here).
+    look_of(a, Shade::Lit)?;
+    overrides_of(a).validate()?;
+    if a.turntable == Some(0) {
+        bail!("--turntable 0: the number of views must be at least 1");
     }
     if let Some(p) = &a.raw_out {
         if !matches!(algo, "count" | "count-plain") {
@@ -29,24 +134,17 @@ pub(crate) fn check_outputs(a: &RunArgs, algo: &str) -> Result<()> {
 pub(crate) fn write_outputs(
     a: &RunArgs,
     spec: &RunSpec,
+    loaded: &run::Loaded,
     r: &run::Rendered,
-    checked: Option<&run::Checked>,
+    checked: Option<(&run::Checked, &AlgoResult)>,
 ) -> Result<Vec<PathBuf>> {
     let res = &r.result;
     let mut written = Vec::new();
     let named = |p: &Path| format!("{}: cannot write", p.display());
     if let Some(path) = &a.out {
-        if let Some(img) = &res.image {
-            fragrace::output::write_rgba(path, spec.width, spec.height, img)
-                .with_context(|| named(path))?;
-        } else if let Some(c) = &res.counts {
-            fragrace::output::write_heatmap(path, spec.width, spec.height, c)
-                .with_context(|| named(path))?;
-        } else {
-            bail!("algorithm `{}` produces no image", spec.algo);
-        }
-        written.push(path.clone());
+        written.extend(write_picture(a, spec, loaded, r, checked, path)?);
     }
+    let checked = checked.map(|(c, _)| c);
     if let Some(path) = &a.raw_out {
         let Some(c) = &res.counts else {
             bail!("--raw-out needs a counting algorithm (count, count-plain)")
