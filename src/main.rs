@@ -605,6 +605,9 @@ fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
     bar.finish_and_clear();
     let written = write_outputs(a, &spec, &loaded, &rendered, None)?;
     let mut summary = run::summary_json(&spec, &loaded, None, &rendered);
+    summary["shade"] = serde_json::json!(written.shade);
+    summary["picture_ms"] = serde_json::json!(written.picture_ms);
+    let written = written.files;
     if let Some(base) = fragrace::culling::baseline(&spec, &loaded)? {
         summary["occupancy"] = fragrace::culling::summary(&rendered, None, Some(&base));
     }
@@ -749,6 +752,8 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     let (wspec, w) = worst.expect("at least one run");
     let written = write_outputs(&a.run, &wspec, &loaded, &w.rendered, Some((&w, &truth)))?;
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
+    summary["shade"] = serde_json::json!(written.shade);
+    let written = written.files;
     if let Some(base) = fragrace::culling::baseline(&wspec, &loaded)? {
         summary["occupancy"] =
             fragrace::culling::summary(&w.rendered, Some(&w.metrics), Some(&base));
@@ -791,10 +796,16 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
         format!("{} --schedules 8", s.command("check"))
     });
     summary["reproduce_with"] = serde_json::json!(scheduled.as_ref().unwrap_or(&replay));
+    let picture = a.run.out.as_deref().filter(|_| a.run.turntable.is_none());
+    let plain = fragrace::verdict::plain_words(&w, &verdict, &replay, picture);
+    summary["plain_words"] = serde_json::json!(plain);
     if a.run.json {
         println!("{summary}");
     } else {
         println!("{}", verdict.text);
+        for line in &plain {
+            println!("  {line}");
+        }
         print_summary(&summary);
         if n > 1 {
             println!(

@@ -37,6 +37,15 @@ pub(crate) fn warn_scene(loaded: &run::Loaded) {
     }
 }
 
+/// What `--out` wrote, for the summary: the shading and the time it took to make the
+/// picture (shading, compositing, legends; not writing the file) in milliseconds.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Written {
+    pub files: Vec<PathBuf>,
+    pub shade: Option<&'static str>,
+    pub picture_ms: Option<f64>,
+}
+
 /// `--out` of `render` (`truth: None`) or of `check` (the three panels): the picture of this
 /// run, or with `--turntable N` of N views around the scene (each view run again).
 fn write_picture(
@@ -46,12 +55,14 @@ fn write_picture(
     r: &run::Rendered,
     checked: Option<(&run::Checked, &AlgoResult)>,
     path: &Path,
-) -> Result<Vec<PathBuf>> {
+    out: &mut Written,
+) -> Result<()> {
     let default = match checked {
         Some(_) => Shade::Id,
         None => render::run::default_shade(r.info.capacity),
     };
     let look = look_of(a, default)?;
+    out.shade = Some(look.shade.name());
     let surface = render::run::surface(loaded, &overrides_of(a))?;
     let picture = |spec: &RunSpec,
                    loaded: &run::Loaded,
@@ -74,11 +85,14 @@ fn write_picture(
         })
     };
     let Some(n) = a.turntable else {
+        let t = std::time::Instant::now();
         let canvas = picture(spec, loaded, &r.result, checked)?;
+        out.picture_ms = Some(t.elapsed().as_secs_f64() * 1e3);
         canvas
             .write_png(path)
             .with_context(|| format!("{}: cannot write", path.display()))?;
-        return Ok(vec![path.to_path_buf()]);
+        out.files.push(path.to_path_buf());
+        return Ok(());
     };
     let mut frames = Vec::with_capacity(n as usize);
     let mut view_loaded = run::Loaded {
@@ -102,7 +116,8 @@ fn write_picture(
         };
         frames.push(frame);
     }
-    Ok(render::turntable::write(path, &frames, 100)?)
+    out.files.extend(render::turntable::write(path, &frames, 100)?);
+    Ok(())
 }
 
 /// Checks that the outputs asked for can be written, before any computation.
@@ -137,13 +152,14 @@ pub(crate) fn write_outputs(
     loaded: &run::Loaded,
     r: &run::Rendered,
     checked: Option<(&run::Checked, &AlgoResult)>,
-) -> Result<Vec<PathBuf>> {
+) -> Result<Written> {
     let res = &r.result;
-    let mut written = Vec::new();
+    let mut out = Written::default();
     let named = |p: &Path| format!("{}: cannot write", p.display());
     if let Some(path) = &a.out {
-        written.extend(write_picture(a, spec, loaded, r, checked, path)?);
+        write_picture(a, spec, loaded, r, checked, path, &mut out)?;
     }
+    let mut written = std::mem::take(&mut out.files);
     let checked = checked.map(|(c, _)| c);
     if let Some(path) = &a.raw_out {
         let Some(c) = &res.counts else {
@@ -199,7 +215,8 @@ pub(crate) fn write_outputs(
             );
         }
     }
-    Ok(written)
+    out.files = written;
+    Ok(out)
 }
 
 /// Lists the files written (on stderr under --json, to keep stdout one JSON object).
