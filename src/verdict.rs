@@ -175,7 +175,13 @@ pub fn plain_words(
         ),
     };
     let look = picture
-        .map(|p| format!("look at {} (truth, {}, difference); ", p.display(), info.name))
+        .map(|p| {
+            format!(
+                "look at {} (truth, {}, difference); ",
+                p.display(),
+                info.name
+            )
+        })
         .unwrap_or_default();
     let safer: Vec<&'static str> = fragrace_kernels::algorithms()
         .iter()
@@ -185,13 +191,11 @@ pub fn plain_words(
         .take(2)
         .collect();
     let alternative = if info.hazard == HazardClass::HazardProne && !safer.is_empty() {
-        format!(
-            "; the same family without the race: {}",
-            safer.join(", ")
-        )
+        format!("; the same family without the race: {}", safer.join(", "))
     } else {
         String::new()
     };
-    let next = format!("Next: {look}replay the worst run bit for bit with `{replay}`{alternative}.");
+    let next =
+        format!("Next: {look}replay the worst run bit for bit with `{replay}`{alternative}.");
     [found, means, next]
 }

@@ -240,8 +240,7 @@ fn exact_algorithms_give_the_truths_shaded_picture() {
             if c.metrics.error_pixels > 0 || c.rendered.result.capture.is_none() {
                 continue;
             }
-            let (got, stats) =
-                render::image(info.name, &c.rendered.result, &view, &look).unwrap();
+            let (got, stats) = render::image(info.name, &c.rendered.result, &view, &look).unwrap();
             if stats.without_primitive > 0 {
                 // Depths only (the bucket schemes): lit shading needs primitives.
                 continue;

@@ -116,7 +116,8 @@ fn write_picture(
         };
         frames.push(frame);
     }
-    out.files.extend(render::turntable::write(path, &frames, 100)?);
+    out.files
+        .extend(render::turntable::write(path, &frames, 100)?);
     Ok(())
 }
 

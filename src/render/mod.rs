@@ -152,8 +152,8 @@ impl Overrides {
         objects: &[Range<u32>],
         triangles: u32,
     ) -> Result<(), RenderError> {
-        let whole = [0..triangles];
-        let objects = if objects.is_empty() { &whole } else { objects };
+        let whole = std::iter::once(0..triangles).collect::<Vec<_>>();
+        let objects = if objects.is_empty() { &whole[..] } else { objects };
         for (what, given) in [
             ("--color", self.colors.len()),
             ("--opacity", self.opacities.len()),
