@@ -753,7 +753,6 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     let written = write_outputs(&a.run, &wspec, &loaded, &w.rendered, Some((&w, &truth)))?;
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
     summary["shade"] = serde_json::json!(written.shade);
-    let written = written.files;
     if let Some(base) = fragrace::culling::baseline(&wspec, &loaded)? {
         summary["occupancy"] =
             fragrace::culling::summary(&w.rendered, Some(&w.metrics), Some(&base));
@@ -797,7 +796,12 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     });
     summary["reproduce_with"] = serde_json::json!(scheduled.as_ref().unwrap_or(&replay));
     let picture = a.run.out.as_deref().filter(|_| a.run.turntable.is_none());
-    let plain = fragrace::verdict::plain_words(&w, &verdict, &replay, picture);
+    // The picture too is reproduced bit for bit by its replay.
+    let replay_picture = match (picture, written.shade) {
+        (Some(p), Some(shade)) => format!("{replay} --shade {shade} --out {}", p.display()),
+        _ => replay.clone(),
+    };
+    let plain = fragrace::verdict::plain_words(&w, &verdict, &replay_picture, picture);
     summary["plain_words"] = serde_json::json!(plain);
     if a.run.json {
         println!("{summary}");
@@ -848,7 +852,7 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
             println!("  worst case replays with:\n    {replay}");
         }
     }
-    list_written(&written, a.run.json);
+    list_written(&written.files, a.run.json);
     Ok(())
 }
 

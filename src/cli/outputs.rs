@@ -127,6 +127,9 @@ pub(crate) fn check_outputs(a: &RunArgs, algo: &str) -> Result<()> {
     if let Some(p) = &a.out {
         check_writable(p, "the image (--out)")?;
     }
+    if a.out.is_none() && (a.shade.is_some() || !a.color.is_empty() || !a.opacity.is_empty()) {
+        bail!("--shade, --color and --opacity change only the picture: add --out PATH");
+    }
     // The renderer's settings, before any computation (the shading mode's default does not
     // matter here).
     look_of(a, Shade::Lit)?;

@@ -153,7 +153,11 @@ impl Overrides {
         triangles: u32,
     ) -> Result<(), RenderError> {
         let whole = std::iter::once(0..triangles).collect::<Vec<_>>();
-        let objects = if objects.is_empty() { &whole[..] } else { objects };
+        let objects = if objects.is_empty() {
+            &whole[..]
+        } else {
+            objects
+        };
         for (what, given) in [
             ("--color", self.colors.len()),
             ("--opacity", self.opacities.len()),

@@ -63,8 +63,26 @@ pub fn compare(
     truth: &AlgoResult,
     look: &Look,
 ) -> Result<Canvas, RenderError> {
-    let (t, _) = image("truth", truth, view, look)?;
-    let (a, _) = image(&spec.algo, &checked.rendered.result, view, look)?;
+    let result = &checked.rendered.result;
+    let (t, a) = match (&result.counts, &result.capture, &truth.counts) {
+        // Counting algorithms: the depth complexities, on one colour scale.
+        (Some(mine), None, Some(want)) => {
+            let max = want.iter().chain(mine.iter()).copied().max().unwrap_or(0);
+            let rgba = |c: &[u32]| -> Vec<[f32; 4]> {
+                c.iter()
+                    .map(|&n| {
+                        let [r, g, b] = picture::count_color(n, max).map(|v| f32::from(v) / 255.0);
+                        [r, g, b, 1.0]
+                    })
+                    .collect()
+            };
+            (rgba(want), rgba(mine))
+        }
+        _ => (
+            image("truth", truth, view, look)?.0,
+            image(&spec.algo, result, view, look)?.0,
+        ),
+    };
     let run = match spec.schedule() {
         Some(s) => format!("{}, {} seed {}", spec.algo, s.policy, s.seed),
         None => format!("{}, {}", spec.algo, spec.exec.mode.name()),
