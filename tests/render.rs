@@ -544,3 +544,35 @@ fn shipped_scene_file_renders_with_its_materials() {
     assert!(pic.pixels().any(|p| c(p)[1] > c(p)[0] + 40), "green shows");
     assert!(pic.pixels().any(|p| c(p)[0] > c(p)[2] + 40), "red shows");
 }
+
+/// The OBJ pre-pass keeps `vn` normals per triangle corner (fans of polygons) and each
+/// triangle's `usemtl`; unusable normals are left out with a warning, never an error.
+#[test]
+fn obj_extras_normals_and_materials() {
+    use fragrace::scene::obj::parse_obj_bytes_with_extras;
+    let text = b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nvn 0 0 -1\n\
+usemtl a\nf 1//1 2//1 3//1 4//1\nusemtl b\nf 1//2 3//2 2//2\nusemtl a\nf 1//-1 4//-1 3//-1\n";
+    let (mesh, ex) = parse_obj_bytes_with_extras(text).unwrap();
+    assert_eq!(mesh.indices.len(), 4);
+    assert_eq!(ex.material_names, ["a", "b"]);
+    assert_eq!(ex.triangle_material, [0, 0, 1, 0]);
+    assert_eq!(ex.mtllibs, ["m.mtl"]);
+    let (normals, corners) = ex.normals.expect("every face has vn");
+    assert_eq!(normals, [Vec3::Z, -Vec3::Z]);
+    assert_eq!(corners, [[0, 0, 0], [0, 0, 0], [1, 1, 1], [1, 1, 1]]);
+    assert!(ex.warnings.is_empty(), "{:?}", ex.warnings);
+    // A normal index past the defined ones, and faces without normals beside faces with.
+    for bad in [
+        &b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//7\n"[..],
+        &b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\nf 1 3 2\n"[..],
+    ] {
+        let (mesh, ex) = parse_obj_bytes_with_extras(bad).unwrap();
+        assert!(!mesh.indices.is_empty());
+        assert!(ex.normals.is_none());
+        assert!(
+            ex.warnings[0].contains("smooth normals"),
+            "{:?}",
+            ex.warnings
+        );
+    }
+}
