@@ -175,6 +175,10 @@ struct RunArgs {
     /// units), e.g. the same file three times in a row.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, requires = "obj")]
     obj_step: Option<[f32; 3]>,
+    /// Where each --obj file goes: repeated once per file, in order (X,Y,Z in the files'
+    /// units, added to --obj-step's move); --scene-file also rotates and scales.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, allow_negative_numbers = true, requires = "obj")]
+    place: Vec<[f32; 3]>,
     /// Multi-pass front-to-back peelers: per iteration an occlusion query of each object's
     /// bounding box against the last peeled layer, and conditional rendering of the objects
     /// (completely peeled ones are culled; depth-fighting paper, section 3.3).
@@ -356,6 +360,13 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
             sha256: Some(fragrace::scene::obj::content_hash(&bytes)),
         });
     }
+    if !a.place.is_empty() && a.place.len() != files.len() {
+        bail!(
+            "--place given {} times for {} --obj files: give it once per file, in order",
+            a.place.len(),
+            files.len()
+        );
+    }
     if a.obj_step.is_some() && files.len() < 2 {
         bail!("--obj-step moves the second and later --obj files: give at least two");
     }
@@ -408,7 +419,7 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
             }
         }
         0 => SceneSpec::Builtin(a.scene.clone()),
-        1 => {
+        1 if a.place.is_empty() => {
             let f = files.remove(0);
             SceneSpec::Obj {
                 path: f.path,
@@ -418,6 +429,7 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
         _ => SceneSpec::Objs {
             files,
             step: a.obj_step.unwrap_or_default(),
+            places: a.place.clone(),
         },
     };
     let mut exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)?;

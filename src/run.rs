@@ -25,11 +25,14 @@ pub enum SceneSpec {
     /// Several OBJ files (`--obj A --obj B ...`), one object each (geometry culling draws
     /// and culls them one by one), normalised together. File `i` is moved by `i x step` in
     /// the files' own units (`--obj-step X,Y,Z`: the same file three times in a row, as the
-    /// depth-fighting paper's three dragons of Figure 10).
+    /// depth-fighting paper's three dragons of Figure 10), and by `places[i]` when given
+    /// (`--place X,Y,Z` once per file; empty: not moved).
     Objs {
         files: Vec<ObjFile>,
         #[serde(default)]
         step: [f32; 3],
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        places: Vec<[f32; 3]>,
     },
     /// A scene file (`--scene-file`, JSON: objects with placements and materials, and a
     /// camera; [`crate::scene::file`]); `sha256` of its bytes, checked on replay when
@@ -86,13 +89,19 @@ impl SceneSpec {
                 check_hash(path, sha256)?;
                 Scene::from_obj(path).map_err(Box::new)?
             }
-            SceneSpec::Objs { files, step } => {
+            SceneSpec::Objs {
+                files,
+                step,
+                places,
+            } => {
                 let mut parts = Vec::with_capacity(files.len());
                 for (i, f) in files.iter().enumerate() {
                     check_hash(&f.path, &f.sha256)?;
                     let mut part = crate::scene::Part::from_obj(&f.path, i).map_err(Box::new)?;
-                    part.placement =
-                        glam::Mat4::from_translation(glam::Vec3::from_array(*step) * i as f32);
+                    let place = glam::Vec3::from_array(places.get(i).copied().unwrap_or_default());
+                    part.placement = glam::Mat4::from_translation(
+                        glam::Vec3::from_array(*step) * i as f32 + place,
+                    );
                     parts.push(part);
                 }
                 Scene::from_parts(parts).map_err(Box::new)?
@@ -210,10 +219,20 @@ impl RunSpec {
             SceneSpec::Builtin(n) => format!("--scene {n}"),
             SceneSpec::Obj { path, .. } => format!("--obj {}", path.display()),
             SceneSpec::File { path, .. } => format!("--scene-file {}", path.display()),
-            SceneSpec::Objs { files, step } => {
+            SceneSpec::Objs {
+                files,
+                step,
+                places,
+            } => {
                 let mut c: Vec<String> = files
                     .iter()
-                    .map(|f| format!("--obj {}", f.path.display()))
+                    .enumerate()
+                    .map(|(i, f)| match places.get(i) {
+                        Some([x, y, z]) => {
+                            format!("--obj {} --place {x},{y},{z}", f.path.display())
+                        }
+                        None => format!("--obj {}", f.path.display()),
+                    })
                     .collect();
                 if *step != [0.0; 3] {
                     c.push(format!("--obj-step {},{},{}", step[0], step[1], step[2]));

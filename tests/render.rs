@@ -576,3 +576,56 @@ usemtl a\nf 1//1 2//1 3//1 4//1\nusemtl b\nf 1//2 3//2 2//2\nusemtl a\nf 1//-1 4
         );
     }
 }
+
+/// `--place X,Y,Z` puts each `--obj` file where it is told (one per file, in order).
+#[test]
+fn obj_files_take_a_placement_each() {
+    let slab = asset("scenes/slab.obj");
+    let file = || run::ObjFile {
+        path: slab.clone(),
+        sha256: None,
+    };
+    let spec = RunSpec::new(
+        SceneSpec::Objs {
+            files: vec![file(), file()],
+            step: [0.0; 3],
+            places: vec![[0.0, 0.0, 0.0], [2.0, 1.0, 0.0]],
+        },
+        "ll",
+    );
+    let loaded = run::load(&spec).unwrap();
+    let s = &loaded.scene;
+    assert_eq!(s.objects.len(), 2);
+    let centre = |r: &std::ops::Range<u32>| {
+        let ids: Vec<u32> = s.mesh.indices[r.start as usize..r.end as usize]
+            .iter()
+            .flatten()
+            .copied()
+            .collect();
+        ids.iter()
+            .map(|&i| s.mesh.positions[i as usize])
+            .sum::<Vec3>()
+            / ids.len() as f32
+    };
+    // Normalised together: the 3-unit-wide scene (x from -0.5 to 2.5) scaled to 1.
+    let moved = centre(&s.objects[1]) - centre(&s.objects[0]);
+    assert!(
+        (moved - Vec3::new(2.0, 1.0, 0.0) / 3.0).length() < 1e-5,
+        "{moved}"
+    );
+    assert!(spec.command("render").contains("--place 2,1,0"));
+    let o = fragrace(&[
+        "render",
+        "--obj",
+        slab.to_str().unwrap(),
+        "--obj",
+        slab.to_str().unwrap(),
+        "--place",
+        "1,0,0",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("once per file"),
+        "{err}"
+    );
+}
