@@ -629,3 +629,53 @@ fn obj_files_take_a_placement_each() {
         "{err}"
     );
 }
+
+/// The renderer's camera options: unset, the peer's orbit matrix bit for bit; `look_at`
+/// projects to the image centre; twice the distance, half the size on screen; an
+/// orthographic camera keeps sizes whatever the depth.
+#[test]
+fn camera_options() {
+    let (r, w, h) = (0.8f32, 64u32, 48u32);
+    let orbit = Camera::new(30.0, 20.0);
+    let same = Camera {
+        fovy: 60.0,
+        ..orbit
+    };
+    assert_eq!(same.view_proj(r, w, h), orbit.view_proj(r, w, h));
+    let ndc = |c: &Camera, p: Vec3| {
+        let v = c.view_proj(r, w, h) * p.extend(1.0);
+        v.truncate() / v.w
+    };
+    let at = Camera {
+        look_at: Some([0.2, -0.1, 0.3]),
+        distance: Some(2.0),
+        ..orbit
+    };
+    let centre = ndc(&at, Vec3::new(0.2, -0.1, 0.3));
+    assert!(centre.x.abs() < 1e-5 && centre.y.abs() < 1e-5, "{centre}");
+    assert!(centre.z > -1.0 && centre.z < 1.0);
+    let far = Camera {
+        distance: Some(4.0),
+        ..at
+    };
+    // A point beside the one looked at, seen at twice the distance: half as far off centre.
+    let side = Vec3::new(0.2, 0.0, 0.3);
+    let (near_y, far_y) = (ndc(&at, side).y, ndc(&far, side).y);
+    assert!((near_y / far_y - 2.0).abs() < 0.05, "{near_y} vs {far_y}");
+    let ortho = |d| Camera {
+        projection: Projection::Orthographic,
+        distance: Some(d),
+        ..at
+    };
+    let (a, b) = (ndc(&ortho(2.0), side), ndc(&ortho(4.0), side));
+    assert!(
+        (a.y - b.y).abs() < 1e-5 && a.z > -1.0 && a.z < 1.0,
+        "{a} vs {b}"
+    );
+    // Out of range: refused with the value.
+    let bad = Camera {
+        distance: Some(-1.0),
+        ..orbit
+    };
+    assert!(bad.validate(w, h).unwrap_err().to_string().contains("-1"));
+}
