@@ -15,6 +15,7 @@ pub mod fuzz;
 pub mod output;
 pub mod plot;
 pub mod racebench;
+pub mod render;
 pub mod run;
 pub mod scene;
 pub mod validate;

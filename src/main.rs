@@ -163,8 +163,12 @@ struct ReportArgs {
 #[derive(Args, Clone)]
 struct RunArgs {
     /// A built-in scene (see `fragrace list`).
-    #[arg(long, default_value = "cubes", conflicts_with = "obj")]
+    #[arg(long, default_value = "cubes", conflicts_with_all = ["obj", "scene_file"])]
     scene: String,
+    /// A scene file (JSON: OBJ objects with placements, colours and opacities, and a
+    /// camera; README "Scene files").
+    #[arg(long, value_name = "PATH", conflicts_with = "obj")]
+    scene_file: Option<PathBuf>,
     /// An OBJ file (plain or .gz) instead of a built-in scene; repeated, a scene of several
     /// objects (one per file; see --geometry-culling).
     #[arg(long)]
@@ -173,6 +177,10 @@ struct RunArgs {
     /// units), e.g. the same file three times in a row.
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, requires = "obj")]
     obj_step: Option<[f32; 3]>,
+    /// Where each --obj file goes: repeated once per file, in order (X,Y,Z in the files'
+    /// units, added to --obj-step's move); --scene-file also rotates and scales.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, allow_negative_numbers = true, requires = "obj")]
+    place: Vec<[f32; 3]>,
     /// Multi-pass peelers (front-to-back and dual): per iteration an occlusion query of each
     /// object's bounding box against what is left to peel, and conditional rendering of the
     /// objects (completely peeled ones are culled; depth-fighting paper, section 3.3).
@@ -189,6 +197,40 @@ struct RunArgs {
     azimuth: f32,
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     elevation: f32,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    fov: f32,
+    /// Distance from the eye to the point looked at (default: the bounding sphere fills
+    /// 80 % of the view), in units of the normalised scene (largest extent 1).
+    #[arg(long)]
+    distance: Option<f32>,
+    /// The point looked at (default the scene's centre, the origin).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, allow_negative_numbers = true)]
+    look_at: Option<[f32; 3]>,
+    /// Parallel projection instead of perspective.
+    #[arg(long)]
+    orthographic: bool,
+    /// How --out shades kept fragments: lit (headlight, Lambert and Blinn-Phong, materials'
+    /// colour and opacity), translucent (Beer-Lambert absorption through the layers),
+    /// fresnel (translucent times Fresnel transmittance), id (the algorithm's own composite in
+    /// the peer's hash colours at --alpha). Default: lit for `render` (id for the algorithms
+    /// that keep only an image), id for `check`.
+    #[arg(long)]
+    shade: Option<fragrace::render::Shade>,
+    /// Translucent and fresnel shading: absorption per unit of the normalised scene; a
+    /// channel absorbs sigma (1 - its colour).
+    #[arg(long, default_value_t = fragrace::render::Look::default().sigma)]
+    sigma: f32,
+    /// Colour R,G,B (each in [0, 1]) of every object, or repeated: of each object in order.
+    #[arg(long, value_name = "R,G,B", value_parser = parse_step)]
+    color: Vec<[f32; 3]>,
+    /// Opacity in [0, 1] of every object, or repeated: of each object in order (lit shading).
+    #[arg(long, allow_negative_numbers = true)]
+    opacity: Vec<f32>,
+    /// Render N views around the scene (azimuth + 360 i / N) to --out: an animated GIF
+    /// when it ends in .gif, else numbered PNGs (NAME-000.png, ...).
+    #[arg(long, value_name = "N", requires = "out")]
+    turntable: Option<u32>,
     /// ordered | parallel | scheduled
     #[arg(long, default_value = "parallel")]
     exec: String,
@@ -320,12 +362,66 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
             sha256: Some(fragrace::scene::obj::content_hash(&bytes)),
         });
     }
+    if !a.place.is_empty() && a.place.len() != files.len() {
+        bail!(
+            "--place given {} times for {} --obj files: give it once per file, in order",
+            a.place.len(),
+            files.len()
+        );
+    }
     if a.obj_step.is_some() && files.len() < 2 {
         bail!("--obj-step moves the second and later --obj files: give at least two");
     }
+    let mut camera = Camera {
+        fovy: a.fov,
+        distance: a.distance,
+        look_at: a.look_at,
+        projection: if a.orthographic {
+            fragrace::scene::Projection::Orthographic
+        } else {
+            fragrace::scene::Projection::Perspective
+        },
+        ..Camera::new(a.azimuth, a.elevation)
+    };
+    if let Some(path) = &a.scene_file {
+        // The file's camera, where the command line says nothing.
+        let bytes =
+            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        let file = fragrace::scene::file::SceneFile::parse(&bytes, path)?;
+        let from_file = file.camera(camera);
+        let set = |name: &str| given.iter().any(|g| g == name);
+        camera = Camera {
+            azimuth: if set("azimuth") {
+                camera.azimuth
+            } else {
+                from_file.azimuth
+            },
+            elevation: if set("elevation") {
+                camera.elevation
+            } else {
+                from_file.elevation
+            },
+            fovy: if set("fov") {
+                camera.fovy
+            } else {
+                from_file.fovy
+            },
+            distance: camera.distance.or(from_file.distance),
+            look_at: camera.look_at.or(from_file.look_at),
+            ..from_file
+        };
+    }
     let scene = match files.len() {
+        0 if a.scene_file.is_some() => {
+            let path = a.scene_file.clone().expect("checked");
+            let bytes = std::fs::read(&path)?;
+            SceneSpec::File {
+                sha256: Some(fragrace::scene::obj::content_hash(&bytes)),
+                path,
+            }
+        }
         0 => SceneSpec::Builtin(a.scene.clone()),
-        1 => {
+        1 if a.place.is_empty() => {
             let f = files.remove(0);
             SceneSpec::Obj {
                 path: f.path,
@@ -335,6 +431,7 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
         _ => SceneSpec::Objs {
             files,
             step: a.obj_step.unwrap_or_default(),
+            places: a.place.clone(),
         },
     };
     let mut exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)?;
@@ -355,7 +452,7 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
     }
     let spec = RunSpec {
         scene,
-        camera: Camera::new(a.azimuth, a.elevation),
+        camera,
         width: a.width,
         height: a.height,
         algo: a.algo.clone(),
@@ -518,12 +615,16 @@ fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
     let spec = spec_of(a, given)?;
     check_outputs(a, &spec.algo)?;
     let loaded = run::load(&spec)?;
+    cli::outputs::warn_scene(&loaded);
     let memory = within_budget(&spec, &loaded, false, a.memory_limit.as_deref())?;
     let bar = progress(0, "rendering");
     let rendered = run::render(&spec, &loaded)?;
     bar.finish_and_clear();
-    let written = write_outputs(a, &spec, &rendered, None)?;
+    let written = write_outputs(a, &spec, &loaded, &rendered, None)?;
     let mut summary = run::summary_json(&spec, &loaded, None, &rendered);
+    summary["shade"] = serde_json::json!(written.shade);
+    summary["picture_ms"] = serde_json::json!(written.picture_ms);
+    let written = written.files;
     if let Some(base) = fragrace::culling::baseline(&spec, &loaded)? {
         summary["occupancy"] = fragrace::culling::summary(&rendered, None, Some(&base));
     }
@@ -632,6 +733,7 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     fragrace::validate::at_least_one("schedules", a.schedules)?;
     check_outputs(&a.run, &spec.algo)?;
     let loaded = run::load(&spec)?;
+    cli::outputs::warn_scene(&loaded);
     let memory = within_budget(&spec, &loaded, true, a.run.memory_limit.as_deref())?;
     // More than one schedule only under the scheduled executor (`spec_of` refuses
     // --schedules elsewhere).
@@ -665,8 +767,9 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     }
     bar.finish_and_clear();
     let (wspec, w) = worst.expect("at least one run");
-    let written = write_outputs(&a.run, &wspec, &w.rendered, Some(&w))?;
+    let written = write_outputs(&a.run, &wspec, &loaded, &w.rendered, Some((&w, &truth)))?;
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
+    summary["shade"] = serde_json::json!(written.shade);
     if let Some(base) = fragrace::culling::baseline(&wspec, &loaded)? {
         summary["occupancy"] =
             fragrace::culling::summary(&w.rendered, Some(&w.metrics), Some(&base));
@@ -709,10 +812,21 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
         format!("{} --schedules 8", s.command("check"))
     });
     summary["reproduce_with"] = serde_json::json!(scheduled.as_ref().unwrap_or(&replay));
+    let picture = a.run.out.as_deref().filter(|_| a.run.turntable.is_none());
+    // The picture too is reproduced bit for bit by its replay.
+    let replay_picture = match (picture, written.shade) {
+        (Some(p), Some(shade)) => format!("{replay} --shade {shade} --out {}", p.display()),
+        _ => replay.clone(),
+    };
+    let plain = fragrace::verdict::plain_words(&w, &verdict, &replay_picture, picture);
+    summary["plain_words"] = serde_json::json!(plain);
     if a.run.json {
         println!("{summary}");
     } else {
         println!("{}", verdict.text);
+        for line in &plain {
+            println!("  {line}");
+        }
         print_summary(&summary);
         if n > 1 {
             println!(
@@ -755,7 +869,7 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
             println!("  worst case replays with:\n    {replay}");
         }
     }
-    list_written(&written, a.run.json);
+    list_written(&written.files, a.run.json);
     Ok(())
 }
 

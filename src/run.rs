@@ -25,11 +25,21 @@ pub enum SceneSpec {
     /// Several OBJ files (`--obj A --obj B ...`), one object each (geometry culling draws
     /// and culls them one by one), normalised together. File `i` is moved by `i x step` in
     /// the files' own units (`--obj-step X,Y,Z`: the same file three times in a row, as the
-    /// depth-fighting paper's three dragons of Figure 10).
+    /// depth-fighting paper's three dragons of Figure 10), and by `places[i]` when given
+    /// (`--place X,Y,Z` once per file; empty: not moved).
     Objs {
         files: Vec<ObjFile>,
         #[serde(default)]
         step: [f32; 3],
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        places: Vec<[f32; 3]>,
+    },
+    /// A scene file (`--scene-file`, JSON: objects with placements and materials, and a
+    /// camera; [`crate::scene::file`]); `sha256` of its bytes, checked on replay when
+    /// present (the OBJ files it names are not hashed).
+    File {
+        path: PathBuf,
+        sha256: Option<String>,
     },
     /// Triangles inline (fuzz and shrunk cases). With `radius`, the positions are taken as
     /// already normalised and the camera frames a sphere of that radius (so a subset of a
@@ -79,16 +89,30 @@ impl SceneSpec {
                 check_hash(path, sha256)?;
                 Scene::from_obj(path).map_err(Box::new)?
             }
-            SceneSpec::Objs { files, step } => {
+            SceneSpec::Objs {
+                files,
+                step,
+                places,
+            } => {
                 let mut parts = Vec::with_capacity(files.len());
-                for f in files {
+                for (i, f) in files.iter().enumerate() {
                     check_hash(&f.path, &f.sha256)?;
-                    parts.push((
-                        f.path.display().to_string(),
-                        crate::scene::load_obj(&f.path).map_err(Box::new)?,
-                    ));
+                    let mut part = crate::scene::Part::from_obj(&f.path, i).map_err(Box::new)?;
+                    let place = glam::Vec3::from_array(places.get(i).copied().unwrap_or_default());
+                    part.placement = glam::Mat4::from_translation(
+                        glam::Vec3::from_array(*step) * i as f32 + place,
+                    );
+                    parts.push(part);
                 }
-                Scene::from_objects(parts, glam::Vec3::from_array(*step)).map_err(Box::new)?
+                Scene::from_parts(parts).map_err(Box::new)?
+            }
+            SceneSpec::File { path, sha256 } => {
+                check_hash(path, sha256)?;
+                let file = crate::scene::file::SceneFile::read(path).map_err(Box::new)?;
+                let parts = file
+                    .parts(&crate::scene::file::folder(path))
+                    .map_err(Box::new)?;
+                Scene::from_parts(parts).map_err(Box::new)?
             }
             SceneSpec::Inline {
                 positions,
@@ -116,6 +140,7 @@ impl SceneSpec {
                             mesh,
                             radius: *r,
                             objects: Vec::new(),
+                            surface: None,
                         }
                     }
                     _ => Scene::from_mesh("inline", mesh).map_err(Box::new)?,
@@ -128,7 +153,9 @@ impl SceneSpec {
     pub fn name(&self) -> String {
         match self {
             SceneSpec::Builtin(n) => n.clone(),
-            SceneSpec::Obj { path, .. } => path.display().to_string(),
+            SceneSpec::Obj { path, .. } | SceneSpec::File { path, .. } => {
+                path.display().to_string()
+            }
             SceneSpec::Objs { files, .. } => files
                 .iter()
                 .map(|f| f.path.display().to_string())
@@ -191,10 +218,21 @@ impl RunSpec {
         let scene = match &self.scene {
             SceneSpec::Builtin(n) => format!("--scene {n}"),
             SceneSpec::Obj { path, .. } => format!("--obj {}", path.display()),
-            SceneSpec::Objs { files, step } => {
+            SceneSpec::File { path, .. } => format!("--scene-file {}", path.display()),
+            SceneSpec::Objs {
+                files,
+                step,
+                places,
+            } => {
                 let mut c: Vec<String> = files
                     .iter()
-                    .map(|f| format!("--obj {}", f.path.display()))
+                    .enumerate()
+                    .map(|(i, f)| match places.get(i) {
+                        Some([x, y, z]) => {
+                            format!("--obj {} --place {x},{y},{z}", f.path.display())
+                        }
+                        None => format!("--obj {}", f.path.display()),
+                    })
                     .collect();
                 if *step != [0.0; 3] {
                     c.push(format!("--obj-step {},{},{}", step[0], step[1], step[2]));
@@ -216,6 +254,18 @@ impl RunSpec {
             self.algo, self.width, self.height, self.camera.azimuth, self.camera.elevation,
             self.exec.mode.name()
         );
+        if self.camera.fovy != Camera::default().fovy {
+            c += &format!(" --fov {}", self.camera.fovy);
+        }
+        if let Some(d) = self.camera.distance {
+            c += &format!(" --distance {d}");
+        }
+        if let Some([x, y, z]) = self.camera.look_at {
+            c += &format!(" --look-at {x},{y},{z}");
+        }
+        if self.camera.projection == crate::scene::Projection::Orthographic {
+            c += " --orthographic";
+        }
         if self.params.spin_cap != Params::default().spin_cap
             && reads(fragrace_kernels::Param::SpinCap)
         {

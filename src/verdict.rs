@@ -123,3 +123,79 @@ pub fn verdict(c: &Checked, hazards: &HazardCounts) -> Verdict {
         ),
     )
 }
+
+/// The verdict for a newcomer, in three plain sentences: what was found, what it means, what
+/// to run next (`replay`: the command that reruns the worst run; `picture`: the file with
+/// the truth, the algorithm and their difference, when one was written).
+pub fn plain_words(
+    c: &Checked,
+    verdict: &Verdict,
+    replay: &str,
+    picture: Option<&std::path::Path>,
+) -> [String; 3] {
+    let info = &c.rendered.info;
+    let m = &c.metrics;
+    let lost = if m.expected > 0 {
+        100.0 * (1.0 - m.captured as f64 / m.expected as f64)
+    } else {
+        0.0
+    };
+    let found = match verdict.kind {
+        VerdictKind::Exact => format!(
+            "Found: nothing wrong; {} kept every fragment it should, on all {} covered pixels.",
+            info.name, m.covered_pixels
+        ),
+        _ if m.error_pixels > 0 => format!(
+            "Found: {} lost {lost:.1}% of the fragments it should have kept; {} of {} covered pixels are wrong.",
+            info.name, m.error_pixels, m.covered_pixels
+        ),
+        _ => format!(
+            "Found: no pixel is wrong, but {}",
+            verdict.text
+        ),
+    };
+    let means = match verdict.kind {
+        VerdictKind::Exact => format!(
+            "Means: under the schedules tried, {} behaved as its class ({}) promises.",
+            info.name,
+            info.hazard.name()
+        ),
+        VerdictKind::HazardFound => format!(
+            "Means: {} is hazard-prone: invocations of one pixel read and write its storage without a lock, so which fragments survive depends on the order a GPU runs them in; this order lost some.",
+            info.name
+        ),
+        VerdictKind::WithinPromise => format!(
+            "Means: the differences are the ones {} declares (it approximates or drops, and counts what it drops); not a race.",
+            info.name
+        ),
+        VerdictKind::Violation => format!(
+            "Means: {} is declared {}, so this is a bug in the algorithm (or in the emulator): it should not happen under any schedule.",
+            info.name,
+            info.hazard.name()
+        ),
+    };
+    let look = picture
+        .map(|p| {
+            format!(
+                "look at {} (truth, {}, difference); ",
+                p.display(),
+                info.name
+            )
+        })
+        .unwrap_or_default();
+    let safer: Vec<&'static str> = fragrace_kernels::algorithms()
+        .iter()
+        .map(|a| a.info())
+        .filter(|a| a.family == info.family && a.hazard != HazardClass::HazardProne)
+        .map(|a| a.name)
+        .take(2)
+        .collect();
+    let alternative = if info.hazard == HazardClass::HazardProne && !safer.is_empty() {
+        format!("; the same family without the race: {}", safer.join(", "))
+    } else {
+        String::new()
+    };
+    let next =
+        format!("Next: {look}replay the worst run bit for bit with `{replay}`{alternative}.");
+    [found, means, next]
+}

@@ -116,6 +116,7 @@ fn several_obj_files_are_one_object_each() {
     let scene = SceneSpec::Objs {
         files: vec![teapot.clone(), teapot.clone(), teapot],
         step: [8.0, 0.0, -25.0],
+        places: Vec::new(),
     };
     let s = spec(
         scene.clone(),

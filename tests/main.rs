@@ -22,6 +22,7 @@ mod occupancy;
 mod output;
 mod params;
 mod racebench;
+mod render;
 mod scenes;
 mod shards;
 

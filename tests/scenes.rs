@@ -803,6 +803,7 @@ fn camera_matches_oit_py() {
             elevation: el as f32,
             fovy: fovy as f32,
             fill: fill as f32,
+            ..Camera::default()
         };
         let vp = cam.view_proj(radius as f32, w, h);
         let diff = (vp - want.as_mat4())

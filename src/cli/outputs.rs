@@ -3,15 +3,139 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use fragrace::render::{self, Look, Overrides, Shade};
 use fragrace::run::{self, RunSpec};
+use fragrace_kernels::AlgoResult;
 
 use crate::RunArgs;
+
+/// The renderer's settings of the command line; `default` when `--shade` is not given.
+pub(crate) fn look_of(a: &RunArgs, default: Shade) -> Result<Look> {
+    let look = Look {
+        shade: a.shade.unwrap_or(default),
+        sigma: a.sigma,
+        ..Look::default()
+    };
+    look.validate()?;
+    Ok(look)
+}
+
+/// `--color` and `--opacity`.
+pub(crate) fn overrides_of(a: &RunArgs) -> Overrides {
+    Overrides {
+        colors: a.color.clone(),
+        opacities: a.opacity.clone(),
+    }
+}
+
+/// Prints what loading the scene left out (unusable normals, missing or malformed MTL files).
+pub(crate) fn warn_scene(loaded: &run::Loaded) {
+    if let Some(s) = &loaded.scene.surface {
+        for w in &s.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
+}
+
+/// What `--out` wrote, for the summary: the shading and the time it took to make the
+/// picture (shading, compositing, legends; not writing the file) in milliseconds.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Written {
+    pub files: Vec<PathBuf>,
+    pub shade: Option<&'static str>,
+    pub picture_ms: Option<f64>,
+}
+
+/// `--out` of `render` (`truth: None`) or of `check` (the three panels): the picture of this
+/// run, or with `--turntable N` of N views around the scene (each view run again).
+fn write_picture(
+    a: &RunArgs,
+    spec: &RunSpec,
+    loaded: &run::Loaded,
+    r: &run::Rendered,
+    checked: Option<(&run::Checked, &AlgoResult)>,
+    path: &Path,
+    out: &mut Written,
+) -> Result<()> {
+    let default = match checked {
+        Some(_) => Shade::Id,
+        None => render::run::default_shade(r.info.capacity),
+    };
+    let look = look_of(a, default)?;
+    out.shade = Some(look.shade.name());
+    let surface = render::run::surface(loaded, &overrides_of(a))?;
+    let picture = |spec: &RunSpec,
+                   loaded: &run::Loaded,
+                   r: &AlgoResult,
+                   checked: Option<(&run::Checked, &AlgoResult)>|
+     -> Result<render::picture::Canvas> {
+        let view = render::run::view(spec, loaded, &surface);
+        Ok(match checked {
+            Some((c, truth)) => render::run::compare(spec, &view, c, truth, &look)?,
+            None => {
+                let (canvas, stats) = render::run::picture(spec, &view, r, &look)?;
+                if stats.without_primitive > 0 {
+                    eprintln!(
+                        "note: {} of {} fragments have no primitive id ({} keeps depths only): shaded with the first material, facing the eye",
+                        stats.without_primitive, stats.fragments, spec.algo
+                    );
+                }
+                canvas
+            }
+        })
+    };
+    let Some(n) = a.turntable else {
+        let t = std::time::Instant::now();
+        let canvas = picture(spec, loaded, &r.result, checked)?;
+        out.picture_ms = Some(t.elapsed().as_secs_f64() * 1e3);
+        canvas
+            .write_png(path)
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+        out.files.push(path.to_path_buf());
+        return Ok(());
+    };
+    let mut frames = Vec::with_capacity(n as usize);
+    let mut view_loaded = run::Loaded {
+        scene: loaded.scene.clone(),
+        view_proj: loaded.view_proj,
+    };
+    for az in render::turntable::azimuths(spec.camera.azimuth, n) {
+        let mut s = spec.clone();
+        s.camera.azimuth = az;
+        view_loaded.view_proj = view_loaded.scene.view_proj(&s.camera, s.width, s.height);
+        let frame = match checked {
+            Some(_) => {
+                let truth = run::truth(&s, &view_loaded)?;
+                let c = run::check_with(&s, &view_loaded, &truth)?;
+                picture(&s, &view_loaded, &c.rendered.result, Some((&c, &truth)))?
+            }
+            None => {
+                let r = run::render(&s, &view_loaded)?;
+                picture(&s, &view_loaded, &r.result, None)?
+            }
+        };
+        frames.push(frame);
+    }
+    out.files
+        .extend(render::turntable::write(path, &frames, 100)?);
+    Ok(())
+}
 
 /// Checks that the outputs asked for can be written, before any computation.
 pub(crate) fn check_outputs(a: &RunArgs, algo: &str) -> Result<()> {
     use fragrace::output::{check_dir, check_writable};
     if let Some(p) = &a.out {
         check_writable(p, "the image (--out)")?;
+    }
+    if a.out.is_none() && (a.shade.is_some() || !a.color.is_empty() || !a.opacity.is_empty()) {
+        bail!("--shade, --color and --opacity change only the picture: add --out PATH");
+    }
+    // The renderer's settings, before any computation (the shading mode's default does not
+    // matter here).
+    look_of(a, Shade::Lit)?;
+    overrides_of(a).validate()?;
+    if a.turntable == Some(0) {
+        bail!("--turntable 0: the number of views must be at least 1");
     }
     if let Some(p) = &a.raw_out {
         if !matches!(algo, "count" | "count-plain") {
@@ -29,24 +153,18 @@ pub(crate) fn check_outputs(a: &RunArgs, algo: &str) -> Result<()> {
 pub(crate) fn write_outputs(
     a: &RunArgs,
     spec: &RunSpec,
+    loaded: &run::Loaded,
     r: &run::Rendered,
-    checked: Option<&run::Checked>,
-) -> Result<Vec<PathBuf>> {
+    checked: Option<(&run::Checked, &AlgoResult)>,
+) -> Result<Written> {
     let res = &r.result;
-    let mut written = Vec::new();
+    let mut out = Written::default();
     let named = |p: &Path| format!("{}: cannot write", p.display());
     if let Some(path) = &a.out {
-        if let Some(img) = &res.image {
-            fragrace::output::write_rgba(path, spec.width, spec.height, img)
-                .with_context(|| named(path))?;
-        } else if let Some(c) = &res.counts {
-            fragrace::output::write_heatmap(path, spec.width, spec.height, c)
-                .with_context(|| named(path))?;
-        } else {
-            bail!("algorithm `{}` produces no image", spec.algo);
-        }
-        written.push(path.clone());
+        write_picture(a, spec, loaded, r, checked, path, &mut out)?;
     }
+    let mut written = std::mem::take(&mut out.files);
+    let checked = checked.map(|(c, _)| c);
     if let Some(path) = &a.raw_out {
         let Some(c) = &res.counts else {
             bail!("--raw-out needs a counting algorithm (count, count-plain)")
@@ -101,7 +219,8 @@ pub(crate) fn write_outputs(
             );
         }
     }
-    Ok(written)
+    out.files = written;
+    Ok(out)
 }
 
 /// Lists the files written (on stderr under --json, to keep stdout one JSON object).

@@ -4,7 +4,7 @@
 //!
 //! Everything is computed in f64 (as numpy does) and rounded to f32 once at the end.
 
-use glam::{DMat4, DVec3, Mat4, Vec3};
+use glam::{DMat4, DVec3, DVec4, Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
 use super::SceneError;
@@ -39,6 +39,12 @@ pub fn normalise(positions: &mut [Vec3]) -> f32 {
 /// towards +Y; the distance makes the scene's bounding sphere span `fill` of the smaller
 /// viewport dimension with a vertical field of view `fovy` (degrees). Stored in case files,
 /// so every field has a default and may be omitted.
+///
+/// The renderer's options leave the peer's camera alone when they are unset (they are then
+/// left out of case files too): `distance` puts the eye that far from the point looked at,
+/// `look_at` moves that point from the origin (in the normalised scene's units: the scene's
+/// bounding box is centred at the origin, its largest extent 1), and
+/// [`Projection::Orthographic`] frames the bounding sphere with parallel rays.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct Camera {
@@ -46,6 +52,29 @@ pub struct Camera {
     pub elevation: f32,
     pub fovy: f32,
     pub fill: f32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance: Option<f32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub look_at: Option<[f32; 3]>,
+    #[serde(skip_serializing_if = "Projection::is_perspective")]
+    pub projection: Projection,
+}
+
+/// How the camera projects.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Projection {
+    /// A pinhole with the vertical field of view `fovy` (the peer's).
+    #[default]
+    Perspective,
+    /// Parallel rays; the bounding sphere spans `fill` of the smaller viewport dimension.
+    Orthographic,
+}
+
+impl Projection {
+    fn is_perspective(&self) -> bool {
+        *self == Projection::Perspective
+    }
 }
 
 impl Default for Camera {
@@ -56,6 +85,9 @@ impl Default for Camera {
             elevation: 0.0,
             fovy: 60.0,
             fill: 0.8,
+            distance: None,
+            look_at: None,
+            projection: Projection::Perspective,
         }
     }
 }
@@ -90,7 +122,22 @@ impl Camera {
         if width == 0 || height == 0 {
             return bad(format!("empty viewport {width}x{height}"));
         }
+        if let Some(d) = self.distance {
+            if !(d > 0.0 && d.is_finite()) {
+                return bad(format!("distance {d} is not positive and finite"));
+            }
+        }
+        if let Some(p) = self.look_at {
+            if !p.iter().all(|c| c.is_finite()) {
+                return bad(format!("look-at point {p:?} is not finite"));
+            }
+        }
         Ok(())
+    }
+
+    /// Whether this is the peer's orbit camera (no renderer option set).
+    pub fn is_orbit(&self) -> bool {
+        self.distance.is_none() && self.look_at.is_none() && self.projection.is_perspective()
     }
 
     /// The full camera set-up for a scene of bounding-sphere `radius` in a `width` x `height`
@@ -100,6 +147,9 @@ impl Camera {
     /// becomes 0.8, not 0.800000011920929), so that a camera written `0.8` in a case file
     /// gives the matrix `oit.py --fill 0.8` gives.
     pub fn rig(&self, radius: f32, width: u32, height: u32) -> CameraRig {
+        if !self.is_orbit() {
+            return self.free_rig(f64::from(radius), width, height);
+        }
         camera_rig(
             f64::from(radius),
             decimal(self.azimuth),
@@ -115,6 +165,81 @@ impl Camera {
     /// bounding-sphere `radius` in a `width` x `height` viewport.
     pub fn view_proj(&self, radius: f32, width: u32, height: u32) -> Mat4 {
         self.rig(radius, width, height).view_proj.as_mat4()
+    }
+}
+
+impl Camera {
+    /// The renderer's camera ([`Camera::is_orbit`] false): the orbit's direction and up
+    /// vector, the eye `distance` from `look_at` (default: the orbit's distance and the
+    /// origin), near and far around the bounding sphere (the near plane at least a
+    /// thousandth of the far one away, so an eye inside the scene still sees what is in
+    /// front of it).
+    fn free_rig(&self, radius: f64, width: u32, height: u32) -> CameraRig {
+        let orbit = camera_rig(
+            radius,
+            decimal(self.azimuth),
+            decimal(self.elevation),
+            width,
+            height,
+            decimal(self.fovy),
+            decimal(self.fill),
+        );
+        let target = self
+            .look_at
+            .map(|p| DVec3::new(decimal(p[0]), decimal(p[1]), decimal(p[2])))
+            .unwrap_or(DVec3::ZERO);
+        let dist = self.distance.map(decimal).unwrap_or(orbit.distance);
+        let dir = orbit.eye / orbit.eye.length();
+        let eye = target + dir * dist;
+        // The orbit's view matrix, moved: same axes, another eye.
+        let rot = DMat4::from_cols(
+            orbit.view.x_axis,
+            orbit.view.y_axis,
+            orbit.view.z_axis,
+            DVec4::W,
+        );
+        let view = rot * DMat4::from_translation(-eye);
+        // Depth of the scene's centre along the view direction.
+        let centre = -(view.transform_point3(DVec3::ZERO)).z;
+        let aspect = f64::from(width) / f64::from(height);
+        let (proj, near, far) = match self.projection {
+            Projection::Perspective => {
+                let far = (centre + radius) * 1.01;
+                let near = ((centre - radius) * 0.99).max(far * 1e-3);
+                let far = far.max(near * 2.0);
+                let t = 1.0 / (decimal(self.fovy).to_radians() / 2.0).tan();
+                let p = DMat4::from_cols_array_2d(&[
+                    [t / aspect, 0.0, 0.0, 0.0],
+                    [0.0, t, 0.0, 0.0],
+                    [0.0, 0.0, (far + near) / (near - far), -1.0],
+                    [0.0, 0.0, 2.0 * far * near / (near - far), 0.0],
+                ]);
+                (p, near, far)
+            }
+            Projection::Orthographic => {
+                let (near, far) = (centre - radius * 1.01, centre + radius * 1.01);
+                // Half extents: the sphere spans `fill` of the smaller dimension.
+                let h = radius / decimal(self.fill) / aspect.min(1.0);
+                let w = h * aspect;
+                let p = DMat4::from_cols_array_2d(&[
+                    [1.0 / w, 0.0, 0.0, 0.0],
+                    [0.0, 1.0 / h, 0.0, 0.0],
+                    [0.0, 0.0, -2.0 / (far - near), 0.0],
+                    [0.0, 0.0, -(far + near) / (far - near), 1.0],
+                ]);
+                (p, near, far)
+            }
+        };
+        CameraRig {
+            view,
+            proj,
+            view_proj: proj * view,
+            eye,
+            distance: dist,
+            near,
+            far,
+            fovy: decimal(self.fovy),
+        }
     }
 }
 

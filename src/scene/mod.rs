@@ -13,15 +13,22 @@
 
 pub mod builtin;
 pub mod camera;
+pub mod file;
+pub mod material;
 pub mod obj;
+pub mod surface;
 
 use std::path::{Path, PathBuf};
 
 use fragrace_emu::geometry::{Mesh, MeshError};
 use glam::Mat4;
 
-pub use camera::{camera, camera_rig, normalise, Camera, CameraRig};
-pub use obj::{content_hash, load_obj, load_obj_with_hash, parse_obj_bytes};
+pub use camera::{camera, camera_rig, normalise, Camera, CameraRig, Projection};
+pub use material::Material;
+pub use obj::{
+    content_hash, load_obj, load_obj_with_extras, load_obj_with_hash, parse_obj_bytes, ObjExtras,
+};
+pub use surface::Surface;
 
 /// Everything that can go wrong while getting a scene. Each variant says *what* is wrong and
 /// *where* (file and line when there is one), because a scene error is usually a user's typo
@@ -76,6 +83,10 @@ pub enum SceneError {
     DegenerateMesh { name: String },
     #[error("{name}: invalid mesh: {source}")]
     InvalidMesh { name: String, source: MeshError },
+    #[error("bad material: {reason}")]
+    BadMaterial { reason: String },
+    #[error("{}: {reason}", path.display())]
+    SceneFile { path: PathBuf, reason: String },
     #[error("bad camera: {reason}")]
     BadCamera { reason: String },
     #[error("unknown built-in scene {name:?}; the built-in scenes are: {}", builtin_names().join(", "))]
@@ -98,6 +109,19 @@ pub struct Scene {
     /// The scene's objects: consecutive ranges of the mesh's triangles (empty: the whole
     /// mesh is one object). `object-grid` and scenes of several OBJ files have several.
     pub objects: Vec<std::ops::Range<u32>>,
+    /// Normals and materials for the renderer (OBJ files, scene files); `None`: the mesh's
+    /// own normals or smooth ones, default materials ([`Scene::surface`]).
+    pub surface: Option<Surface>,
+}
+
+/// One object of a scene being assembled: a mesh, its surface and where it is placed.
+#[derive(Clone, Debug)]
+pub struct Part {
+    pub name: String,
+    pub mesh: Mesh,
+    pub surface: Surface,
+    /// Model matrix, applied to the mesh's own coordinates before the scene is normalised.
+    pub placement: Mat4,
 }
 
 /// The names [`Scene::builtin`] accepts (without parameters; see [`builtin::USAGE`]).
@@ -117,11 +141,68 @@ impl Scene {
         })
     }
 
-    /// Loads an OBJ file (plain or gzip) and normalises it. The scene's name is the path.
+    /// Loads an OBJ file (plain or gzip) and normalises it, with its normals and the
+    /// materials of its MTL files ([`Part::from_obj`]). The scene's name is the path.
     pub fn from_obj(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
-        let path = path.as_ref();
-        let mesh = load_obj(path)?;
-        Scene::from_mesh(path.display().to_string(), mesh)
+        let part = Part::from_obj(path.as_ref(), 0)?;
+        let surface = part.surface;
+        Ok(Scene {
+            surface: Some(surface),
+            ..Scene::from_mesh(part.name, part.mesh)?
+        })
+    }
+
+    /// A scene of several placed parts, one object each, normalised together. Its name is
+    /// the parts' names joined by `+`.
+    pub fn from_parts(parts: Vec<Part>) -> Result<Scene, SceneError> {
+        let name = parts
+            .iter()
+            .map(|p| p.name.as_str())
+            .collect::<Vec<_>>()
+            .join("+");
+        let mut mesh = Mesh::default();
+        let mut surface: Option<Surface> = None;
+        let mut objects = Vec::with_capacity(parts.len());
+        for (i, mut part) in parts.into_iter().enumerate() {
+            if part.placement != Mat4::IDENTITY {
+                for p in &mut part.mesh.positions {
+                    *p = part.placement.transform_point3(*p);
+                }
+                if let Some(n) = &mut part.mesh.normals {
+                    let inv_t = glam::Mat3::from_mat4(part.placement).inverse().transpose();
+                    for v in n {
+                        *v = (inv_t * *v).normalize_or_zero();
+                    }
+                }
+                part.surface
+                    .transform_normals(glam::Mat3::from_mat4(part.placement));
+            }
+            let start = mesh.indices.len() as u32;
+            if i == 0 {
+                mesh = part.mesh;
+            } else {
+                mesh.append(&part.mesh);
+            }
+            match &mut surface {
+                None => surface = Some(part.surface),
+                Some(s) => s.append(part.surface),
+            }
+            objects.push(start..mesh.indices.len() as u32);
+        }
+        Ok(Scene {
+            objects,
+            surface,
+            ..Scene::from_mesh(name, mesh)?
+        })
+    }
+
+    /// The renderer's normals and materials: the scene's own, or the mesh's normals (smooth
+    /// ones when it has none) and a default material per object.
+    pub fn surface(&self) -> std::borrow::Cow<'_, Surface> {
+        match &self.surface {
+            Some(s) if s.fits(&self.mesh) => std::borrow::Cow::Borrowed(s),
+            _ => std::borrow::Cow::Owned(Surface::for_objects(&self.mesh, &self.objects)),
+        }
     }
 
     /// A scene of several meshes, one object each, `parts[i]` moved by `i x step` (in the
@@ -173,6 +254,7 @@ impl Scene {
             mesh,
             radius,
             objects: Vec::new(),
+            surface: None,
         })
     }
 
@@ -180,6 +262,23 @@ impl Scene {
     /// `width` x `height` viewport; the same matrix `oit.py` would use.
     pub fn view_proj(&self, camera: &Camera, width: u32, height: u32) -> Mat4 {
         camera.view_proj(self.radius, width, height)
+    }
+}
+
+impl Part {
+    /// An OBJ file as object number `index` of a scene: its mesh, its `vn` normals (smooth
+    /// ones when it has none) and its MTL materials (faces without one take
+    /// [`Material::default_for`]`(index)`), not moved.
+    pub fn from_obj(path: &Path, index: usize) -> Result<Part, SceneError> {
+        let (mesh, extras, _) = obj::load_obj_with_extras(path)?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let surface = Surface::from_obj(&mesh, &extras, dir, Material::default_for(index))?;
+        Ok(Part {
+            name: path.display().to_string(),
+            mesh,
+            surface,
+            placement: Mat4::IDENTITY,
+        })
     }
 }
 

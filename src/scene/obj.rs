@@ -12,9 +12,12 @@
 //!   id), and `tobj` can overflow on absurd ones (`f 1/-9999999999999999999/1`), a panic in
 //!   a debug or fuzz build; the pre-pass keeps only the position index of each face vertex.
 //!
-//! Materials, groups, objects, smoothing groups, texture coordinates, normals, lines and
-//! points are ignored; all faces go into one mesh in file order, polygons triangulated as
-//! fans `(v0, vi, vi+1)`, so triangle `i` has the primitive id `oit.py` gives it.
+//! Groups, objects, smoothing groups, texture coordinates, lines and points are ignored; all
+//! faces go into one mesh in file order, polygons triangulated as fans `(v0, vi, vi+1)`, so
+//! triangle `i` has the primitive id `oit.py` gives it. What the renderer needs besides
+//! positions, the `vn` normals, `usemtl` materials and `mtllib` files, is gathered by the same
+//! pre-pass into [`ObjExtras`] ([`load_obj_with_extras`]), apart from the [`Mesh`], which
+//! stays the peer's.
 
 use std::borrow::Cow;
 use std::fmt::Write as _;
@@ -58,6 +61,13 @@ pub fn load_obj(path: impl AsRef<Path>) -> Result<Mesh, SceneError> {
 
 /// [`load_obj`] and the [`content_hash`] of the file's bytes, reading the file once.
 pub fn load_obj_with_hash(path: impl AsRef<Path>) -> Result<(Mesh, String), SceneError> {
+    load_obj_with_extras(path).map(|(mesh, _, hash)| (mesh, hash))
+}
+
+/// [`load_obj_with_hash`] and what the renderer reads besides positions ([`ObjExtras`]).
+pub fn load_obj_with_extras(
+    path: impl AsRef<Path>,
+) -> Result<(Mesh, ObjExtras, String), SceneError> {
     let path = path.as_ref();
     let bytes = std::fs::read(path).map_err(|source| match source.kind() {
         std::io::ErrorKind::NotFound => SceneError::NotFound {
@@ -76,17 +86,22 @@ pub fn load_obj_with_hash(path: impl AsRef<Path>) -> Result<(Mesh, String), Scen
             path: path.to_owned(),
         });
     }
-    let mesh = parse(&bytes, path)?;
-    Ok((mesh, content_hash(&bytes)))
+    let (mesh, extras) = parse(&bytes, path)?;
+    Ok((mesh, extras, content_hash(&bytes)))
 }
 
 /// Parses OBJ data (plain or gzip) from memory. Never panics, whatever the bytes: this is
 /// the entry point of the OBJ fuzz target. Errors name the source `<memory>`.
 pub fn parse_obj_bytes(bytes: &[u8]) -> Result<Mesh, SceneError> {
+    parse(bytes, Path::new(MEMORY)).map(|(mesh, _)| mesh)
+}
+
+/// [`parse_obj_bytes`] with the [`ObjExtras`] (normals, materials) of the data.
+pub fn parse_obj_bytes_with_extras(bytes: &[u8]) -> Result<(Mesh, ObjExtras), SceneError> {
     parse(bytes, Path::new(MEMORY))
 }
 
-fn parse(bytes: &[u8], path: &Path) -> Result<Mesh, SceneError> {
+fn parse(bytes: &[u8], path: &Path) -> Result<(Mesh, ObjExtras), SceneError> {
     let data: Cow<[u8]> = if is_gzip(bytes) {
         let mut out = Vec::new();
         flate2::read::MultiGzDecoder::new(bytes)
@@ -103,7 +118,7 @@ fn parse(bytes: &[u8], path: &Path) -> Result<Mesh, SceneError> {
     // byte inside a number still fails that number's parse, with its line.
     let text = String::from_utf8_lossy(&data);
     // A UTF-8 byte order mark would hide the first line's keyword.
-    let pre = prepass(text.strip_prefix('\u{feff}').unwrap_or(&text), path)?;
+    let mut pre = prepass(text.strip_prefix('\u{feff}').unwrap_or(&text), path)?;
     if pre.faces == 0 {
         return Err(SceneError::EmptyMesh {
             name: path.display().to_string(),
@@ -137,7 +152,8 @@ fn parse(bytes: &[u8], path: &Path) -> Result<Mesh, SceneError> {
             name: path.display().to_string(),
         });
     }
-    Ok(mesh)
+    let extras = std::mem::take(&mut pre.extras).finish(mesh.indices.len(), path);
+    Ok((mesh, extras))
 }
 
 /// The text handed to tobj: only `v` lines (colours dropped) and `f` lines with absolute,
@@ -148,6 +164,89 @@ struct Prepass {
     vertices: usize,
     /// Number of faces with at least three vertices (not counting the identity polygon).
     faces: usize,
+    extras: ExtrasBuilder,
+}
+
+/// What an OBJ file says besides its triangles' positions: shading normals (`vn`), each
+/// triangle's material (`usemtl`) and the material libraries (`mtllib`) to read them from.
+/// Never a reason to refuse a file: what is unusable is left out with a warning.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ObjExtras {
+    /// The file's `vn` normals and, per triangle, the normal of each corner; `None` when
+    /// the file has none (or unusable ones, with a warning).
+    pub normals: Option<(Vec<Vec3>, Vec<[u32; 3]>)>,
+    /// Per triangle, an index into `material_names`, or `u32::MAX` before any `usemtl`.
+    pub triangle_material: Vec<u32>,
+    /// The names given to `usemtl`, in order of first use.
+    pub material_names: Vec<String>,
+    /// The files named by `mtllib` lines, as written (relative to the OBJ's folder).
+    pub mtllibs: Vec<String>,
+    /// What was left out, and why.
+    pub warnings: Vec<String>,
+}
+
+/// [`ObjExtras`] as the pre-pass gathers them.
+#[derive(Default)]
+struct ExtrasBuilder {
+    normals: Vec<Vec3>,
+    /// Per triangle, the `vn` index (from 1; 0: none) of each corner.
+    corners: Vec<[u32; 3]>,
+    triangle_material: Vec<u32>,
+    material_names: Vec<String>,
+    current_material: u32,
+    mtllibs: Vec<String>,
+    /// The first reason the normals cannot be used (with its line).
+    bad_normals: Option<String>,
+}
+
+impl ExtrasBuilder {
+    fn finish(self, triangles: usize, path: &Path) -> ObjExtras {
+        let mut warnings = Vec::new();
+        let with_normals = self.corners.iter().filter(|c| c[0] != 0).count();
+        let mut bad = self.bad_normals;
+        let defined = self.normals.len() as u32;
+        if bad.is_none() && self.corners.iter().flatten().any(|&i| i > defined) {
+            bad = Some(format!("a face names a normal past the {defined} defined"));
+        }
+        if bad.is_none() && with_normals > 0 && with_normals < self.corners.len() {
+            bad = Some(format!(
+                "{with_normals} of {} triangles have vn normals",
+                self.corners.len()
+            ));
+        }
+        let normals = match bad {
+            Some(why) => {
+                warnings.push(format!(
+                    "{}: vn normals not used ({why}); smooth normals are computed instead",
+                    path.display()
+                ));
+                None
+            }
+            None if with_normals > 0 && self.corners.len() == triangles => Some((
+                self.normals,
+                self.corners
+                    .iter()
+                    .map(|c| c.map(|i| i - 1))
+                    .collect::<Vec<_>>(),
+            )),
+            None => None,
+        };
+        let mut triangle_material = self.triangle_material;
+        if triangle_material.len() != triangles {
+            warnings.push(format!(
+                "{}: usemtl materials not used (faces and triangles disagree); one default material",
+                path.display()
+            ));
+            triangle_material = vec![u32::MAX; triangles];
+        }
+        ObjExtras {
+            normals,
+            triangle_material,
+            material_names: self.material_names,
+            mtllibs: self.mtllibs,
+            warnings,
+        }
+    }
 }
 
 /// The identity polygon's vertices: `1..=n`, padded to three by repeating the last one.
@@ -169,6 +268,11 @@ fn prepass(text: &str, path: &Path) -> Result<Prepass, SceneError> {
     // and its line are checked at the end.
     let (mut max_index, mut max_line) = (0usize, 0usize);
     let mut face = Vec::new();
+    let mut face_normals: Vec<u32> = Vec::new();
+    let mut ex = ExtrasBuilder {
+        current_material: u32::MAX,
+        ..ExtrasBuilder::default()
+    };
     for (n, line) in text.lines().enumerate() {
         let lineno = n + 1;
         let mut words = line.split_whitespace();
@@ -232,11 +336,52 @@ fn prepass(text: &str, path: &Path) -> Result<Prepass, SceneError> {
                 }
                 vlines.push('\n');
             }
+            Some("vn") => {
+                let n: Vec<f32> = words.filter_map(|w| w.parse().ok()).collect();
+                match n[..] {
+                    [x, y, z] if x.is_finite() && y.is_finite() && z.is_finite() => {
+                        ex.normals.push(Vec3::new(x, y, z))
+                    }
+                    _ => {
+                        ex.bad_normals
+                            .get_or_insert(format!("line {lineno}: not 3 finite numbers"));
+                        ex.normals.push(Vec3::ZERO);
+                    }
+                }
+            }
+            Some("usemtl") => {
+                let name = line.trim_start()[6..].trim().to_string();
+                ex.current_material = match ex.material_names.iter().position(|m| *m == name) {
+                    Some(i) => i as u32,
+                    None => {
+                        ex.material_names.push(name);
+                        (ex.material_names.len() - 1) as u32
+                    }
+                };
+            }
+            Some("mtllib") => {
+                let names = line.trim_start()[6..].trim();
+                if !names.is_empty() {
+                    ex.mtllibs.push(names.to_string());
+                }
+            }
             Some("f") => {
                 face.clear();
+                face_normals.clear();
                 for token in words {
                     let index = face_index(token)
                         .ok_or_else(|| malformed(lineno, format!("bad face vertex {token:?}")))?;
+                    face_normals.push(normal_index(token, ex.normals.len()).unwrap_or_else(
+                        |bad| {
+                            if bad {
+                                ex.bad_normals.get_or_insert(format!(
+                                    "line {lineno}: normal index out of range ({} defined)",
+                                    ex.normals.len()
+                                ));
+                            }
+                            0
+                        },
+                    ));
                     let out_of_range = || SceneError::FaceIndexOutOfRange {
                         path: path.to_owned(),
                         line: lineno,
@@ -266,6 +411,11 @@ fn prepass(text: &str, path: &Path) -> Result<Prepass, SceneError> {
                 // drop them too).
                 if face.len() >= 3 {
                     faces += 1;
+                    for i in 1..face.len() - 1 {
+                        ex.corners
+                            .push([face_normals[0], face_normals[i], face_normals[i + 1]]);
+                        ex.triangle_material.push(ex.current_material);
+                    }
                     flines.push('f');
                     for i in &face {
                         let _ = write!(flines, " {i}");
@@ -297,7 +447,20 @@ fn prepass(text: &str, path: &Path) -> Result<Prepass, SceneError> {
         text,
         vertices,
         faces,
+        extras: ex,
     })
+}
+
+/// The normal index (from 1, absolute) of a face vertex `v//vn` or `v/vt/vn`: `Ok(0)` when it
+/// has none, `Err(true)` when it names no normal defined so far (relative) or at all.
+fn normal_index(token: &str, defined: usize) -> Result<u32, bool> {
+    let Some(n) = token.split('/').nth(2).filter(|n| !n.is_empty()) else {
+        return Ok(0);
+    };
+    let i: i64 = n.parse().map_err(|_| true)?;
+    let absolute = if i < 0 { defined as i64 + 1 + i } else { i };
+    // Forward references are checked at the end ([`ExtrasBuilder::finish`] sees the count).
+    u32::try_from(absolute).ok().filter(|&a| a >= 1).ok_or(true)
 }
 
 /// The position index of one face vertex `v`, `v/vt`, `v//vn` or `v/vt/vn`; texture and

@@ -129,6 +129,7 @@ pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
             elevation: finite_f32(u)?,
             fovy: finite_f32(u)?,
             fill: finite_f32(u)?,
+            ..Camera::default()
         },
         width: u32::arbitrary(u)?,
         height: u32::arbitrary(u)?,
