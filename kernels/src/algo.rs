@@ -246,7 +246,10 @@ pub struct AlgoResult {
 /// the resolve target back, rebuilding the capture from them, and the invariants checked on
 /// it (the llvmpipe peer reads back and checks untimed too). It owns what it reads (the
 /// device and its framebuffer), and fills in the result's capture, image and checks.
-pub struct Deferred(Box<dyn FnOnce(&mut AlgoResult) -> Result<(), AlgoError> + Send>);
+pub struct Deferred(Box<DeferredWork>);
+
+/// The work of a [`Deferred`].
+type DeferredWork = dyn FnOnce(&mut AlgoResult) -> Result<(), AlgoError> + Send;
 
 impl Deferred {
     pub fn new(
