@@ -15,7 +15,11 @@
 # ALGO is fragrace's name; the peer runs its counterpart (count, ll, kb-rmw -> kbuf-rmw,
 # kb-atomic32 -> kbuf-atomic; both with k = 8, the peer's default).
 # Env: CASES (default "dragon.obj.gz:512 dragon.obj.gz:2048 bunny.obj.gz:2048"; MESH:SIZE);
-# LOCKSTEP=1 runs fragrace with its default lockstep warps instead of --no-lockstep.
+# LOCKSTEP=1 runs fragrace with its default lockstep warps instead of --no-lockstep;
+# FRAGRACE=PATH runs that binary instead of building this tree's release one (a build to
+# compare with, kept apart while this tree changes).
+# Runs from another directory keep ../shared relative to the repository (MODELS and PEER
+# override the models' directory and the peer's script).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 rounds=${1:-3}
@@ -29,10 +33,14 @@ case "$algo" in
 esac
 lockstep=--no-lockstep
 [ "${LOCKSTEP:-0}" = 1 ] && lockstep=
-cargo build --release -q
-F=./target/release/fragrace
-M=../shared/models
-PEER=../shared/peers/llvmpipe/oit.py
+if [ -n "${FRAGRACE:-}" ]; then
+    F=$FRAGRACE
+else
+    cargo build --release -q
+    F=./target/release/fragrace
+fi
+M=${MODELS:-../shared/models}
+PEER=${PEER:-../shared/peers/llvmpipe/oit.py}
 python3 -c "import moderngl" 2>/dev/null || { echo "needs the llvmpipe peer's dependencies (see ci/bench.sh)" >&2; exit 1; }
 median='import sys; v = sorted(float(x) for x in sys.argv[1:]); print(f"{v[len(v) // 2]:.2f}")'
 for c in ${CASES:-dragon.obj.gz:512 dragon.obj.gz:2048 bunny.obj.gz:2048}; do

@@ -239,6 +239,7 @@ impl TileMemory {
 
     /// Writes the shader outputs (one per target, raw words) to the samples in `mask`,
     /// through each target's blend / logic op / write mask.
+    #[inline]
     pub fn write_outputs(
         &mut self,
         state: &FragmentState,

@@ -347,8 +347,19 @@ impl TargetState {
     ///
     /// Then channel `c` takes the new value only if bit `c` of `write_mask` is set; other
     /// channels keep `dst`.
+    #[inline]
     pub fn combine(&self, src: [u32; 4], dst: [u32; 4]) -> [u32; 4] {
         let n = self.format.channels();
+        // A plain write of every channel of a four-channel 32-bit format (a resolve's
+        // target): the output's bits, as the general case below computes them.
+        if n == 4
+            && self.write_mask & 0xf == 0xf
+            && self.blend.is_none()
+            && self.logic_op.is_none()
+            && self.format != Format::RGBA8
+        {
+            return src;
+        }
         let new: [u32; 4] = match self.format {
             Format::R32UI | Format::RGBA32UI => match self.logic_op {
                 Some(op) => std::array::from_fn(|c| op.apply(src[c], dst[c])),

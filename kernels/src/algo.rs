@@ -212,7 +212,7 @@ impl Check {
 }
 
 /// What one run of an algorithm produced.
-#[derive(Clone, Debug, Default)]
+#[derive(Debug, Default)]
 pub struct AlgoResult {
     /// What was kept per pixel (for `Capacity::All`, `KNearest`, `Nearest`).
     pub capture: Option<Capture>,
@@ -237,6 +237,44 @@ pub struct AlgoResult {
     /// Bucket schemes only: per pixel (row-major), the fragments that lost their bucket to
     /// another fragment routed to the same one (deterministic, not races).
     pub collisions: Option<Vec<u32>>,
+    /// What [`Algorithm::run_frame`] left for [`Algorithm::self_check`] (readbacks and the
+    /// checks that walk them); `None` once done, or when the frame left nothing.
+    pub deferred: Option<Deferred>,
+}
+
+/// The host work a frame leaves for [`Algorithm::self_check`]: reading whole buffers and
+/// the resolve target back, rebuilding the capture from them, and the invariants checked on
+/// it (the llvmpipe peer reads back and checks untimed too). It owns what it reads (the
+/// device and its framebuffer), and fills in the result's capture, image and checks.
+pub struct Deferred(Box<DeferredWork>);
+
+/// The work of a [`Deferred`].
+type DeferredWork = dyn FnOnce(&mut AlgoResult) -> Result<(), AlgoError> + Send;
+
+impl Deferred {
+    pub fn new(
+        work: impl FnOnce(&mut AlgoResult) -> Result<(), AlgoError> + Send + 'static,
+    ) -> Self {
+        Deferred(Box::new(work))
+    }
+
+    /// Does the work on `result`; an error (a buffer that cannot be read back) is a failed
+    /// check, named after the work.
+    pub fn run(self, result: &mut AlgoResult) {
+        if let Err(e) = (self.0)(result) {
+            result.checks.push(Check::new(
+                "the self-checks read the buffers back",
+                false,
+                e.to_string(),
+            ));
+        }
+    }
+}
+
+impl std::fmt::Debug for Deferred {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Deferred(..)")
+    }
 }
 
 /// Why an algorithm could not run.
@@ -330,10 +368,13 @@ pub trait Algorithm: Send + Sync {
     }
 
     /// Completes a result of [`Algorithm::run_frame`] with the checks it left out (and what
-    /// they find, as [`AlgoResult::dropped`]). By default nothing: `run_frame` left nothing
-    /// out.
+    /// they find, as [`AlgoResult::dropped`]). By default the result's
+    /// [`AlgoResult::deferred`] work, if any.
     fn self_check(&self, result: &mut AlgoResult, exec: &ExecConfig) {
-        let _ = (result, exec);
+        let _ = exec;
+        if let Some(work) = result.deferred.take() {
+            work.run(result);
+        }
     }
 }
 
@@ -353,4 +394,48 @@ pub fn frame_then_check<A: Algorithm + ?Sized>(
 /// Runs with a fresh device (helper for implementations).
 pub fn fresh_device() -> Device {
     Device::new()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::*;
+
+    /// The algorithms whose frame defers its readbacks: `run` is exactly the frame followed
+    /// by `self_check`, and the frame alone reads nothing back.
+    #[test]
+    fn a_deferred_frame_then_its_self_check_is_run() {
+        let mesh = layers();
+        let f = frame_sized(&mesh, 24, 20);
+        let exec = ExecConfig::ordered();
+        let params = Params::default();
+        for name in ["ll", "kb-rmw", "kb-atomic32", "kb-atomic64"] {
+            let algo = crate::algorithm(name).unwrap();
+            let whole = algo.run(&f, &params, &exec).unwrap();
+            let mut split = algo.run_frame(&f, &params, &exec).unwrap();
+            assert!(
+                split.checks.is_empty() && split.capture.is_none() && split.image.is_none(),
+                "{name}: the frame alone reads nothing back"
+            );
+            assert!(split.deferred.is_some(), "{name}");
+            algo.self_check(&mut split, &exec);
+            assert!(split.deferred.is_none(), "{name}: done once");
+            assert_eq!(split.capture, whole.capture, "{name}");
+            assert_eq!(split.image, whole.image, "{name}");
+            assert_eq!(split.dropped, whole.dropped, "{name}");
+            assert_eq!(split.storage_bytes, whole.storage_bytes, "{name}");
+            let checks = |r: &AlgoResult| {
+                r.checks
+                    .iter()
+                    .map(|c| (c.name.clone(), c.passed, c.detail.clone()))
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(checks(&split), checks(&whole), "{name}");
+            assert!(
+                !whole.checks.is_empty() && whole.checks.iter().all(|c| c.passed),
+                "{name}: {:?}",
+                whole.checks
+            );
+        }
+    }
 }

@@ -25,11 +25,27 @@ pub fn hash32(mut x: u32) -> u32 {
 /// primitive id, each channel `0.2 + 0.8 * c`), packed RGBA8 with alpha 255.
 pub fn prim_color_packed(prim: u32) -> u32 {
     let h = hash32(prim);
-    let ch = |c: u32| -> u32 {
-        let v = 0.2 + 0.8 * (c & 255) as f32 / 255.0;
-        (v * 255.0).round() as u32
-    };
+    let ch = |c: u32| CHANNEL[(c & 255) as usize];
     ch(h) | (ch(h >> 8) << 8) | (ch(h >> 16) << 16) | (255 << 24)
+}
+
+/// One channel of [`prim_color_packed`] for each byte of the hash: `0.2 + 0.8 c / 255`,
+/// scaled to 0..=255 and rounded, computed once (the resolve colours every fragment it
+/// composites, and `f32::round` is a library call on baseline x86-64).
+const CHANNEL: [u32; 256] = {
+    let mut t = [0u32; 256];
+    let mut c = 0;
+    while c < 256 {
+        t[c] = channel(c as u32);
+        c += 1;
+    }
+    t
+};
+
+/// The peer's channel value of hash byte `c`.
+const fn channel(c: u32) -> u32 {
+    let v = 0.2 + 0.8 * c as f32 / 255.0;
+    (v * 255.0).round() as u32
 }
 
 /// Unpacks an RGBA8 colour to floats.

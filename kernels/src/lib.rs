@@ -30,7 +30,7 @@ pub(crate) mod resolve;
 mod testing;
 
 pub use algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, Check, Frame, HazardClass,
-    Param, Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, Check, Deferred, Frame,
+    HazardClass, Param, Params,
 };
 pub use registry::{algorithm, algorithms, names};

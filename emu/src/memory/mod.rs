@@ -85,6 +85,22 @@ struct Buffer {
     words: Words,
 }
 
+/// Runs `store` on every word of `words`, split among up to `threads` threads when the
+/// buffer is large (the worker pool is std's: under loom, one thread).
+fn fill_parts<A: Sync>(words: &[A], threads: usize, store: impl Fn(&A) + Sync) {
+    /// Below this many words a thread costs more than it saves.
+    const MIN_PART: usize = 1 << 18;
+    #[cfg(not(loom))]
+    crate::sync::pool::map_parts(words, threads, MIN_PART, |part| {
+        part.iter().for_each(&store)
+    });
+    #[cfg(loom)]
+    {
+        let _ = (threads, MIN_PART);
+        words.iter().for_each(store);
+    }
+}
+
 /// The storage of a device: every buffer, by id.
 #[derive(Default)]
 pub struct Memory {
@@ -279,11 +295,16 @@ impl Memory {
         Ok(())
     }
 
-    /// Fills the whole buffer with `value` (host side).
+    /// Fills the whole buffer with `value` (host side): a large buffer by several threads
+    /// at once, as new buffers are zeroed ([`Memory::with_threads`]).
     pub fn fill<T: Word>(&self, buf: Buf<T>, value: T) -> Result<(), MemoryError> {
-        self.check(buf)?;
-        for i in 0..buf.len {
-            self.word(buf.id, i).store(value.to_bits());
+        let b = self.check(buf)?;
+        let (len, bits, threads) = (buf.len as usize, value.to_bits(), self.clear_threads);
+        match &b.words {
+            Words::W32(w) => fill_parts(&w[..len], threads, |a| {
+                a.store(bits as u32, Ordering::Relaxed)
+            }),
+            Words::W64(w) => fill_parts(&w[..len], threads, |a| a.store(bits, Ordering::Relaxed)),
         }
         Ok(())
     }

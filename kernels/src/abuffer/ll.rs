@@ -26,15 +26,17 @@
 //! ([`LinkedList::concurrent_reader`]), where the hazard detector reports the reader's
 //! payload record as torn and the reader itself counts half-written nodes.
 
+use std::cell::Cell;
+
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo, PassReport};
 
-use super::run::AbRun;
+use super::run::{AbRun, Readback};
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
-    HazardClass, Params,
+    frame_then_check, AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture,
+    CapturedFrag, Check, Frame, HazardClass, Params,
 };
 use crate::basic::CountKernel;
-use crate::common::{sort_fragments, EMPTY};
+use crate::common::{parallel_sum, sort_fragments, EMPTY};
 use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -152,11 +154,27 @@ impl FragmentKernel for ListResolve {
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
-        let mut all = Vec::new();
+        let first = p * self.lists;
+        let head = f.load(self.pool.heads, first).await;
+        // An empty pixel (most of a frame) loads its one head and writes the background.
+        if self.lists == 1 && head == EMPTY {
+            self.composite.output(&f, &[]);
+            return;
+        }
+        // The lists are gathered in this thread's scratch vectors, reused from pixel to
+        // pixel (not two allocations per covered pixel). An invocation that finds them
+        // taken (another one on this thread is suspended holding them, under the
+        // scheduled executor) starts from empty ones; the last one back keeps its own.
+        let (mut all, mut nodes, mut frags) = SCRATCH.with(Cell::take);
+        all.clear();
         for b in 0..self.lists {
-            let mut cur = f.load(self.pool.heads, p * self.lists + b).await;
-            let mut nodes = Vec::new();
-            let mut frags = Vec::new();
+            let mut cur = if b == 0 {
+                head
+            } else {
+                f.load(self.pool.heads, first + b).await
+            };
+            nodes.clear();
+            frags.clear();
             while cur != EMPTY {
                 if cur >= self.pool_nodes {
                     f.atomic_add(self.faults, 0, 1).await;
@@ -182,10 +200,17 @@ impl FragmentKernel for ListResolve {
                 )
                 .await;
             }
-            all.extend(frags);
+            all.extend_from_slice(&frags);
         }
         self.composite.output(&f, &all);
+        SCRATCH.with(|s| s.set((all, nodes, frags)));
     }
+}
+
+thread_local! {
+    /// [`ListResolve`]'s per-thread scratch: the pixel's fragments, one list's nodes and
+    /// its fragments.
+    static SCRATCH: Cell<(Vec<CapturedFrag>, Vec<u32>, Vec<CapturedFrag>)> = Cell::default();
 }
 
 /// The lists as the host finds them after the resolve.
@@ -245,12 +270,13 @@ impl Walk {
 
     /// Per pixel, its lists concatenated in bucket order, as a capture.
     pub fn capture(&self, frame: &Frame<'_>, lists: u32) -> Capture {
+        self.capture_sized(frame.width, frame.height, lists)
+    }
+
+    /// [`Walk::capture`] for a frame of `width` x `height` pixels.
+    pub fn capture_sized(&self, width: u32, height: u32, lists: u32) -> Capture {
         let per = lists.max(1) as usize;
-        Capture::from_lists(
-            frame.width,
-            frame.height,
-            self.lists.chunks(per).map(|c| c.concat()),
-        )
+        Capture::from_lists(width, height, self.lists.chunks(per).map(|c| c.concat()))
     }
 
     /// "Lists acyclic and every next index in range", from this walk and the resolve's
@@ -404,20 +430,32 @@ impl Algorithm for LinkedList {
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
+        frame_then_check(self, frame, params, exec)
+    }
+
+    /// The count pass (when the pool is sized exactly), the capture pass and the resolve;
+    /// the lists are walked and checked afterwards ([`AlgoResult::deferred`]).
+    fn run_frame(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut run = AbRun::new(frame, params, exec)?;
         let n = run.n;
         // The count pass is optional: the report starts empty.
         let mut report = PassReport::default();
 
-        // Pool size: nodes per pixel x pixels, or exactly the count pass's total.
+        // Pool size: nodes per pixel x pixels, or exactly the count pass's total. The counts
+        // are moved out of the device (no copy) for the list-length check.
         let mut counted = None;
         let capacity = match params.pool_per_pixel {
             Some(per_pixel) => pool_from_params(per_pixel, n),
             None => {
                 let counts = run.device.buffer::<u32>("ll-counts", n as u64)?;
                 report.merge(&run.capture(&CountKernel { counts })?);
-                let c = run.device.memory.read(counts)?;
-                let total = c.iter().map(|&x| x as u64).sum();
+                let c = run.device.memory.take(counts)?;
+                let total = parallel_sum(&c, exec.threads);
                 counted = Some(c);
                 total
             }
@@ -448,54 +486,58 @@ impl Algorithm for LinkedList {
         let generated = run.store_and_resolve(&mut report, &insert, &resolve)?;
 
         let memory = &run.device.memory;
+        // One word each (`ll` has one region).
         let counter = memory.read(pool.counters)?[0];
         let dropped_counter = memory.read(pool.dropped)?[0] as u64;
-        let allocated = counter.min(cap);
-        let walk = Walk::new(
-            &memory.read(pool.heads)?,
-            &memory.read(pool.nodes)?,
-            1,
-            &[(0, allocated)],
-        );
-        let capture = walk.capture(frame, 1);
         let dropped = counter.saturating_sub(cap) as u64;
-
-        let checks = vec![
-            Check::new(
-                "every generated fragment stored exactly once unless the pool overflowed",
-                walk.stored + dropped == generated && walk.stored == allocated as u64 && walk.revisits == 0,
-                format!(
-                    "stored {} (allocated {allocated}), dropped {dropped}, generated {generated}; pool {cap} nodes",
-                    walk.stored
+        let (width, height) = (frame.width, frame.height);
+        Ok(run.finish_deferred(report, dropped, move |device| {
+            let memory = &device.memory;
+            let allocated = counter.min(cap);
+            let walk = Walk::new(
+                &memory.read(pool.heads)?,
+                &memory.read(pool.nodes)?,
+                1,
+                &[(0, allocated)],
+            );
+            let capture = walk.capture_sized(width, height, 1);
+            let own = vec![
+                Check::new(
+                    "every generated fragment stored exactly once unless the pool overflowed",
+                    walk.stored + dropped == generated && walk.stored == allocated as u64 && walk.revisits == 0,
+                    format!(
+                        "stored {} (allocated {allocated}), dropped {dropped}, generated {generated}; pool {cap} nodes",
+                        walk.stored
+                    ),
                 ),
-            ),
-            Check::new(
-                "overflow counted exactly",
-                dropped_counter == dropped,
-                format!("dropped counter {dropped_counter}, max(node counter {counter} - capacity {cap}, 0) = {dropped}"),
-            ),
-            walk.integrity_check(&memory.read(faults)?),
-        ];
-        let mut later = Vec::new();
-        if let Some(c) = &counted {
-            let bad = (0..n)
-                .filter(|&p| walk.lists[p].len() as u32 != c[p])
-                .count();
-            later.push(Check::new(
-                "list lengths equal the count pass (per pixel)",
-                bad == 0,
-                format!("{bad} pixels differ"),
-            ));
-        }
-        if let Some(r) = reader {
-            let half = memory.read(r)?[0];
-            later.push(Check::new(
-                "the in-pass reader never saw a half-written node",
-                half == 0,
-                format!("{half} half-written node payloads seen"),
-            ));
-        }
-        Ok(run.finish(capture, report, dropped, checks, later))
+                Check::new(
+                    "overflow counted exactly",
+                    dropped_counter == dropped,
+                    format!("dropped counter {dropped_counter}, max(node counter {counter} - capacity {cap}, 0) = {dropped}"),
+                ),
+                walk.integrity_check(&memory.read(faults)?),
+            ];
+            let mut later = Vec::new();
+            if let Some(c) = &counted {
+                let bad = (0..n)
+                    .filter(|&p| walk.lists[p].len() as u32 != c[p])
+                    .count();
+                later.push(Check::new(
+                    "list lengths equal the count pass (per pixel)",
+                    bad == 0,
+                    format!("{bad} pixels differ"),
+                ));
+            }
+            if let Some(r) = reader {
+                let half = memory.read(r)?[0];
+                later.push(Check::new(
+                    "the in-pass reader never saw a half-written node",
+                    half == 0,
+                    format!("{half} half-written node payloads seen"),
+                ));
+            }
+            Ok(Readback { capture, own, later })
+        }))
     }
 }
 

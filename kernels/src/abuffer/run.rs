@@ -21,7 +21,7 @@ use fragrace_emu::{
 
 use super::array::{ArrayResolve, FragmentArrays, Layout};
 use super::checks::{capture_checks, count_store_check, ranges_check, stored_once_check};
-use crate::algo::{AlgoError, AlgoResult, Capture, Check, Frame, Params};
+use crate::algo::{AlgoError, AlgoResult, Capture, Check, Deferred, Frame, Params};
 use crate::common::{self, capture_state, geometry_pass, pixels};
 use crate::resolve::{self, Composite};
 
@@ -102,6 +102,45 @@ impl<'a> AbRun<'a> {
         Ok(store_report.stats.fragments_generated)
     }
 
+    /// [`AbRun::finish`] with the readbacks left out of the frame: the result carries them
+    /// as [`Deferred`] work, which reads the image back, calls `work` on the device (the
+    /// buffers' readback and walk: the capture, then the algorithm's `own` and `later`
+    /// checks) and assembles the checks in [`AbRun::finish`]'s order.
+    pub(super) fn finish_deferred(
+        self,
+        report: PassReport,
+        dropped: u64,
+        work: impl FnOnce(&Device) -> Result<Readback, AlgoError> + Send + 'static,
+    ) -> AlgoResult {
+        let storage_bytes = self.device.memory.bytes() + self.n as u64 * resolve::TARGET_BYTES;
+        let AbRun {
+            device, params, fb, ..
+        } = self;
+        let params = params.clone();
+        let deferred = Deferred::new(move |r: &mut AlgoResult| {
+            let Readback {
+                capture,
+                own,
+                later,
+            } = work(&device)?;
+            let image = resolve::read_image(&fb);
+            let mut checks = own;
+            checks.extend(capture_checks(&capture, &image, &params, &r.report));
+            checks.extend(later);
+            r.checks.extend(checks);
+            r.capture = Some(capture);
+            r.image = Some(image);
+            Ok(())
+        });
+        AlgoResult {
+            storage_bytes,
+            report,
+            dropped,
+            deferred: Some(deferred),
+            ..Default::default()
+        }
+    }
+
     /// Assembles the result: the resolve image read back, the checks (`own`, then the
     /// family's [`capture_checks`], then `later`: the algorithm's checks that exist only for
     /// some parameters), and the storage of every buffer plus the resolve target.
@@ -127,6 +166,14 @@ impl<'a> AbRun<'a> {
             ..Default::default()
         }
     }
+}
+
+/// What the deferred readback of [`AbRun::finish_deferred`] found: the capture, the
+/// algorithm's own checks (before the family's) and its later ones (after them).
+pub(super) struct Readback {
+    pub capture: Capture,
+    pub own: Vec<Check>,
+    pub later: Vec<Check>,
 }
 
 /// A count-scan-store A-buffer once its scan has run: the buffers its store pass and resolve

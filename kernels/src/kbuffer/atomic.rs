@@ -21,13 +21,14 @@
 //! - `kb-atomic64`: one pass on 64-bit keys `depth bits << 32 | primitive id`; keys are unique
 //!   per pixel, so the kept set is exactly the k nearest in the truth's order.
 
-use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo, Word};
+use fragrace_emu::{Buf, Device, ExecConfig, Fragment, FragmentKernel, KernelInfo, Word};
 
 use super::checks::Shape;
 use super::run::KbRun;
 use super::slots::{depth_key, pack64, Slots};
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+    frame_then_check, AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, CapturedFrag, Check,
+    Frame, HazardClass, Params,
 };
 use crate::common::EMPTY;
 
@@ -61,16 +62,23 @@ impl Census {
         }
     }
 
-    fn checks(&self, run: &KbRun<'_>, slots: Slots) -> Result<Vec<Check>, AlgoError> {
-        let counts = run.device.memory.read(self.count)?;
-        let negative = run.device.memory.read(self.negative)?[0];
-        let by_prim = matches!(slots, Slots::Key64 { .. });
-        let shape = Shape::of(&slots.read(&run.device, run.k)?, by_prim, Some(&counts));
+    /// The checks on the slots read back (`raw`) and the census's buffers. `by_prim`: the
+    /// slots are ordered by `(depth, primitive)` (64-bit keys), not by depth alone.
+    fn checks(
+        &self,
+        device: &Device,
+        raw: &[Vec<Option<CapturedFrag>>],
+        by_prim: bool,
+        width: u32,
+    ) -> Result<Vec<Check>, AlgoError> {
+        let counts = device.memory.read(self.count)?;
+        let negative = device.memory.read(self.negative)?[0];
+        let shape = Shape::of(raw, by_prim, Some(&counts));
         Ok(vec![
             // The design rule: "atomic-min k-buffer: final slots are the k smallest keys under
             // every interleaving". That they are the k smallest of the truth is the oracle's
             // job; here: sorted, and exactly min(k, n) of them.
-            shape.check(run.frame.width, true),
+            shape.check(width, true),
             Check::new(
                 "depths non-negative (the unsigned order of the keys is the depth order)",
                 negative == 0,
@@ -222,6 +230,17 @@ impl Algorithm for KbAtomic32 {
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
+        frame_then_check(self, frame, params, exec)
+    }
+
+    /// The capture passes and the resolve; the slots are read back and checked afterwards
+    /// ([`AlgoResult::deferred`]).
+    fn run_frame(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut run = KbRun::new(frame, params, exec)?;
         let len = run.n as u64 * run.k as u64;
         let key = run.device.buffer::<u32>("kb-key", len)?;
@@ -239,26 +258,29 @@ impl Algorithm for KbAtomic32 {
             unclaimed,
         })?);
         let slots = Slots::Key32 { key, prim };
-        let mut checks = census.checks(&run, slots)?;
-        let keys = run.device.memory.read(key)?;
-        let prims = run.device.memory.read(prim)?;
-        let mismatched = keys
-            .iter()
-            .zip(&prims)
-            .filter(|(&k, &p)| (k == EMPTY) != (p == EMPTY))
-            .count();
-        checks.push(Check::new(
-            "every key slot claimed by exactly one fragment of its depth, no empty slot claimed",
-            mismatched == 0,
-            format!("{mismatched} slots claimed wrongly"),
-        ));
-        let left = run.device.memory.read(unclaimed)?[0];
-        checks.push(Check::new(
-            "coplanar fragments beyond the slots of their depth (informational)",
-            true,
-            format!("{left} fragments at a kept depth found every slot of that depth claimed"),
-        ));
-        run.finish(slots, report, checks, 0, 0)
+        let width = frame.width;
+        run.finish_deferred(slots, report, 0, 0, move |device, raw| {
+            let mut checks = census.checks(device, raw, false, width)?;
+            let keys = device.memory.read(key)?;
+            let prims = device.memory.read(prim)?;
+            let mismatched = keys
+                .iter()
+                .zip(&prims)
+                .filter(|(&k, &p)| (k == EMPTY) != (p == EMPTY))
+                .count();
+            checks.push(Check::new(
+                "every key slot claimed by exactly one fragment of its depth, no empty slot claimed",
+                mismatched == 0,
+                format!("{mismatched} slots claimed wrongly"),
+            ));
+            let left = device.memory.read(unclaimed)?[0];
+            checks.push(Check::new(
+                "coplanar fragments beyond the slots of their depth (informational)",
+                true,
+                format!("{left} fragments at a kept depth found every slot of that depth claimed"),
+            ));
+            Ok(checks)
+        })
     }
 }
 
@@ -291,6 +313,17 @@ impl Algorithm for KbAtomic64 {
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
+        frame_then_check(self, frame, params, exec)
+    }
+
+    /// The capture passes and the resolve; the slots are read back and checked afterwards
+    /// ([`AlgoResult::deferred`]).
+    fn run_frame(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut run = KbRun::new(frame, params, exec)?;
         let key = run
             .device
@@ -303,8 +336,10 @@ impl Algorithm for KbAtomic64 {
             census,
         })?;
         let slots = Slots::Key64 { key };
-        let checks = census.checks(&run, slots)?;
-        run.finish(slots, report, checks, 0, 0)
+        let width = frame.width;
+        run.finish_deferred(slots, report, 0, 0, move |device, raw| {
+            census.checks(device, raw, true, width)
+        })
     }
 }
 

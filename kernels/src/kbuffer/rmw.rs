@@ -19,7 +19,8 @@ use super::checks::Shape;
 use super::run::KbRun;
 use super::slots::{rmw_insert, Slots, SplitSlots};
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+    frame_then_check, AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame,
+    HazardClass, Params,
 };
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -82,30 +83,41 @@ impl Algorithm for KbRmw {
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
+        frame_then_check(self, frame, params, exec)
+    }
+
+    /// The capture pass and the resolve; the slots are read back and checked afterwards
+    /// ([`AlgoResult::deferred`]).
+    fn run_frame(
+        &self,
+        frame: &Frame<'_>,
+        params: &Params,
+        exec: &ExecConfig,
+    ) -> Result<AlgoResult, AlgoError> {
         let mut run = KbRun::new(frame, params, exec)?;
         let kb = SplitSlots::new(&mut run.device, run.n, run.k)?;
         let report = run.capture(&RmwStore { kb, k: run.k })?;
         let slots = Slots::Split(kb);
-        let shape = Shape::of(&slots.read(&run.device, run.k)?, true, None);
-        // Racing is this algorithm's documented behaviour, not a broken invariant: the
-        // symptoms are reported as information (what the hazard did to the slots).
         let h = report.hazards;
-        let checks = vec![
-            Check::new(
-                "slot corruption by races (informational)",
-                true,
-                shape.detail(frame.width),
-            ),
-            Check::new(
-                "hazards seen by the detector (informational)",
-                true,
-                format!(
-                    "lost updates {}, races {}, torn records {}",
-                    h.lost_updates, h.races, h.torn
+        let width = frame.width;
+        run.finish_deferred(slots, report, 0, 0, move |_, raw| {
+            let shape = Shape::of(raw, true, None);
+            Ok(vec![
+                Check::new(
+                    "slot corruption by races (informational)",
+                    true,
+                    shape.detail(width),
                 ),
-            ),
-        ];
-        run.finish(slots, report, checks, 0, 0)
+                Check::new(
+                    "hazards seen by the detector (informational)",
+                    true,
+                    format!(
+                        "lost updates {}, races {}, torn records {}",
+                        h.lost_updates, h.races, h.torn
+                    ),
+                ),
+            ])
+        })
     }
 }
 

@@ -7,7 +7,7 @@ use fragrace_emu::{
 };
 
 use super::slots::{k_of, Slots, MAX_K};
-use crate::algo::{AlgoError, AlgoResult, Capture, CapturedFrag, Check, Frame, Params};
+use crate::algo::{AlgoError, AlgoResult, Capture, CapturedFrag, Check, Deferred, Frame, Params};
 use crate::common::{self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments};
 use crate::occupancy::Culling;
 use crate::resolve::{self, Composite};
@@ -119,6 +119,58 @@ impl<'a> KbRun<'a> {
             .iter()
             .map(|&c| c as u64)
             .sum())
+    }
+
+    /// [`KbRun::finish`] with the readbacks left out of the frame: the resolve runs now,
+    /// and the result carries as [`Deferred`] work the image's readback, the slots' (read
+    /// once), the algorithm's `own` checks on them (with the device for its other buffers)
+    /// and the capture.
+    pub(super) fn finish_deferred(
+        self,
+        slots: Slots,
+        mut report: PassReport,
+        dropped: u64,
+        target_bytes: u64,
+        own: impl FnOnce(&Device, &[Vec<Option<CapturedFrag>>]) -> Result<Vec<Check>, AlgoError>
+            + Send
+            + 'static,
+    ) -> Result<AlgoResult, AlgoError> {
+        let mut fb = resolve::framebuffer(&self.frame)?;
+        let kernel = Resolve {
+            slots,
+            k: self.k,
+            composite: Composite::of(self.params),
+        };
+        report.merge(&resolve::pass(&self.device, &mut fb, &kernel, self.exec)?);
+        let culling = self.culling.map(|c| {
+            let (stage, summary) = c.finish();
+            report.merge(&stage);
+            summary
+        });
+        let depth_bytes = if culling.is_some() { 4 } else { 0 };
+        let storage_bytes = self.device.memory.bytes()
+            + self.n as u64 * (target_bytes + depth_bytes + resolve::TARGET_BYTES);
+        let (device, k, width, height) = (self.device, self.k, self.frame.width, self.frame.height);
+        let deferred = Deferred::new(move |r: &mut AlgoResult| {
+            let raw = slots.read(&device, k)?;
+            r.checks.extend(own(&device, &raw)?);
+            r.image = Some(resolve::read_image(&fb));
+            let lists = raw.into_iter().map(|l| {
+                let mut v: Vec<CapturedFrag> = l.into_iter().flatten().collect();
+                sort_fragments(&mut v);
+                v
+            });
+            r.capture = Some(Capture::from_lists(width, height, lists));
+            Ok(())
+        });
+        Ok(AlgoResult {
+            report,
+            dropped,
+            storage_bytes,
+            culling,
+            deferred: Some(deferred),
+            ..Default::default()
+        })
     }
 
     /// Resolves `slots` with the full-screen kernel (the image), reads them back (the
