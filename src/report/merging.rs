@@ -77,6 +77,13 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
          z-fighting, not at the exact composite: a wider thickness merges more fragments, \
          and the image differs more from the exact one."
     ));
+    if error[0].points == error[1].points && psnr[0].points == psnr[1].points {
+        s.text.push(
+            "The paper's 2 P(z) thickness merged nothing here: its lines lie on those without \
+             merging."
+                .into(),
+        );
+    }
     if !infinite.is_empty() {
         s.text.push(format!(
             "Identical to the exact composite (infinite PSNR, not drawn): {}.",
