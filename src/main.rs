@@ -162,7 +162,10 @@ struct ReportArgs {
     /// (index.html, SVG and PNG per figure, CSV and Markdown per table, report.json).
     /// depth-fighting, bucket, occupancy, merging, presorted, hazards (comma-separated), or
     /// all.
-    #[arg(long, value_name = "SECTIONS", conflicts_with_all = ["views", "algo", "scenes"])]
+    #[arg(long, value_name = "SECTIONS", conflicts_with_all = [
+        "views", "algo", "scenes", "size", "exec", "policy", "seed", "k", "jobs", "shard",
+        "memory_limit", "occupancy", "range", "occupancy_fill",
+    ])]
     paper: Option<String>,
     /// --paper: built-in and shipped scenes only, small images, few views (minutes).
     #[arg(long, requires = "paper")]

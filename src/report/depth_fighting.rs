@@ -305,6 +305,30 @@ pub fn measure(size: u32, k: u32, progress: &dyn Progress) -> Result<Vec<Row>, R
     Ok(rows)
 }
 
+/// A declaration of passes without its remarks: the parenthesised ones and what follows
+/// its first `;` or `, ` (the whole text: `fragrace list`).
+pub fn short(declared: &str) -> String {
+    let mut plain = String::new();
+    let mut depth = 0;
+    for c in declared.chars() {
+        match c {
+            '(' => depth += 1,
+            ')' => depth -= 1,
+            _ if depth == 0 => plain.push(c),
+            _ => {}
+        }
+    }
+    let end = [plain.find(';'), plain.find(", ")]
+        .into_iter()
+        .flatten()
+        .min()
+        .unwrap_or(plain.len());
+    plain[..end]
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 fn num(x: Option<f64>) -> Value {
     x.map_or(Value::Null, |x| json!((x * 1000.0).round() / 1000.0))
 }
@@ -335,7 +359,7 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
         "formula value",
         "measured",
         "difference",
-        "geometry passes (declared)",
+        "geometry passes (declared; remarks in fragrace list)",
         "measured geometry",
         "difference",
         "measured full-screen",
@@ -359,7 +383,7 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
                 num(Some(r.memory_measured_bytes)),
                 num(mem_diff),
                 r.geometry_passes_formula
-                    .map_or_else(|| json!(r.passes_declared), |g| json!(g)),
+                    .map_or_else(|| json!(short(&r.passes_declared)), |g| json!(g)),
                 json!(r.geometry_passes_measured),
                 r.geometry_passes_formula.map_or(Value::Null, |g| {
                     json!(i64::from(r.geometry_passes_measured) - i64::from(g))

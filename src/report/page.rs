@@ -110,7 +110,7 @@ fn provenance(command: &str, m: &Machine) -> String {
     )
 }
 
-const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}\
+const STYLE: &str = "body{font-family:sans-serif;max-width:1400px;margin:2em auto;padding:0 1em;color:#222}\
 table{border-collapse:collapse;font-size:0.85em;margin:0.5em 0}td,th{border:1px solid #bbb;padding:2px 6px;text-align:left}\
 th{background:#eee}img{max-width:100%;border:1px solid #ddd}.prov{font-size:0.8em;color:#555}\
 code{font-size:0.95em;background:#f4f4f4}.scroll{overflow-x:auto}";
