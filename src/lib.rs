@@ -16,6 +16,7 @@ pub mod output;
 pub mod plot;
 pub mod racebench;
 pub mod render;
+pub mod report;
 pub mod run;
 pub mod scene;
 pub mod validate;

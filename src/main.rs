@@ -158,6 +158,22 @@ struct ReportArgs {
     /// of the physical memory).
     #[arg(long, value_name = "SIZE")]
     memory_limit: Option<String>,
+    /// Instead of the table: the seeds' tables and figures, measured, written to --out DIR
+    /// (index.html, SVG and PNG per figure, CSV and Markdown per table, report.json).
+    /// depth-fighting, bucket, occupancy, merging, presorted, hazards (comma-separated), or
+    /// all.
+    #[arg(long, value_name = "SECTIONS", conflicts_with_all = [
+        "views", "algo", "scenes", "size", "exec", "policy", "seed", "k", "jobs", "shard",
+        "memory_limit", "occupancy", "range", "occupancy_fill",
+    ])]
+    paper: Option<String>,
+    /// --paper: built-in and shipped scenes only, small images, few views (minutes).
+    #[arg(long, requires = "paper")]
+    quick: bool,
+    /// --paper: a directory of meshes (.obj, .obj.gz) for the full report (default: the
+    /// shipped meshes of assets/).
+    #[arg(long, value_name = "DIR", requires = "paper", conflicts_with = "quick")]
+    models: Option<PathBuf>,
 }
 
 #[derive(Args, Clone)]

@@ -23,6 +23,7 @@ mod output;
 mod params;
 mod racebench;
 mod render;
+mod report;
 mod scenes;
 mod shards;
 
@@ -34,12 +35,19 @@ fn every_file_of_tests_is_a_module() {
     let this = include_str!("main.rs");
     let mut missing = Vec::new();
     for entry in std::fs::read_dir(dir).expect("tests/ is readable") {
-        let name = entry.expect("an entry").file_name().into_string().expect("UTF-8");
+        let name = entry
+            .expect("an entry")
+            .file_name()
+            .into_string()
+            .expect("UTF-8");
         if let Some(m) = name.strip_suffix(".rs") {
             if m != "main" && !this.contains(&format!("\nmod {m};\n")) {
                 missing.push(name);
             }
         }
     }
-    assert!(missing.is_empty(), "tests/main.rs does not declare {missing:?}");
+    assert!(
+        missing.is_empty(),
+        "tests/main.rs does not declare {missing:?}"
+    );
 }

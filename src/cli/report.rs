@@ -10,6 +10,9 @@ use rayon::prelude::*;
 use crate::{within_budget, ReportArgs};
 
 pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
+    if let Some(papers) = &a.paper {
+        return cmd_paper(a, papers);
+    }
     // `NAME@EXEC` runs one algorithm of a view sweep under another executor than --exec;
     // the scheduled executor's options then apply to it.
     let overridden = a
@@ -247,5 +250,34 @@ fn report_budget(
         fragrace::budget::check(&all, limit_bytes, &source)
             .with_context(|| format!("algorithm {name}"))?;
     }
+    Ok(())
+}
+
+/// `report --paper SECTIONS --out DIR`: the library's report ([`fragrace::report`]), with a
+/// progress bar naming the figure or table being made.
+fn cmd_paper(a: &ReportArgs, papers: &str) -> Result<()> {
+    let out = a
+        .out
+        .clone()
+        .context("--paper writes a directory: give it with --out DIR")?;
+    let cfg = fragrace::report::PaperConfig {
+        papers: fragrace::report::Paper::parse_list(papers)?,
+        out,
+        quick: a.quick,
+        models: a.models.clone(),
+        threads: a
+            .threads
+            .unwrap_or_else(fragrace_emu::exec::default_threads),
+    };
+    let bar = crate::progress(0, "report");
+    let step = |m: &str| bar.set_message(m.to_string());
+    let written = fragrace::report::generate(&cfg, &step)?;
+    bar.finish_and_clear();
+    println!(
+        "{} ({} files, {:.1} s)",
+        written.index.display(),
+        written.files.len(),
+        written.seconds
+    );
     Ok(())
 }

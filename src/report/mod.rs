@@ -1,0 +1,302 @@
+//! `fragrace report --paper SECTION --out DIR`: the seeds' tables and figures regenerated
+//! from measured runs, written as one directory a researcher can open without a server:
+//! `index.html` (the page), one SVG and PNG per figure, CSV and Markdown per table, and
+//! `report.json` with every table's rows and every figure's points.
+//!
+//! Each section is one file: [`depth_fighting`] (Table 1 of "Depth-Fighting Aware Methods
+//! for Multifragment Rendering" against its formulas), [`bucket`] (Table 2 and Figure 6 of
+//! "Efficient Depth Peeling via Bucket Sort"), [`occupancy`] (the culling of "Improving
+//! k-buffer methods via occupancy maps", Figures 4 and 5 analogues), [`merging`] (image
+//! error against k with and without merging, "Z-Thickness Blending: Effective Fragment
+//! Merging for Multi-Fragment Rendering"), [`hazards`] (the race benchmark) and
+//! [`presorted`] (the hook of the depth-presorted lists). Nothing here is a stored result:
+//! every number is measured when the report runs.
+
+pub mod bucket;
+pub mod depth_fighting;
+pub mod hazards;
+pub mod machine;
+pub mod merging;
+pub mod occupancy;
+pub mod page;
+pub mod presorted;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::plot::{LinePlot, PlotError};
+use crate::run::RunError;
+
+pub use machine::Machine;
+
+/// One section of the report (`--paper NAME`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Paper {
+    DepthFighting,
+    Bucket,
+    Occupancy,
+    Merging,
+    Presorted,
+    Hazards,
+}
+
+impl Paper {
+    /// Every section, in the page's order.
+    pub const ALL: [Paper; 6] = [
+        Paper::DepthFighting,
+        Paper::Bucket,
+        Paper::Occupancy,
+        Paper::Merging,
+        Paper::Presorted,
+        Paper::Hazards,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Paper::DepthFighting => "depth-fighting",
+            Paper::Bucket => "bucket",
+            Paper::Occupancy => "occupancy",
+            Paper::Merging => "merging",
+            Paper::Presorted => "presorted",
+            Paper::Hazards => "hazards",
+        }
+    }
+
+    /// `--paper` values: one section's name, several separated by commas, or `all`.
+    pub fn parse_list(s: &str) -> Result<Vec<Paper>, ReportError> {
+        if s == "all" {
+            return Ok(Paper::ALL.to_vec());
+        }
+        let mut out = Vec::new();
+        for part in s.split(',') {
+            let p = Paper::ALL
+                .into_iter()
+                .find(|p| p.name() == part)
+                .ok_or_else(|| ReportError::UnknownPaper(part.to_string()))?;
+            if !out.contains(&p) {
+                out.push(p);
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// What to report, and where.
+#[derive(Clone, Debug)]
+pub struct PaperConfig {
+    pub papers: Vec<Paper>,
+    pub out: PathBuf,
+    /// Built-in and shipped scenes only, small images and few views (minutes on 2 cores).
+    pub quick: bool,
+    /// A directory of meshes (`*.obj`, `*.obj.gz`) for the full report; the shipped meshes
+    /// (assets/) when `None`.
+    pub models: Option<PathBuf>,
+    /// Threads of each run.
+    pub threads: usize,
+}
+
+impl PaperConfig {
+    /// The command that regenerates one section alone (what every table and figure of it
+    /// carries).
+    pub fn command(&self, paper: Paper) -> String {
+        let mut c = format!(
+            "{} report --paper {} --out {}",
+            crate::run::CLI,
+            paper.name(),
+            self.out.display()
+        );
+        if self.quick {
+            c += " --quick";
+        }
+        if let Some(m) = &self.models {
+            c += &format!(" --models {}", m.display());
+        }
+        c
+    }
+
+    /// The meshes of the full report: the `--models` directory's OBJ files by name, or the
+    /// shipped ones.
+    pub fn meshes(&self) -> Result<Vec<PathBuf>, ReportError> {
+        let Some(dir) = &self.models else {
+            return Ok(shipped_meshes());
+        };
+        let entries = std::fs::read_dir(dir).map_err(|source| ReportError::Io {
+            path: dir.clone(),
+            source,
+        })?;
+        let mut found: Vec<PathBuf> = entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                let n = p.to_string_lossy();
+                n.ends_with(".obj") || n.ends_with(".obj.gz")
+            })
+            .collect();
+        found.sort();
+        if found.is_empty() {
+            return Err(ReportError::NoModels(dir.clone()));
+        }
+        Ok(found)
+    }
+}
+
+/// The meshes shipped in the repository's `assets/` (when run from it).
+fn shipped_meshes() -> Vec<PathBuf> {
+    [
+        "assets/bunny.obj.gz",
+        "assets/teapot.obj.gz",
+        "assets/dragon_res4.obj.gz",
+    ]
+    .iter()
+    .map(PathBuf::from)
+    .filter(|p| p.exists())
+    .collect()
+}
+
+/// A short name of a mesh path (its file name without `.obj` or `.obj.gz`).
+pub fn mesh_name(p: &Path) -> String {
+    let n = p
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    n.trim_end_matches(".gz")
+        .trim_end_matches(".obj")
+        .to_string()
+}
+
+/// A table: its rows as text (CSV, Markdown, HTML) and as values (report.json).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Table {
+    /// File stem (`ID.csv`, `ID.md`) and anchor.
+    pub id: String,
+    pub title: String,
+    /// What the columns mean, how it was measured.
+    pub caption: String,
+    pub columns: Vec<String>,
+    pub rows: Vec<Vec<serde_json::Value>>,
+    pub command: String,
+}
+
+/// A figure: a line plot and the command that regenerates it.
+#[derive(Clone, Debug)]
+pub struct Figure {
+    /// File stem (`ID.svg`, `ID.png`) and anchor.
+    pub id: String,
+    pub caption: String,
+    pub plot: LinePlot,
+    pub command: String,
+}
+
+/// One section as measured.
+#[derive(Clone, Debug)]
+pub struct Section {
+    pub paper: Paper,
+    pub title: String,
+    /// Paragraphs before the tables (plain text).
+    pub text: Vec<String>,
+    pub tables: Vec<Table>,
+    pub figures: Vec<Figure>,
+    pub seconds: f64,
+}
+
+impl Section {
+    fn new(paper: Paper, title: &str) -> Section {
+        Section {
+            paper,
+            title: title.into(),
+            text: Vec::new(),
+            tables: Vec::new(),
+            figures: Vec::new(),
+            seconds: 0.0,
+        }
+    }
+}
+
+/// Why a report could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    #[error("--paper {0}: unknown section; the sections are depth-fighting, bucket, occupancy, merging, presorted, hazards, or all")]
+    UnknownPaper(String),
+    #[error("--models {0}: no .obj or .obj.gz file in it")]
+    NoModels(PathBuf),
+    #[error("--threads {0} is out of range: it must be from 1 to {1}")]
+    Threads(usize, usize),
+    #[error("{context}: {source}")]
+    Run {
+        context: String,
+        #[source]
+        source: Box<RunError>,
+    },
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+    #[error(transparent)]
+    Bench(#[from] crate::racebench::BenchError),
+    #[error("writing {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// Attaches what was being run to a run's error.
+pub(crate) fn ctx<T>(
+    r: Result<T, RunError>,
+    what: impl FnOnce() -> String,
+) -> Result<T, ReportError> {
+    r.map_err(|source| ReportError::Run {
+        context: what(),
+        source: Box::new(source),
+    })
+}
+
+/// What the report tells its caller while it runs: the figure or table being made.
+pub trait Progress: Sync {
+    fn step(&self, message: &str);
+}
+
+impl<F: Fn(&str) + Sync> Progress for F {
+    fn step(&self, message: &str) {
+        self(message)
+    }
+}
+
+/// The report as written.
+#[derive(Clone, Debug)]
+pub struct Written {
+    pub index: PathBuf,
+    pub files: Vec<PathBuf>,
+    pub seconds: f64,
+}
+
+/// Measures every section of `cfg` and writes the directory.
+pub fn generate(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Written, ReportError> {
+    let max = fragrace_emu::exec::max_threads();
+    if !(1..=max).contains(&cfg.threads) {
+        return Err(ReportError::Threads(cfg.threads, max));
+    }
+    let start = Instant::now();
+    let machine = Machine::this(cfg.threads);
+    let mut sections = Vec::new();
+    for &paper in &cfg.papers {
+        let t = Instant::now();
+        progress.step(paper.name());
+        let mut s = match paper {
+            Paper::DepthFighting => depth_fighting::section(cfg, progress)?,
+            Paper::Bucket => bucket::section(cfg, progress)?,
+            Paper::Occupancy => occupancy::section(cfg, progress)?,
+            Paper::Merging => merging::section(cfg, progress)?,
+            Paper::Presorted => presorted::section(cfg),
+            Paper::Hazards => hazards::section(cfg, progress)?,
+        };
+        s.seconds = t.elapsed().as_secs_f64();
+        sections.push(s);
+    }
+    progress.step("writing the page");
+    let seconds = start.elapsed().as_secs_f64();
+    let files = page::write(cfg, &machine, &sections, seconds)?;
+    Ok(Written {
+        index: cfg.out.join("index.html"),
+        files,
+        seconds,
+    })
+}
