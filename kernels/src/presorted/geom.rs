@@ -88,7 +88,10 @@ impl Region {
             (-DVec3::Z, [4, 5, 7, 6]),
         ];
         Region {
-            planes: faces.iter().map(|(n, _)| Plane { n: *n, d: half }).collect(),
+            planes: faces
+                .iter()
+                .map(|(n, _)| Plane { n: *n, d: half })
+                .collect(),
             loops: faces.iter().map(|(_, l)| l.map(c).to_vec()).collect(),
             verts: (0..8).map(c).collect(),
         }
@@ -160,23 +163,43 @@ impl Region {
                 loops.push(out);
             }
         }
-        dedup_points(&mut cap);
+        dedup_small(&mut cap);
         if cap.len() >= 3 {
-            // Order the cap's points around their centroid, in h's plane.
+            // Order the cap's points around their centroid, in h's plane (by pseudo-angle,
+            // monotonic in the angle).
             let c = cap.iter().copied().sum::<DVec3>() / cap.len() as f64;
             let u = h.n.any_orthonormal_vector();
             let w = h.n.cross(u);
-            cap.sort_by(|a, b| {
-                let (pa, pb) = (*a - c, *b - c);
-                pa.dot(w)
-                    .atan2(pa.dot(u))
-                    .total_cmp(&pb.dot(w).atan2(pb.dot(u)))
-            });
+            let key = |p: &DVec3| {
+                let (x, y) = ((*p - c).dot(u), (*p - c).dot(w));
+                let t = y / (x.abs() + y.abs()).max(f64::MIN_POSITIVE);
+                if x < 0.0 {
+                    2.0 - t
+                } else if y < 0.0 {
+                    4.0 + t
+                } else {
+                    t
+                }
+            };
+            cap.sort_by(|a, b| key(a).total_cmp(&key(b)));
+        }
+        // The vertices: those kept (on the inner side or on the plane) and the new ones of
+        // the cap.
+        let mut verts: Vec<DVec3> = Vec::with_capacity(self.verts.len() + cap.len());
+        verts.extend(self.verts.iter().filter(|v| h.eval(**v) >= -EPS));
+        let kept = verts.len();
+        for p in &cap {
+            let old = verts[..kept]
+                .iter()
+                .any(|v| (*v - *p).length_squared() < MERGE * MERGE);
+            if !old {
+                verts.push(*p);
+            }
+        }
+        if cap.len() >= 3 {
             planes.push(*h);
             loops.push(cap);
         }
-        let mut verts: Vec<DVec3> = loops.iter().flatten().copied().collect();
-        dedup_points(&mut verts);
         if !spans_volume(&verts) {
             return Region::default();
         }
@@ -243,17 +266,14 @@ fn dedup_loop(l: &mut Vec<DVec3>) {
     }
 }
 
-/// Removes points closer than [`MERGE`] to an earlier one.
-fn dedup_points(v: &mut Vec<DVec3>) {
-    v.sort_by(|a, b| a.x.total_cmp(&b.x));
+/// Removes points closer than [`MERGE`] to an earlier one (few points: quadratic).
+fn dedup_small(v: &mut Vec<DVec3>) {
     let mut out: Vec<DVec3> = Vec::with_capacity(v.len());
     for &p in v.iter() {
-        let dup = out
+        if !out
             .iter()
-            .rev()
-            .take_while(|q| p.x - q.x < MERGE)
-            .any(|q| (p - *q).length_squared() < MERGE * MERGE);
-        if !dup {
+            .any(|q| (p - *q).length_squared() < MERGE * MERGE)
+        {
             out.push(p);
         }
     }

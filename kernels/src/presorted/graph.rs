@@ -62,6 +62,26 @@ pub fn facing(t: &[DVec3; 3], back: bool) -> Plane {
     }
 }
 
+/// A necessary condition for `a` to occlude `b` from a viewpoint of both regions, cheaper
+/// than the occlusion region: when every direction `a_k - b_l` has a positive component
+/// along `u` (from `b`'s centroid to `a`'s), `O_{a->b} = a + cone(a - b)` lies in the
+/// half-space `u.x >= min_k u.a_k`, which both regions must reach into.
+fn may_occlude(a: &[DVec3; 3], b: &[DVec3; 3], ra: &Region, rb: &Region) -> bool {
+    let u = (a[0] + a[1] + a[2] - b[0] - b[1] - b[2]) / 3.0;
+    if a.iter().any(|p| b.iter().any(|q| (*p - *q).dot(u) <= 0.0)) {
+        return true;
+    }
+    let Some(h) = Plane::through(u, DVec3::ZERO) else {
+        return true;
+    };
+    let lo = a.iter().map(|p| h.eval(*p)).fold(f64::INFINITY, f64::min);
+    let bound = [Plane {
+        n: h.n,
+        d: h.d - lo,
+    }];
+    !(ra.outside_any(&bound) || rb.outside_any(&bound))
+}
+
 impl Graph {
     /// Nodes (front and back copy of every triangle whose copy can be rendered from the
     /// partition) and every edge. `tick(done, total)` reports progress over the nodes.
@@ -106,6 +126,15 @@ impl Graph {
                 if !b.iter().any(|q| planes[i].eval(*q) < -EPS)
                     || !a.iter().any(|p| planes[j].eval(*p) > EPS)
                 {
+                    continue;
+                }
+                // Each region must reach into the other's facing half-space.
+                if g.nodes[i].region.outside_any(&planes[j..=j])
+                    || g.nodes[j].region.outside_any(&planes[i..=i])
+                {
+                    continue;
+                }
+                if !may_occlude(a, b, &g.nodes[i].region, &g.nodes[j].region) {
                     continue;
                 }
                 let occl = occl_cache

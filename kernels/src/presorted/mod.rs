@@ -131,10 +131,12 @@ pub enum PresortError {
     Input(#[from] InputError),
     #[error("{0}")]
     Config(String),
-    #[error("partition {partition}: {source}")]
+    /// (The scan's error is part of this message, not a `source`: error chains would
+    /// print it twice.)
+    #[error("partition {partition}: {error}")]
     Scan {
         partition: usize,
-        source: scan::ScanError,
+        error: scan::ScanError,
     },
 }
 
@@ -226,9 +228,9 @@ fn presort_partition(
     let final_order = scan::scan(&mut g, prelim, &mut sstats, &|d, t| {
         progress.update(k, "scan", d, t)
     })
-    .map_err(|source| PresortError::Scan {
+    .map_err(|error| PresortError::Scan {
         partition: k,
-        source,
+        error,
     })?;
     stats.scan = sstats;
     stats.scan_time = t1.elapsed();

@@ -192,9 +192,7 @@ pub fn scan(
         const PAIRS: usize = 8;
         'pairs: for &f in fs.iter().rev().take(PAIRS) {
             for &b in backs.iter().take(PAIRS) {
-                if let Some(p) =
-                    cutting_plane(&g.edges[f].verts, &g.edges[b].verts, None, stats)
-                {
+                if let Some(p) = cutting_plane(&g.edges[f].verts, &g.edges[b].verts, None, stats) {
                     pair = Some(p);
                     break 'pairs;
                 }

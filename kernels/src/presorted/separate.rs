@@ -294,7 +294,10 @@ mod tests {
             // Reference: the hulls are disjoint iff some plane through three points of the
             // difference set (or a face direction) leaves every difference point strictly
             // on one side; equivalently the origin is outside conv(a - b).
-            let diff: Vec<DVec3> = a.iter().flat_map(|p| b.iter().map(move |q| *p - *q)).collect();
+            let diff: Vec<DVec3> = a
+                .iter()
+                .flat_map(|p| b.iter().map(move |q| *p - *q))
+                .collect();
             let mut outside = false;
             for i in 0..diff.len() {
                 for j in i + 1..diff.len() {
