@@ -17,9 +17,12 @@
 //! 3. moving `x` whole after the last `b` (the `f -> x` edges become back-edges of the
 //!    `f*`, handled when the scan reaches them).
 //!
-//! The scan counts its steps and gives up with an error past a budget proportional to the
-//! graph, so a cycle that the input's assumptions exclude (intersecting triangles: a cycle
-//! visible from one viewpoint) ends in an error, never a hang.
+//! The scan gives up with an error when it cannot progress, so a cycle that the input's
+//! assumptions exclude (intersecting triangles: a cycle visible from one viewpoint), or one
+//! whose regions only touch (no cutting plane with a margin), ends in an error, never a
+//! hang: past a step budget proportional to the graph, when one instance has been moved
+//! whole [`MAX_WHOLE_MOVES`] times (the moves ping-pong), or when the instances outnumber
+//! [`MAX_COPIES`] per initial instance.
 
 use glam::DVec3;
 
@@ -38,12 +41,14 @@ pub struct ScanStats {
     pub lp_calls: u64,
 }
 
-/// The scan ran out of steps.
+/// The scan could not progress.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error(
     "the back-edge scan made no progress after {steps} steps ({nodes} instances, {edges} \
-     occlusion edges left): the mesh likely has intersecting triangles or a cycle visible \
-     from one viewpoint, which the method assumes away (split them first)"
+     occlusion edges left): the mesh has intersecting triangles or a cycle visible from one \
+     viewpoint, which the method assumes away (split them first), or a cycle whose occlusion \
+     regions only touch, which this implementation cannot cut yet (no cutting plane with a \
+     margin)"
 )]
 pub struct ScanError {
     pub steps: u64,
@@ -94,6 +99,12 @@ fn shares_point(a: &[DVec3], b: &[DVec3]) -> bool {
     })
 }
 
+/// Whole moves of one instance after which the scan gives up (fallback 3 moved it back and
+/// forth with the instances it is in a cycle with).
+pub const MAX_WHOLE_MOVES: u32 = 256;
+/// Instances per initial instance after which the scan gives up.
+pub const MAX_COPIES: usize = 64;
+
 /// Most LPs the greedy growth of `R_f` runs for one instance before it stops adding
 /// forward edges (the rest go with the copy, as the paper's unaccounted edges do).
 const GREEDY_LPS: u64 = 12;
@@ -107,6 +118,8 @@ pub fn scan(
     tick: &dyn Fn(u64, u64),
 ) -> Result<Vec<usize>, ScanError> {
     let budget = 200 * (g.nodes.len() as u64 + g.edge_count() as u64) + 10_000;
+    let max_nodes = MAX_COPIES * g.nodes.len().max(1);
+    let mut whole = vec![0u32; g.nodes.len()];
     let mut steps = 0u64;
     let mut pos = vec![0usize; g.nodes.len()];
     let reindex = |order: &[usize], pos: &mut Vec<usize>, n: usize| {
@@ -119,7 +132,7 @@ pub fn scan(
     let mut idx = 0usize;
     while idx < order.len() {
         steps += 1;
-        if steps > budget {
+        if steps > budget || g.nodes.len() > max_nodes {
             return Err(ScanError {
                 steps,
                 nodes: g.nodes.len(),
@@ -211,6 +224,15 @@ pub fn scan(
             continue;
         }
         // Fallback 3: move x whole.
+        whole.resize(g.nodes.len(), 0);
+        whole[x] += 1;
+        if whole[x] > MAX_WHOLE_MOVES {
+            return Err(ScanError {
+                steps,
+                nodes: g.nodes.len(),
+                edges: g.edge_count(),
+            });
+        }
         order.remove(idx);
         order.insert(b_last, x);
         reindex(&order, &mut pos, g.nodes.len());
