@@ -10,7 +10,7 @@
 //! triangles, seen from outside the bounding polyhedron. This file holds them to their
 //! contract on such input.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use fragrace::run::{self, RunSpec, SceneSpec};
 use fragrace::scene::Camera;
@@ -53,12 +53,12 @@ fn scene_of(pos: &[[f32; 3]], idx: &[[u32; 3]]) -> SceneSpec {
     }
 }
 
-fn spec(scene: &SceneSpec, algo: &str, az: f32, el: f32, file: &PathBuf) -> RunSpec {
+fn spec(scene: &SceneSpec, algo: &str, az: f32, el: f32, file: &Path) -> RunSpec {
     let mut s = RunSpec::new(scene.clone(), algo);
     s.width = 40;
     s.height = 40;
     s.camera = Camera::new(az, el);
-    s.params.presorted = Some(file.clone());
+    s.params.presorted = Some(file.to_path_buf());
     s
 }
 
@@ -106,12 +106,7 @@ fn max_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
 
 /// Runs `algos` from `views` random viewpoints; returns the viewpoints refused as inside the
 /// bounding polyhedron.
-fn exact_from_random_views(
-    scene: &SceneSpec,
-    file: &PathBuf,
-    algos: &[&str],
-    views: usize,
-) -> usize {
+fn exact_from_random_views(scene: &SceneSpec, file: &Path, algos: &[&str], views: usize) -> usize {
     let mut rng = rand::rngs::SmallRng::seed_from_u64(26);
     let mut inside = 0;
     for _ in 0..views {

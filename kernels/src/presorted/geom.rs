@@ -26,7 +26,7 @@ impl Plane {
     /// to give a direction.
     pub fn through(n: DVec3, p: DVec3) -> Option<Plane> {
         let len = n.length();
-        if !(len > 1e-12) {
+        if len.is_nan() || len <= 1e-12 {
             return None;
         }
         let n = n / len;

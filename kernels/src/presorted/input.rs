@@ -65,7 +65,7 @@ pub fn check(mesh: &Mesh) -> Result<(), InputError> {
         let p = t.map(|i| mesh.positions[i as usize]);
         let d = p.map(|q| q.as_dvec3());
         let area = 0.5 * (d[1] - d[0]).cross(d[2] - d[0]).length();
-        if !(area > min) {
+        if area.is_nan() || area <= min {
             return Err(InputError::Degenerate { tri, area, min });
         }
         let mut key = p.map(|q| [q.x.to_bits(), q.y.to_bits(), q.z.to_bits()]);

@@ -166,7 +166,7 @@ pub fn prepared(mesh: &Mesh, params: &Params, threads: usize) -> Result<Arc<Prep
 pub fn eye_of(view_proj: glam::Mat4) -> Result<DVec3, AlgoError> {
     let m = DMat4::from_cols_array(&view_proj.to_cols_array().map(f64::from));
     let h: DVec4 = m.inverse() * DVec4::new(0.0, 0.0, 1.0, 0.0);
-    if !(h.w.abs() > 1e-300) || !h.is_finite() {
+    if !h.is_finite() || h.w.abs() <= 1e-300 {
         return Err(AlgoError::Invalid(
             "presorted lists need a perspective camera (the view-projection has no viewpoint)"
                 .into(),
@@ -251,10 +251,9 @@ impl FragmentKernel for SsboKernel<'_> {
         if self.interlock.is_some() {
             f.interlock_begin().await;
         }
-        for ch in 0..3 {
-            let d = f.load(self.color, base + ch as u32).await;
-            f.store(self.color, base + ch as u32, c[ch] * a + d * (1.0 - a))
-                .await;
+        for (ch, cv) in (0u32..).zip(&c[..3]) {
+            let d = f.load(self.color, base + ch).await;
+            f.store(self.color, base + ch, cv * a + d * (1.0 - a)).await;
         }
         let d = f.load(self.color, base + 3).await;
         f.store(self.color, base + 3, a + d * (1.0 - a)).await;

@@ -139,7 +139,7 @@ pub fn scan(
                 edges: g.edge_count(),
             });
         }
-        if steps % 256 == 0 {
+        if steps.is_multiple_of(256) {
             tick(idx as u64, order.len() as u64);
         }
         let x = order[idx];

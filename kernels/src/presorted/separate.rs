@@ -97,7 +97,7 @@ fn closest_triangle(a: DVec3, b: DVec3, c: DVec3) -> (DVec3, Vec<DVec3>) {
         return (b + (c - b) * w, vec![b, c]);
     }
     let den = va + vb + vc;
-    if !(den.abs() > 1e-300) {
+    if den.is_nan() || den.abs() <= 1e-300 {
         // Degenerate (collinear) triangle: the nearest of its edges.
         return [(a, b), (b, c), (a, c)]
             .into_iter()
