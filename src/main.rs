@@ -56,6 +56,8 @@ enum Command {
     Report(ReportArgs),
     /// The hazard detector measured on labelled racy and race-free kernels, per policy.
     Racebench(cli::racebench::RacebenchArgs),
+    /// Preprocess a static mesh into depth-presorted triangle lists (`--algo presorted`).
+    Presort(cli::presort::PresortArgs),
 }
 
 #[derive(Args)]
@@ -312,6 +314,10 @@ struct RunArgs {
     /// Merging algorithms: beta of equation 4 (SFM: 0 exact optics, 1 linear), in [0, 1].
     #[arg(long, default_value_t = 0.0)]
     beta: f32,
+    /// The presorted algorithms: lists written by `fragrace presort` for this mesh (without
+    /// it, the mesh is preprocessed first, with 6 partitions).
+    #[arg(long, value_name = "FILE")]
+    presorted: Option<PathBuf>,
     /// Output PNG.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -461,9 +467,14 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
     exec.simt = a.simt;
     if fragrace_kernels::algorithm(&a.algo).is_none() {
         bail!(
-            "unknown algorithm `{}`; known: {}",
+            "unknown algorithm `{}`; known: {}, and after `fragrace presort`: {}",
             a.algo,
-            fragrace_kernels::names().join(", ")
+            fragrace_kernels::names().join(", "),
+            fragrace_kernels::registry::preprocessed()
+                .iter()
+                .map(|x| x.info().name)
+                .collect::<Vec<_>>()
+                .join(", ")
         );
     }
     let spec = RunSpec {
@@ -491,6 +502,7 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
                 merge.validate()?;
                 merge
             },
+            presorted: a.presorted.clone(),
             ..Params::default()
         },
         exec,
@@ -578,6 +590,7 @@ fn real_main() -> Result<()> {
         } => cmd_replay(&case, json, memory_limit.as_deref()),
         Command::Report(a) => cmd_report(&a, &given),
         Command::Racebench(a) => cli::racebench::cmd_racebench(&a),
+        Command::Presort(a) => cli::presort::cmd_presort(&a),
     }
 }
 
@@ -602,7 +615,7 @@ fn within_budget(
 
 /// A progress bar of `len` steps (a spinner when 0) with the elapsed time, on stderr when it
 /// is a terminal; nothing otherwise, so that piped output stays clean.
-fn progress(len: u64, msg: &str) -> indicatif::ProgressBar {
+pub(crate) fn progress(len: u64, msg: &str) -> indicatif::ProgressBar {
     let (bar, template) = if len == 0 {
         (
             indicatif::ProgressBar::new_spinner(),
@@ -890,7 +903,8 @@ fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
 }
 
 fn cmd_list(json: bool) -> Result<()> {
-    let algos = fragrace_kernels::algorithms();
+    let mut algos = fragrace_kernels::algorithms();
+    algos.extend(fragrace_kernels::registry::preprocessed());
     let infos: Vec<_> = algos
         .iter()
         .map(|a| {

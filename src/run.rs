@@ -291,6 +291,9 @@ impl RunSpec {
                 self.params.merge.thickness, self.params.merge.beta
             );
         }
+        if let Some(f) = &self.params.presorted {
+            c += &format!(" --presorted {}", f.display());
+        }
         if let Some(s) = self.schedule() {
             c += &format!(
                 " --policy {} --seed {} --window {} --block {}",

@@ -33,6 +33,8 @@ pub enum SpecError {
     Occupancy(Box<crate::run::RunError>),
     #[error(transparent)]
     Merge(#[from] fragrace_kernels::merging::MergeParamError),
+    #[error("--presorted {file}: only the presorted algorithms read it, not `{algo}` (leave it out, or use --algo presorted)")]
+    PresortedFile { file: String, algo: String },
 }
 
 impl RunSpec {
@@ -59,6 +61,14 @@ impl RunSpec {
         self.exec.validate()?;
         self.params.validate()?;
         self.params.merge.validate()?;
+        if let Some(f) = &self.params.presorted {
+            if algo.info().family != "presorted" {
+                return Err(SpecError::PresortedFile {
+                    file: f.display().to_string(),
+                    algo: self.algo.clone(),
+                });
+            }
+        }
         // Occupancy culling: an algorithm that takes it, and a map size for its k.
         crate::culling::validate(self, &*algo).map_err(|e| SpecError::Occupancy(Box::new(e)))?;
         Ok(())

@@ -21,6 +21,7 @@ mod merging;
 mod occupancy;
 mod output;
 mod params;
+mod presorted;
 mod racebench;
 mod render;
 mod report;

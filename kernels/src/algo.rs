@@ -57,6 +57,11 @@ pub struct Params {
         skip_serializing_if = "crate::peeling::GeometryCulling::is_off"
     )]
     pub geometry_culling: crate::peeling::GeometryCulling,
+    /// Depth-presorted triangle lists (the `presorted` family): the file `fragrace presort`
+    /// wrote for the mesh (`--presorted FILE`); without it the mesh is preprocessed on first
+    /// use.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub presorted: Option<std::path::PathBuf>,
 }
 
 fn is_default_range(r: &crate::occupancy::RangeSource) -> bool {
@@ -77,6 +82,7 @@ impl Default for Params {
             merge: crate::merging::MergeParams::default(),
             range: crate::occupancy::RangeSource::default(),
             geometry_culling: crate::peeling::GeometryCulling::Off,
+            presorted: None,
         }
     }
 }

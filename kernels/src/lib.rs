@@ -22,6 +22,7 @@ pub mod merging;
 pub mod occupancy;
 pub mod oracle;
 pub mod peeling;
+pub mod presorted;
 pub mod protocols;
 pub mod racebench;
 pub mod registry;

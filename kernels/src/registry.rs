@@ -51,9 +51,21 @@ pub fn algorithms() -> Vec<Box<dyn Algorithm>> {
     v
 }
 
-/// The algorithm called `name`.
+/// Algorithms that need an off-line preprocessing of a static mesh under assumptions
+/// random scenes break (no intersecting or duplicate triangles, viewpoints outside a
+/// bounding polyhedron): `fragrace presort` and `--algo` run them; the harnesses that
+/// iterate [`algorithms`] over arbitrary scenes (fuzzers, the differential sweep) do not.
+/// `tests/presorted.rs` holds them to their contract.
+pub fn preprocessed() -> Vec<Box<dyn Algorithm>> {
+    crate::presorted::algorithms()
+}
+
+/// The algorithm called `name` (of [`algorithms`] or [`preprocessed`]).
 pub fn algorithm(name: &str) -> Option<Box<dyn Algorithm>> {
-    algorithms().into_iter().find(|a| a.info().name == name)
+    algorithms()
+        .into_iter()
+        .chain(preprocessed())
+        .find(|a| a.info().name == name)
 }
 
 /// All names.

@@ -3,5 +3,6 @@
 pub(crate) mod bench;
 pub(crate) mod fuzz;
 pub(crate) mod outputs;
+pub(crate) mod presort;
 pub(crate) mod racebench;
 pub(crate) mod report;

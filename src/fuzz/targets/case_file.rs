@@ -181,6 +181,8 @@ pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
             ][u.int_in_range(0..=2)?],
             // Not drawn from the input (so that existing corpora decode as before).
             geometry_culling: Default::default(),
+            // A file path drawn at random would read arbitrary files: never fuzzed.
+            presorted: None,
         },
         exec: ExecConfig {
             mode,

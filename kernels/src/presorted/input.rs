@@ -1,0 +1,211 @@
+//! What preprocessing accepts (section 4: "we assume intersecting triangles have been split
+//! prior to invocation"), and the mesh hash that ties a stored result to its mesh.
+//!
+//! Refused, with the triangle named: a mesh without triangles, non-finite positions or
+//! indices out of range ([`Mesh::validate`]), degenerate triangles (no plane, so no facing
+//! and no occlusion region) and duplicate triangles (the same three points, whatever the
+//! order: two coplanar copies occlude each other from every viewpoint, a cycle no order
+//! can break), and non-manifold edges (one edge, by its end points, shared by more than two
+//! triangles). The occlusion regions of the triangles of such a fan all meet along the
+//! edge's line, which reaches outside the bounding polyhedron: a cycle through three of
+//! them can only be cut by planes through that line, with no margin, and the scan cannot
+//! make progress (split or weld such edges first). Intersecting triangles are not looked
+//! for (that needs a pairwise test as costly as the graph); they surface as a
+//! [`super::scan::ScanError`] or as errors of the run-time check.
+
+use std::collections::HashMap;
+
+use fragrace_emu::{Mesh, MeshError};
+
+/// Why a mesh cannot be preprocessed.
+#[derive(Debug, PartialEq, thiserror::Error)]
+pub enum InputError {
+    #[error("the mesh has no triangles: nothing to presort")]
+    Empty,
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    #[error(
+        "triangle {tri} is degenerate (area {area:e}, below {min:e} of the squared bounding \
+         radius): remove it before presorting"
+    )]
+    Degenerate { tri: usize, area: f64, min: f64 },
+    #[error(
+        "triangles {first} and {second} have the same three vertices: remove the duplicate \
+         before presorting (coplanar copies occlude each other from every viewpoint)"
+    )]
+    Duplicate { first: usize, second: usize },
+    #[error(
+        "the edge from {from:?} to {to:?} is shared by {count} triangles (first {tris:?}; \
+         {edges} such edges in all): non-manifold edges are not presorted (the occlusion \
+         regions of a fan of three or more triangles meet along the edge's line, where no \
+         cutting plane separates them); split the fan into separate edges first"
+    )]
+    NonManifold {
+        from: [f32; 3],
+        to: [f32; 3],
+        count: usize,
+        tris: Vec<usize>,
+        edges: usize,
+    },
+}
+
+/// Relative area below which a triangle counts as degenerate.
+pub const MIN_AREA: f64 = 1e-12;
+
+/// Checks `mesh` (see the module documentation).
+pub fn check(mesh: &Mesh) -> Result<(), InputError> {
+    mesh.validate()?;
+    if mesh.indices.is_empty() {
+        return Err(InputError::Empty);
+    }
+    let frame = super::partition::Frame3::of(&mesh.positions);
+    let min = MIN_AREA * frame.radius * frame.radius;
+    let mut seen: HashMap<[[u32; 3]; 3], usize> = HashMap::new();
+    for (tri, t) in mesh.indices.iter().enumerate() {
+        let p = t.map(|i| mesh.positions[i as usize]);
+        let d = p.map(|q| q.as_dvec3());
+        let area = 0.5 * (d[1] - d[0]).cross(d[2] - d[0]).length();
+        if area.is_nan() || area <= min {
+            return Err(InputError::Degenerate { tri, area, min });
+        }
+        let mut key = p.map(|q| [q.x.to_bits(), q.y.to_bits(), q.z.to_bits()]);
+        key.sort();
+        if let Some(&first) = seen.get(&key) {
+            return Err(InputError::Duplicate { first, second: tri });
+        }
+        seen.insert(key, tri);
+    }
+    non_manifold(mesh)
+}
+
+/// Refuses edges shared by more than two triangles (edges by their end points' bits, so
+/// that unwelded copies of a vertex count as one).
+fn non_manifold(mesh: &Mesh) -> Result<(), InputError> {
+    type Point = [u32; 3];
+    let bits = |i: u32| {
+        let p = mesh.positions[i as usize];
+        [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
+    };
+    let mut edges: HashMap<(Point, Point), Vec<usize>> = HashMap::new();
+    for (tri, t) in mesh.indices.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (bits(t[k]), bits(t[(k + 1) % 3]));
+            edges.entry((a.min(b), a.max(b))).or_default().push(tri);
+        }
+    }
+    let mut bad: Vec<(&(Point, Point), &Vec<usize>)> =
+        edges.iter().filter(|(_, t)| t.len() > 2).collect();
+    bad.sort_by_key(|(_, t)| t[0]);
+    match bad.first() {
+        None => Ok(()),
+        Some(((a, b), tris)) => Err(InputError::NonManifold {
+            from: a.map(f32::from_bits),
+            to: b.map(f32::from_bits),
+            count: tris.len(),
+            tris: tris.to_vec(),
+            edges: bad.len(),
+        }),
+    }
+}
+
+/// FNV-1a (64 bits) of the positions' bits and the indices: ties a stored result to the
+/// exact mesh it was made from (not a cryptographic hash).
+pub fn mesh_hash(mesh: &Mesh) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |w: u32| {
+        for b in w.to_le_bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    };
+    eat(mesh.positions.len() as u32);
+    for p in &mesh.positions {
+        eat(p.x.to_bits());
+        eat(p.y.to_bits());
+        eat(p.z.to_bits());
+    }
+    eat(mesh.indices.len() as u32);
+    for t in &mesh.indices {
+        t.iter().for_each(|&i| eat(i));
+    }
+    h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    fn quad() -> Mesh {
+        Mesh {
+            positions: vec![
+                Vec3::new(0.0, 0.0, 0.0),
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(1.0, 1.0, 0.0),
+                Vec3::new(0.0, 1.0, 0.0),
+            ],
+            normals: None,
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+        }
+    }
+
+    #[test]
+    fn accepts_a_quad_and_refuses_bad_triangles() {
+        assert_eq!(check(&quad()), Ok(()));
+        let mut m = quad();
+        m.indices.push([0, 1, 1]);
+        assert!(matches!(
+            check(&m),
+            Err(InputError::Degenerate { tri: 2, .. })
+        ));
+        let mut m = quad();
+        m.indices.push([2, 0, 1]);
+        assert_eq!(
+            check(&m),
+            Err(InputError::Duplicate {
+                first: 0,
+                second: 2
+            })
+        );
+        // The same points through other vertex indices are a duplicate too.
+        let mut m = quad();
+        m.positions.push(Vec3::new(1.0, 1.0, 0.0));
+        m.indices.push([4, 3, 0]);
+        assert!(matches!(check(&m), Err(InputError::Duplicate { .. })));
+        let empty = Mesh::default();
+        assert_eq!(check(&empty), Err(InputError::Empty));
+        let mut m = quad();
+        m.indices.push([0, 1, 9]);
+        assert!(matches!(check(&m), Err(InputError::Mesh(_))));
+        // A fin on the quad's diagonal: three triangles share the edge 0-2.
+        let mut m = quad();
+        m.positions.push(Vec3::new(0.5, 0.5, 1.0));
+        m.indices.push([0, 2, 4]);
+        let e = check(&m).unwrap_err();
+        assert!(
+            matches!(
+                &e,
+                InputError::NonManifold {
+                    count: 3,
+                    edges: 1,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains("shared by 3 triangles"), "{e}");
+    }
+
+    #[test]
+    fn hash_sees_every_change() {
+        let a = quad();
+        let mut b = quad();
+        b.positions[2].x = 1.0 + f32::EPSILON;
+        let mut c = quad();
+        c.indices[1] = [0, 3, 2];
+        let h = mesh_hash(&a);
+        assert_eq!(h, mesh_hash(&quad()));
+        assert_ne!(h, mesh_hash(&b));
+        assert_ne!(h, mesh_hash(&c));
+    }
+}

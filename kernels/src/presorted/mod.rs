@@ -1,0 +1,269 @@
+//! Depth-presorted triangle lists ("Depth-Presorted Triangle Lists", Chen, Sander, Nehab,
+//! Yang and Hu): an off-line preprocessing turns a static mesh into an extended list of
+//! triangle instances, each annotated with test planes, such that for every viewpoint
+//! outside a bounding polyhedron the instances that pass their tests are the mesh's
+//! triangles, each exactly once, in back-to-front order. At run time no sorting is left:
+//! the CPU picks the viewpoint's segment, the GPU selects instances by one dot product and
+//! blends in API order.
+//!
+//! Preprocessing (sections 3-4), one concept per file:
+//! - [`geom`]: half-spaces, convex regions of viewpoint space, occlusion regions;
+//! - [`separate`]: separability of two regions (the distance of their hulls);
+//! - [`partition`]: the bounding polyhedron (4, 6, 16 or 64 faces) and its partitions;
+//! - [`graph`]: the occlusion graph of a partition (back-facing duplicates included);
+//! - [`order`]: the preliminary order (depth sort and feedback-arc heuristic);
+//! - [`scan`]: the back-edge scan with duplication and cutting planes (section 4.1);
+//! - [`input`]: what meshes are accepted; [`file`]: the stored result.
+//!
+//! Run time (section 5): [`runtime`] (`presorted`, `presorted-vs`, `presorted-ssbo`,
+//! `presorted-ssbo-interlock`).
+
+pub mod file;
+pub mod geom;
+pub mod graph;
+pub mod input;
+pub mod order;
+pub mod partition;
+pub mod runtime;
+pub mod scan;
+pub mod separate;
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use fragrace_emu::Mesh;
+use glam::DVec3;
+
+pub use input::InputError;
+pub use partition::{Frame3, ViewpointError};
+pub use runtime::algorithms;
+
+/// How to preprocess.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PresortConfig {
+    /// Faces of the bounding polyhedron = partitions of viewpoint space: 4, 6, 16 or 64.
+    pub partitions: u32,
+    /// Worker threads (partitions run one per task).
+    pub threads: usize,
+}
+
+impl Default for PresortConfig {
+    fn default() -> Self {
+        PresortConfig {
+            partitions: 6,
+            threads: 2,
+        }
+    }
+}
+
+/// One triangle instance of a segment, in draw order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Instance {
+    /// Input triangle (its primitive id in the mesh).
+    pub tri: u32,
+    /// The back-facing duplicate: rendered only from behind the triangle's plane.
+    pub back: bool,
+    /// The last instance of its triangle and facing in the segment: its test planes are
+    /// left to the LESS depth test (section 4.1: it is drawn iff no earlier copy was).
+    pub last: bool,
+    /// Test planes `p` (world space), all of which must pass: `dot(p, [v, -1]) > 0`.
+    /// The last instance keeps them too (its exact region), for the variants that select
+    /// without a depth test.
+    pub planes: Vec<[f32; 4]>,
+}
+
+/// The instances of one partition, in draw order (back to front).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Segment {
+    pub instances: Vec<Instance>,
+}
+
+/// What preprocessing one partition did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PartitionStats {
+    /// Triangle instances rendered from some viewpoint of the partition, before the scan.
+    pub initial_nodes: usize,
+    pub edges: usize,
+    /// Back-edges of the preliminary order.
+    pub back_edges: usize,
+    pub scan: scan::ScanStats,
+    pub graph_time: Duration,
+    pub scan_time: Duration,
+}
+
+/// The preprocessing's result: one segment per partition.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Presorted {
+    pub mesh_hash: u64,
+    pub triangles: u32,
+    pub frame: Frame3,
+    pub dirs: Vec<DVec3>,
+    pub segments: Vec<Segment>,
+    /// Per partition (empty for a result read from a file).
+    pub stats: Vec<PartitionStats>,
+}
+
+impl Presorted {
+    /// Instances in all segments.
+    pub fn total_instances(&self) -> usize {
+        self.segments.iter().map(|s| s.instances.len()).sum()
+    }
+    /// Memory ratio of the paper's figure 5: all instances over the input triangles.
+    pub fn duplication_ratio(&self) -> f64 {
+        self.total_instances() as f64 / self.triangles.max(1) as f64
+    }
+    /// Average draw-call size over the input triangles (figure 5).
+    pub fn avg_segment_ratio(&self) -> f64 {
+        self.total_instances() as f64
+            / self.segments.len().max(1) as f64
+            / self.triangles.max(1) as f64
+    }
+    /// The segment of a world-space viewpoint.
+    pub fn locate(&self, eye: DVec3) -> Result<usize, ViewpointError> {
+        partition::locate(&self.frame, &self.dirs, eye)
+    }
+}
+
+/// Why preprocessing failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PresortError {
+    #[error(transparent)]
+    Input(#[from] InputError),
+    #[error("{0}")]
+    Config(String),
+    /// (The scan's error is part of this message, not a `source`: error chains would
+    /// print it twice.)
+    #[error("partition {partition}: {error}")]
+    Scan {
+        partition: usize,
+        error: scan::ScanError,
+    },
+}
+
+/// Progress of preprocessing: `(partition, phase, done, total)`, phase `"graph"` or
+/// `"scan"`. Called from the worker threads.
+pub trait Progress: Sync {
+    fn update(&self, partition: usize, phase: &'static str, done: u64, total: u64);
+}
+
+/// No progress reporting.
+pub struct Silent;
+
+impl Progress for Silent {
+    fn update(&self, _: usize, _: &'static str, _: u64, _: u64) {}
+}
+
+/// Preprocesses `mesh` (sections 3-4.2): every partition in parallel, one per task.
+pub fn presort(
+    mesh: &Mesh,
+    cfg: &PresortConfig,
+    progress: &dyn Progress,
+) -> Result<Presorted, PresortError> {
+    if cfg.threads == 0 {
+        return Err(PresortError::Config(
+            "threads 0: preprocessing needs at least 1 thread".into(),
+        ));
+    }
+    let dirs = partition::directions(cfg.partitions).map_err(PresortError::Config)?;
+    input::check(mesh)?;
+    let frame = Frame3::of(&mesh.positions);
+    let tris: Arc<[[DVec3; 3]]> = mesh
+        .indices
+        .iter()
+        .map(|t| t.map(|i| frame.to_local(mesh.positions[i as usize].as_dvec3())))
+        .collect();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(cfg.threads)
+        .build()
+        .map_err(|e| PresortError::Config(format!("thread pool: {e}")))?;
+    let results: Vec<Result<(Segment, PartitionStats), PresortError>> = pool.install(|| {
+        use rayon::prelude::*;
+        (0..dirs.len())
+            .into_par_iter()
+            .map(|k| presort_partition(&tris, &dirs, k, &frame, progress))
+            .collect()
+    });
+    let mut segments = Vec::with_capacity(dirs.len());
+    let mut stats = Vec::with_capacity(dirs.len());
+    for r in results {
+        let (s, st) = r?;
+        segments.push(s);
+        stats.push(st);
+    }
+    Ok(Presorted {
+        mesh_hash: input::mesh_hash(mesh),
+        triangles: mesh.indices.len() as u32,
+        frame,
+        dirs,
+        segments,
+        stats,
+    })
+}
+
+/// One partition: graph, preliminary order, scan, and the segment.
+fn presort_partition(
+    tris: &Arc<[[DVec3; 3]]>,
+    dirs: &[DVec3],
+    k: usize,
+    frame: &Frame3,
+    progress: &dyn Progress,
+) -> Result<(Segment, PartitionStats), PresortError> {
+    let t0 = Instant::now();
+    let region = partition::partition_region(dirs, k);
+    let mut g = graph::Graph::build(tris.clone(), &region, &|d, t| {
+        progress.update(k, "graph", d, t)
+    });
+    let mut stats = PartitionStats {
+        initial_nodes: g.nodes.len(),
+        edges: g.edge_count(),
+        graph_time: t0.elapsed(),
+        ..Default::default()
+    };
+    let t1 = Instant::now();
+    // A viewpoint of the partition: out along its face normal.
+    let eye = dirs[k] * 3.0;
+    let prelim = order::preliminary(&g, eye);
+    stats.back_edges = order::back_edges(&g, &prelim);
+    let mut sstats = scan::ScanStats::default();
+    let final_order = scan::scan(&mut g, prelim, &mut sstats, &|d, t| {
+        progress.update(k, "scan", d, t)
+    })
+    .map_err(|error| PresortError::Scan {
+        partition: k,
+        error,
+    })?;
+    stats.scan = sstats;
+    stats.scan_time = t1.elapsed();
+    Ok((segment_of(&g, &final_order, frame), stats))
+}
+
+/// The segment of a scanned graph: instances in draw order, test planes in world space,
+/// the last copy of each triangle and facing marked.
+fn segment_of(g: &graph::Graph, order: &[usize], frame: &Frame3) -> Segment {
+    let mut seen = std::collections::HashSet::new();
+    let mut last = vec![false; order.len()];
+    for (i, &x) in order.iter().enumerate().rev() {
+        let n = &g.nodes[x];
+        if seen.insert((n.tri, n.back)) {
+            last[i] = true;
+        }
+    }
+    let instances = order
+        .iter()
+        .zip(last)
+        .map(|(&x, last)| {
+            let n = &g.nodes[x];
+            Instance {
+                tri: n.tri,
+                back: n.back,
+                last,
+                planes: n
+                    .cuts
+                    .iter()
+                    .map(|p| frame.world_plane(p).map(|c| c as f32))
+                    .collect(),
+            }
+        })
+        .collect();
+    Segment { instances }
+}

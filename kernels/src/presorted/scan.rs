@@ -1,0 +1,323 @@
+//! The back-edge scan (section 4.1): walk the preliminary order in draw order; at each
+//! instance `x` with back-edges (it occludes instances `b*` drawn after it), place a copy
+//! of `x` right after the last `b`, and choose a cutting plane that leaves the original `x`
+//! the viewpoints of the forward edges from the instances `f*` in between (eq. 2-5).
+//!
+//! Regions are convex ([`super::geom::Region`]); unions are approximated by the convex hull
+//! of their vertices, and the cutting plane separates the two hulls
+//! ([`super::separate::separate`]: the plane halfway between them).
+//!
+//! Fallbacks, in order, when no forward-edge region separates from all of `R_b`:
+//! 1. the paper's pairwise progress step (section 4.1, "at least one of the edges between
+//!    `f*` and `x` from at least one of edges between `x` and `b*`"): a plane separating one
+//!    `O_{f->x}` from one `O_{x->b}` splits `x`; the original keeps fewer back-edges and is
+//!    scanned again;
+//! 2. the `b` and `f` duplications of section 4.1 (the edge `b -> f` separated from
+//!    `x -> b`, or from `f -> x`);
+//! 3. moving `x` whole after the last `b` (the `f -> x` edges become back-edges of the
+//!    `f*`, handled when the scan reaches them).
+//!
+//! The scan gives up with an error when it cannot progress, so a cycle that the input's
+//! assumptions exclude (intersecting triangles: a cycle visible from one viewpoint), or one
+//! whose regions only touch (no cutting plane with a margin), ends in an error, never a
+//! hang: past a step budget proportional to the graph, when one instance has been moved
+//! whole [`MAX_WHOLE_MOVES`] times (the moves ping-pong), or when the instances outnumber
+//! [`MAX_COPIES`] per initial instance.
+
+use glam::DVec3;
+
+use super::geom::{Plane, EPS};
+use super::graph::Graph;
+use super::separate;
+
+/// What the scan did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ScanStats {
+    pub moves: u64,
+    pub splits: u64,
+    pub pairwise: u64,
+    pub bf_dups: u64,
+    pub whole_moves: u64,
+    pub lp_calls: u64,
+}
+
+/// The scan could not progress.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "the back-edge scan made no progress after {steps} steps ({nodes} instances, {edges} \
+     occlusion edges left): the mesh has intersecting triangles or a cycle visible from one \
+     viewpoint, which the method assumes away (split them first), or a cycle whose occlusion \
+     regions only touch, which this implementation cannot cut yet (no cutting plane with a \
+     margin)"
+)]
+pub struct ScanError {
+    pub steps: u64,
+    pub nodes: usize,
+    pub edges: usize,
+}
+
+/// A cutting plane with every `pos` point strictly on the positive side and every `neg`
+/// point on the negative side (section 4.1.2), if the hulls of the two sets are disjoint.
+///
+/// `prev`, the plane that separated the previous, smaller set in the greedy growth of
+/// `R_f`, is tried first (one check of every point); then the hulls' distance decides
+/// ([`separate::separate`]) and gives the plane halfway between them. The paper tries the
+/// regions' faces and vertex-edge planes after its LP because the LP only says whether the
+/// hulls intersect; the distance computation returns the plane of largest margin itself.
+fn cutting_plane(
+    pos: &[DVec3],
+    neg: &[DVec3],
+    prev: Option<Plane>,
+    stats: &mut ScanStats,
+) -> Option<Plane> {
+    if let Some(p) = prev {
+        if separate::verify(&p, pos, neg) {
+            return Some(p);
+        }
+    }
+    // A point both sets share (regions meeting at a corner of the partition): the hulls
+    // intersect.
+    if shares_point(pos, neg) {
+        return None;
+    }
+    stats.lp_calls += 1;
+    separate::separate(pos, neg)
+}
+
+/// Whether two point sets have a point in common (within [`EPS`]).
+fn shares_point(a: &[DVec3], b: &[DVec3]) -> bool {
+    let key = |p: &DVec3| (p.x / 1e-6).round() as i64;
+    let mut xs: Vec<(i64, usize)> = a.iter().enumerate().map(|(i, p)| (key(p), i)).collect();
+    xs.sort_unstable();
+    b.iter().any(|q| {
+        let k = key(q);
+        let from = xs.partition_point(|e| e.0 < k - 1);
+        xs[from..]
+            .iter()
+            .take_while(|e| e.0 <= k + 1)
+            .any(|e| (a[e.1] - *q).length_squared() < EPS * EPS)
+    })
+}
+
+/// Whole moves of one instance after which the scan gives up (fallback 3 moved it back and
+/// forth with the instances it is in a cycle with).
+pub const MAX_WHOLE_MOVES: u32 = 256;
+/// Instances per initial instance after which the scan gives up.
+pub const MAX_COPIES: usize = 64;
+
+/// Most LPs the greedy growth of `R_f` runs for one instance before it stops adding
+/// forward edges (the rest go with the copy, as the paper's unaccounted edges do).
+const GREEDY_LPS: u64 = 12;
+
+/// Runs the scan over `order` (draw order, back to front), duplicating instances in `g`.
+/// Returns the final draw order.
+pub fn scan(
+    g: &mut Graph,
+    mut order: Vec<usize>,
+    stats: &mut ScanStats,
+    tick: &dyn Fn(u64, u64),
+) -> Result<Vec<usize>, ScanError> {
+    let budget = 200 * (g.nodes.len() as u64 + g.edge_count() as u64) + 10_000;
+    let max_nodes = MAX_COPIES * g.nodes.len().max(1);
+    let mut whole = vec![0u32; g.nodes.len()];
+    let mut steps = 0u64;
+    let mut pos = vec![0usize; g.nodes.len()];
+    let reindex = |order: &[usize], pos: &mut Vec<usize>, n: usize| {
+        pos.resize(n, usize::MAX);
+        for (i, &x) in order.iter().enumerate() {
+            pos[x] = i;
+        }
+    };
+    reindex(&order, &mut pos, g.nodes.len());
+    let mut idx = 0usize;
+    while idx < order.len() {
+        steps += 1;
+        if steps > budget || g.nodes.len() > max_nodes {
+            return Err(ScanError {
+                steps,
+                nodes: g.nodes.len(),
+                edges: g.edge_count(),
+            });
+        }
+        if steps.is_multiple_of(256) {
+            tick(idx as u64, order.len() as u64);
+        }
+        let x = order[idx];
+        let backs: Vec<usize> = g.out[x]
+            .iter()
+            .copied()
+            .filter(|&e| g.edges[e].alive && pos[g.edges[e].to] > idx)
+            .collect();
+        if backs.is_empty() {
+            idx += 1;
+            continue;
+        }
+        let b_last = backs
+            .iter()
+            .map(|&e| pos[g.edges[e].to])
+            .max()
+            .expect("non-empty");
+        let mut fs: Vec<usize> = g.inn[x]
+            .iter()
+            .copied()
+            .filter(|&e| {
+                let p = pos[g.edges[e].from];
+                g.edges[e].alive && p > idx && p < b_last
+            })
+            .collect();
+        fs.sort_by_key(|&e| pos[g.edges[e].from]);
+        if fs.is_empty() {
+            // Moving x after the last b breaks no forward edge.
+            order.remove(idx);
+            order.insert(b_last, x);
+            reindex(&order, &mut pos, g.nodes.len());
+            stats.moves += 1;
+            continue;
+        }
+        let rb: Vec<DVec3> = backs
+            .iter()
+            .flat_map(|&e| g.edges[e].verts.iter().copied())
+            .collect();
+        // Greedy growth of R_f (eq. 3-5).
+        let mut rf: Vec<DVec3> = Vec::new();
+        let mut plane: Option<Plane> = None;
+        let lps_before = stats.lp_calls;
+        for &e in &fs {
+            if stats.lp_calls - lps_before >= GREEDY_LPS {
+                break;
+            }
+            let mut cand = rf.clone();
+            cand.extend(g.edges[e].verts.iter().copied());
+            if let Some(p) = cutting_plane(&cand, &rb, plane, stats) {
+                rf = cand;
+                plane = Some(p);
+            }
+        }
+        if let Some(p) = plane {
+            split_and_place(g, &mut order, &mut pos, idx, b_last, x, p);
+            reindex(&order, &mut pos, g.nodes.len());
+            stats.splits += 1;
+            continue;
+        }
+        // Fallback 1: one forward edge against one back edge.
+        let mut pair: Option<Plane> = None;
+        // At most PAIRS x PAIRS attempts (the nearest f and b first): a bound on the LPs.
+        const PAIRS: usize = 8;
+        'pairs: for &f in fs.iter().rev().take(PAIRS) {
+            for &b in backs.iter().take(PAIRS) {
+                if let Some(p) = cutting_plane(&g.edges[f].verts, &g.edges[b].verts, None, stats) {
+                    pair = Some(p);
+                    break 'pairs;
+                }
+            }
+        }
+        if let Some(p) = pair {
+            split_and_place(g, &mut order, &mut pos, idx, b_last, x, p);
+            reindex(&order, &mut pos, g.nodes.len());
+            stats.pairwise += 1;
+            continue;
+        }
+        // Fallback 2: duplicate b or f (section 4.1's three configurations).
+        if dup_b_or_f(g, &mut order, &pos, x, &backs, &fs, stats) {
+            reindex(&order, &mut pos, g.nodes.len());
+            stats.bf_dups += 1;
+            continue;
+        }
+        // Fallback 3: move x whole.
+        whole.resize(g.nodes.len(), 0);
+        whole[x] += 1;
+        if whole[x] > MAX_WHOLE_MOVES {
+            return Err(ScanError {
+                steps,
+                nodes: g.nodes.len(),
+                edges: g.edge_count(),
+            });
+        }
+        order.remove(idx);
+        order.insert(b_last, x);
+        reindex(&order, &mut pos, g.nodes.len());
+        stats.whole_moves += 1;
+    }
+    tick(order.len() as u64, order.len() as u64);
+    Ok(order)
+}
+
+/// Splits `x` (at `idx`) by `p`: `x` keeps the positive side and stays; the copy with the
+/// negative side goes right after position `b_last`.
+fn split_and_place(
+    g: &mut Graph,
+    order: &mut Vec<usize>,
+    pos: &mut [usize],
+    idx: usize,
+    b_last: usize,
+    x: usize,
+    p: Plane,
+) {
+    let (new, keep) = g.split(x, p);
+    let _ = pos;
+    if let Some(n) = new {
+        order.insert(b_last + 1, n);
+    }
+    if !keep {
+        order.remove(idx);
+    }
+}
+
+/// The `b` and `f` duplications of section 4.1, for the last `b` and the last `f` before
+/// it, when an edge `b -> f` closes the cycle `x -> b -> f -> x`: a copy of `b` restricted
+/// to `O_{x->b}`'s side placed before `x` (the original keeps `O_{b->f}`'s side), or `x`
+/// moved after `b` followed by a copy of `f` restricted to `O_{f->x}`'s side (the original
+/// keeps `O_{b->f}`'s side).
+fn dup_b_or_f(
+    g: &mut Graph,
+    order: &mut Vec<usize>,
+    pos: &[usize],
+    x: usize,
+    backs: &[usize],
+    fs: &[usize],
+    stats: &mut ScanStats,
+) -> bool {
+    let b_edge = *backs
+        .iter()
+        .max_by_key(|&&e| pos[g.edges[e].to])
+        .expect("non-empty");
+    let f_edge = *fs.last().expect("non-empty");
+    let (b, f) = (g.edges[b_edge].to, g.edges[f_edge].from);
+    let Some(bf) = g.out[b]
+        .iter()
+        .copied()
+        .find(|&e| g.edges[e].alive && g.edges[e].to == f)
+    else {
+        return false;
+    };
+    let xb = g.edges[b_edge].verts.clone();
+    let bf_v = g.edges[bf].verts.clone();
+    let fx = g.edges[f_edge].verts.clone();
+    // Duplicate b: the copy that serves x -> b goes before x.
+    if let Some(p) = cutting_plane(&bf_v, &xb, None, stats) {
+        let (new, keep) = g.split(b, p);
+        if let Some(n) = new {
+            order.insert(pos[x], n);
+        }
+        if !keep {
+            order.retain(|&y| y != b);
+        }
+        return true;
+    }
+    // Duplicate f: x moves after b, and the copy of f that serves f -> x follows it; the
+    // original f keeps the viewpoints of b -> f.
+    if let Some(p) = cutting_plane(&bf_v, &fx, None, stats) {
+        let (new, keep) = g.split(f, p);
+        order.retain(|&y| y != x);
+        let at = order.iter().position(|&y| y == b).expect("b placed") + 1;
+        order.insert(at, x);
+        if let Some(n) = new {
+            order.insert(at + 1, n);
+        }
+        if !keep {
+            order.retain(|&y| y != f);
+        }
+        return true;
+    }
+    false
+}

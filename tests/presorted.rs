@@ -1,0 +1,379 @@
+//! Depth-presorted triangle lists ("Depth-Presorted Triangle Lists"): the stored lists of a
+//! small non-convex mesh render, from random viewpoints outside the bounding polyhedron,
+//! the exact back-to-front composite of the truth (within 1/255) with every triangle drawn
+//! exactly once, under the ordered, parallel and scheduled executors; the SSBO variant
+//! races without interlock; bad input is refused.
+//!
+//! The presorted algorithms are kept out of the registry's catalogue that the fuzzers and
+//! the differential sweep iterate over arbitrary scenes ([`fragrace_kernels::registry::
+//! preprocessed`]): their input must be a static mesh without intersecting or duplicate
+//! triangles, seen from outside the bounding polyhedron. This file holds them to their
+//! contract on such input.
+
+use std::path::{Path, PathBuf};
+
+use fragrace::run::{self, RunSpec, SceneSpec};
+use fragrace::scene::Camera;
+use fragrace_emu::{ExecConfig, ExecMode, Mesh, Policy, ScheduleConfig};
+use fragrace_kernels::presorted::{self, file, PresortConfig, Silent};
+use glam::Vec3;
+use rand::{Rng, SeedableRng};
+
+/// A torus (non-convex: occlusion cycles across viewpoints), `n` x `m` quads.
+fn torus(n: u32, m: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let (big, small) = (1.0f32, 0.4f32);
+    let mut pos = Vec::new();
+    for i in 0..n {
+        let u = i as f32 / n as f32 * std::f32::consts::TAU;
+        for j in 0..m {
+            let v = j as f32 / m as f32 * std::f32::consts::TAU;
+            let r = big + small * v.cos();
+            pos.push([r * u.cos(), small * v.sin(), r * u.sin()]);
+        }
+    }
+    let mut idx = Vec::new();
+    for i in 0..n {
+        for j in 0..m {
+            let a = i * m + j;
+            let b = ((i + 1) % n) * m + j;
+            let c = ((i + 1) % n) * m + (j + 1) % m;
+            let d = i * m + (j + 1) % m;
+            idx.push([a, b, c]);
+            idx.push([a, c, d]);
+        }
+    }
+    (pos, idx)
+}
+
+fn scene_of(pos: &[[f32; 3]], idx: &[[u32; 3]]) -> SceneSpec {
+    SceneSpec::Inline {
+        positions: pos.to_vec(),
+        indices: idx.to_vec(),
+        radius: None,
+    }
+}
+
+fn spec(scene: &SceneSpec, algo: &str, az: f32, el: f32, file: &Path) -> RunSpec {
+    let mut s = RunSpec::new(scene.clone(), algo);
+    s.width = 40;
+    s.height = 40;
+    s.camera = Camera::new(az, el);
+    s.params.presorted = Some(file.to_path_buf());
+    s
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fragrace-presorted-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// The mesh exactly as runs load it (normalised like any inline scene).
+fn loaded_mesh(scene: &SceneSpec) -> Mesh {
+    scene.load().unwrap().mesh
+}
+
+fn executors() -> Vec<ExecConfig> {
+    let mut v = vec![
+        ExecConfig::ordered(),
+        ExecConfig::parallel(2),
+        ExecConfig {
+            lockstep: false,
+            ..ExecConfig::parallel(2)
+        },
+    ];
+    for (policy, seed) in [(Policy::Random, 1), (Policy::Reverse, 0), (Policy::Fifo, 0)] {
+        v.push(ExecConfig {
+            mode: ExecMode::Scheduled(ScheduleConfig {
+                policy,
+                seed,
+                window: 16,
+                record: false,
+            }),
+            ..ExecConfig::parallel(2)
+        });
+    }
+    v
+}
+
+/// Largest channel difference between two images.
+fn max_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
+    a.iter()
+        .zip(b)
+        .flat_map(|(x, y)| (0..4).map(move |c| (x[c] - y[c]).abs()))
+        .fold(0.0, f32::max)
+}
+
+/// Runs `algos` from `views` random viewpoints; returns the viewpoints refused as inside the
+/// bounding polyhedron.
+fn exact_from_random_views(scene: &SceneSpec, file: &Path, algos: &[&str], views: usize) -> usize {
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(26);
+    let mut inside = 0;
+    for _ in 0..views {
+        let az = rng.gen_range(0.0..360.0f32);
+        let el = rng.gen_range(-80.0..80.0f32);
+        let base = spec(scene, "presorted", az, el, file);
+        let loaded = run::load(&base).unwrap();
+        let truth = run::truth(&base, &loaded).unwrap();
+        let cap = truth.capture.as_ref().unwrap();
+        let want: Vec<[f32; 4]> = (0..cap.pixels())
+            .map(|p| {
+                fragrace_kernels::common::composite_frags(
+                    cap.pixel(p),
+                    base.params.alpha,
+                    base.params.background,
+                )
+            })
+            .collect();
+        for algo in algos {
+            for exec in executors() {
+                let mut s = spec(scene, algo, az, el, file);
+                s.exec = exec;
+                let r = match run::render(&s, &loaded) {
+                    Ok(r) => r,
+                    Err(e) if e.to_string().contains("inside the bounding polyhedron") => {
+                        inside += 1;
+                        continue;
+                    }
+                    Err(e) => panic!("{}: {e}", s.command("check")),
+                };
+                for c in &r.result.checks {
+                    assert!(c.passed, "{}: {}: {}", s.command("check"), c.name, c.detail);
+                }
+                let img = r.result.image.as_ref().unwrap();
+                let d = max_diff(img, &want);
+                assert!(
+                    d <= 1.0 / 255.0,
+                    "{}: image differs from the truth's composite by {d}",
+                    s.command("check")
+                );
+                if *algo == "presorted-ssbo-interlock" || *algo == "presorted" {
+                    assert_eq!(r.result.report.hazards.total(), 0, "{}", s.command("check"));
+                }
+            }
+        }
+    }
+    inside
+}
+
+#[test]
+fn torus_is_exact_from_random_viewpoints_under_every_executor() {
+    let (pos, idx) = torus(12, 6);
+    let scene = scene_of(&pos, &idx);
+    let mesh = loaded_mesh(&scene);
+    let lists = presorted::presort(
+        &mesh,
+        &PresortConfig {
+            partitions: 6,
+            threads: 2,
+        },
+        &Silent,
+    )
+    .unwrap();
+    assert_eq!(lists.segments.len(), 6);
+    assert!(lists.duplication_ratio() >= 1.0);
+    let f = tmp("torus6.bin");
+    file::save(&lists, &f).unwrap();
+    let algos = ["presorted", "presorted-vs", "presorted-ssbo-interlock"];
+    let inside = exact_from_random_views(&scene, &f, &algos, 6);
+    // The camera frames the bounding sphere from about 2.2 radii: outside the cube.
+    assert_eq!(inside, 0);
+}
+
+#[test]
+fn every_partition_count_gives_exact_lists() {
+    let (pos, idx) = torus(8, 4);
+    let scene = scene_of(&pos, &idx);
+    let mesh = loaded_mesh(&scene);
+    for partitions in [4, 16, 64] {
+        let lists = presorted::presort(
+            &mesh,
+            &PresortConfig {
+                partitions,
+                threads: 2,
+            },
+            &Silent,
+        )
+        .unwrap();
+        let f = tmp(&format!("torus-small-{partitions}.bin"));
+        file::save(&lists, &f).unwrap();
+        // The tetrahedron's corners are 3 radii out: some views are inside it, refused.
+        exact_from_random_views(&scene, &f, &["presorted"], 3);
+    }
+}
+
+#[test]
+fn ssbo_blending_races_without_interlock() {
+    let (pos, idx) = torus(12, 6);
+    let scene = scene_of(&pos, &idx);
+    let mesh = loaded_mesh(&scene);
+    let lists = presorted::presort(&mesh, &PresortConfig::default(), &Silent).unwrap();
+    let f = tmp("torus-ssbo.bin");
+    file::save(&lists, &f).unwrap();
+    let mut hazards = 0;
+    let mut wrong = 0;
+    for seed in 0..4 {
+        let mut s = spec(&scene, "presorted-ssbo", 30.0, 20.0, &f);
+        s.exec = ExecConfig {
+            mode: ExecMode::Scheduled(ScheduleConfig {
+                policy: Policy::Random,
+                seed,
+                window: 32,
+                record: false,
+            }),
+            ..ExecConfig::parallel(2)
+        };
+        let loaded = run::load(&s).unwrap();
+        let truth = run::truth(&s, &loaded).unwrap();
+        let c = run::check_with(&s, &loaded, &truth).unwrap();
+        hazards += c.hazards().total();
+        wrong += u64::from(
+            c.metrics
+                .image
+                .as_ref()
+                .is_some_and(|m| m.max_diff > 1.0 / 255.0),
+        );
+    }
+    assert!(
+        hazards > 0,
+        "no scheduled run of presorted-ssbo showed a hazard"
+    );
+    assert!(
+        wrong > 0,
+        "no scheduled run of presorted-ssbo differed from the truth"
+    );
+}
+
+#[test]
+fn a_file_for_another_mesh_is_refused() {
+    let (pos, idx) = torus(8, 4);
+    let mesh = loaded_mesh(&scene_of(&pos, &idx));
+    let lists = presorted::presort(&mesh, &PresortConfig::default(), &Silent).unwrap();
+    let f = tmp("mismatch.bin");
+    file::save(&lists, &f).unwrap();
+    assert!(file::load(&f, &mesh).is_ok());
+    let mut other = mesh.clone();
+    other.positions[0] += Vec3::new(1e-3, 0.0, 0.0);
+    let e = file::load(&f, &other).unwrap_err();
+    assert!(e.to_string().contains("made for another mesh"), "{e}");
+    // And through a run: a clear error, not an image.
+    let (pos2, idx2) = torus(9, 4);
+    let s = spec(&scene_of(&pos2, &idx2), "presorted", 10.0, 10.0, &f);
+    let loaded = run::load(&s).unwrap();
+    let e = run::render(&s, &loaded).err().expect("refused");
+    assert!(e.to_string().contains("made for another mesh"), "{e}");
+}
+
+#[test]
+fn truncated_or_altered_files_are_refused_and_writes_are_atomic() {
+    let (pos, idx) = torus(8, 4);
+    let mesh = loaded_mesh(&scene_of(&pos, &idx));
+    let lists = presorted::presort(&mesh, &PresortConfig::default(), &Silent).unwrap();
+    let bytes = file::encode(&lists);
+    let f = tmp("cut.bin");
+    // An interrupted plain write would leave a prefix: refused, whatever its length.
+    for cut in [0, 10, bytes.len() / 2, bytes.len() - 1] {
+        std::fs::write(&f, &bytes[..cut]).unwrap();
+        assert!(
+            file::load(&f, &mesh).is_err(),
+            "prefix of {cut} bytes accepted"
+        );
+    }
+    let mut flipped = bytes.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 1;
+    std::fs::write(&f, &flipped).unwrap();
+    let e = file::load(&f, &mesh).unwrap_err();
+    assert!(e.to_string().contains("corrupted"), "{e}");
+    // save goes through a temporary file and a rename: a failed save leaves neither.
+    let dir = tmp("sub");
+    let missing = dir.join("no-such-dir").join("x.bin");
+    assert!(file::save(&lists, &missing).is_err());
+    assert!(!missing.exists());
+    let f2 = tmp("atomic.bin");
+    file::save(&lists, &f2).unwrap();
+    let leftovers: Vec<_> = std::fs::read_dir(f2.parent().unwrap())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+        .collect();
+    assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
+    assert_eq!(file::load(&f2, &mesh).unwrap().segments, lists.segments);
+}
+
+#[test]
+fn bad_and_non_manifold_meshes_are_refused() {
+    let (pos, mut idx) = torus(8, 4);
+    // A degenerate triangle.
+    let mut d = idx.clone();
+    d.push([0, 1, 1]);
+    let e = presorted::presort(
+        &loaded_mesh(&scene_of(&pos, &d)),
+        &PresortConfig::default(),
+        &Silent,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("degenerate"), "{e}");
+    // A duplicate triangle.
+    let mut dup = idx.clone();
+    dup.push([idx[3][1], idx[3][2], idx[3][0]]);
+    let e = presorted::presort(
+        &loaded_mesh(&scene_of(&pos, &dup)),
+        &PresortConfig::default(),
+        &Silent,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("same three vertices"), "{e}");
+    // Bad partition counts.
+    let e = presorted::presort(
+        &loaded_mesh(&scene_of(&pos, &idx)),
+        &PresortConfig {
+            partitions: 5,
+            threads: 1,
+        },
+        &Silent,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("4, 6, 16 or 64"), "{e}");
+    // Non-manifold: a fin on one edge of the outer equator, pointing outwards (three
+    // triangles share the edge): refused, naming the edge.
+    let mut p2 = pos.clone();
+    p2.push([1.9, 0.05, 0.25]);
+    let apex = (p2.len() - 1) as u32;
+    idx.push([idx[0][0], idx[0][1], apex]);
+    let e = presorted::presort(
+        &loaded_mesh(&scene_of(&p2, &idx)),
+        &PresortConfig::default(),
+        &Silent,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("shared by 3 triangles"), "{e}");
+}
+
+#[test]
+fn a_viewpoint_inside_the_bounding_polyhedron_is_a_clear_error() {
+    let (pos, idx) = torus(8, 4);
+    let scene = scene_of(&pos, &idx);
+    let mesh = loaded_mesh(&scene);
+    let lists = presorted::presort(&mesh, &PresortConfig::default(), &Silent).unwrap();
+    let f = tmp("inside.bin");
+    file::save(&lists, &f).unwrap();
+    let mut s = spec(&scene, "presorted", 45.0, 0.0, &f);
+    // Zoomed in with a wide field of view: the eye comes to the bounding sphere, here
+    // towards an edge of the bounding cube (inside it).
+    s.camera.fill = 20.0;
+    s.camera.fovy = 170.0;
+    let loaded = run::load(&s).unwrap();
+    let e = run::render(&s, &loaded).err().expect("refused");
+    assert!(
+        e.to_string().contains("inside the bounding polyhedron"),
+        "{e}"
+    );
+    // And a file passed to an algorithm that does not read it is refused before the run.
+    let s = spec(&scene, "opaque", 0.0, 0.0, &f);
+    let e = s.validate().unwrap_err();
+    assert!(
+        e.to_string().contains("only the presorted algorithms"),
+        "{e}"
+    );
+}
