@@ -155,9 +155,14 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
                         .collect(),
                 })
                 .collect();
+            // A mesh by its file name: the directory it was read from is the machine's, not
+            // the figure's.
+            let name = std::path::Path::new(scene)
+                .file_name()
+                .map_or(scene.to_string(), |n| n.to_string_lossy().into_owned());
             let mut plot = fragrace::plot::LinePlot::new(
                 &format!(
-                    "Error pixel rate over {views} views of {scene} ({0}x{0}, k = {1})",
+                    "Error pixel rate over {views} views of {name} ({0}x{0}, k = {1})",
                     a.size, a.k
                 ),
                 "azimuth (degrees)",
