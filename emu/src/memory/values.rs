@@ -1,6 +1,8 @@
 //! Buffer contents: aligned, zeroed allocations of atomic words ([`Values`]), zeroed by
 //! several threads at once for large buffers, backed by huge pages where the OS allows.
 
+// Under loom the buffers are not aligned by hand (loom's atomics are not plain words).
+#[cfg(not(loom))]
 use super::BUFFER_ALIGN;
 use crate::sync::{AtomicU32, AtomicU64};
 
