@@ -377,6 +377,30 @@ impl<'m> Objects<'m> {
         Ok(())
     }
 
+    /// The end of a dual peeler's iteration: the queries against its range image (RG32F
+    /// `(-near, far)`, `-inf` where nothing is left, [`super::dual::dual_range`]), issued
+    /// only while some pixel has a range left (after the last range pass, none).
+    pub fn end_dual_iteration(
+        &mut self,
+        device: &Device,
+        range: &Image,
+        exec: &ExecConfig,
+        report: &mut PassReport,
+    ) -> Result<(), AlgoError> {
+        if range
+            .texels
+            .iter()
+            .all(|t| f32::from_bits(t[1]) == f32::NEG_INFINITY)
+        {
+            return Ok(());
+        }
+        let remaining = Remaining::Range {
+            image: range,
+            range: super::dual::dual_range,
+        };
+        self.end_iteration(device, remaining, exec, report)
+    }
+
     /// What culling did (`None` when it was off), the last pass (which found nothing left,
     /// or ended the run at `k`) included.
     pub fn summary(&mut self) -> Option<ObjectCulling> {

@@ -170,26 +170,8 @@ impl Algorithm for DualB {
         };
         let (mut range, first) = range_pass(&mut fb, &device, &mut objects, None, &mut report)?;
         // Geometry culling: after each range pass, objects entirely outside every pixel's
-        // range are done (queried only while a range is left).
-        let cull = |objects: &mut super::culling::Objects<'_>,
-                    device: &fragrace_emu::Device,
-                    range: &Image,
-                    report: &mut PassReport|
-         -> Result<(), AlgoError> {
-            if range.texels.iter().any(|t| f32::from_bits(t[1]) != NONE) {
-                objects.end_iteration(
-                    device,
-                    super::culling::Remaining::Range {
-                        image: range,
-                        range: super::dual::dual_range,
-                    },
-                    exec,
-                    report,
-                )?;
-            }
-            Ok(())
-        };
-        cull(&mut objects, &device, &range, &mut report)?;
+        // range are done.
+        objects.end_dual_iteration(&device, &range, exec, &mut report)?;
         let generated = first.stats.fragments_generated;
         let mut backs: Vec<Vec<CapturedFrag>> = vec![Vec::new(); pixels];
         let (mut met, mut not_shrinking) = (0u64, 0u64);
@@ -230,7 +212,7 @@ impl Algorithm for DualB {
                     not_shrinking += 1;
                 }
             }
-            cull(&mut objects, &device, &next, &mut report)?;
+            objects.end_dual_iteration(&device, &next, exec, &mut report)?;
             range = next;
         }
         let unfinished = left(&range);
