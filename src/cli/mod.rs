@@ -1,4 +1,4 @@
-//! The commands of the binary, by file (`main.rs` keeps the options and the core commands).
+//! The commands of the binary, by file (`main.rs` keeps the options, their parsing into a run and `list`).
 
 pub(crate) mod bench;
 pub(crate) mod fuzz;
@@ -6,3 +6,4 @@ pub(crate) mod outputs;
 pub(crate) mod presort;
 pub(crate) mod racebench;
 pub(crate) mod report;
+pub(crate) mod run;
