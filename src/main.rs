@@ -175,6 +175,10 @@ struct ReportArgs {
     /// shipped meshes of assets/).
     #[arg(long, value_name = "DIR", requires = "paper", conflicts_with = "quick")]
     models: Option<PathBuf>,
+    /// --paper: the llvmpipe peer's script (oit.py, with Python's moderngl), run by the
+    /// hazards section next to the k-buffer's race; without it the page says it is absent.
+    #[arg(long, value_name = "FILE", requires = "paper")]
+    peer: Option<PathBuf>,
 }
 
 #[derive(Args, Clone)]

@@ -76,6 +76,7 @@ fn quick_report_of_every_section_is_complete() {
         quick: true,
         models: None,
         threads: 2,
+        peer: None,
     };
     let written = report::generate(&cfg, &|_: &str| {}).unwrap();
     let html = std::fs::read_to_string(&written.index).unwrap();
@@ -122,19 +123,51 @@ fn quick_report_of_every_section_is_complete() {
         .flat_map(|s| s["figures"].as_array().unwrap())
         .collect();
     assert!(figures.len() >= 5);
+    let mut boxes = 0;
     for f in figures {
-        let series = f["series"].as_array().unwrap();
+        // A line plot's series have points; a box plot's boxes have values.
+        let (list, key) = match f.get("series") {
+            Some(s) => (s, "points"),
+            None => {
+                boxes += 1;
+                (&f["boxes"], "values")
+            }
+        };
+        let list = list.as_array().unwrap();
+        assert!(!list.is_empty(), "{}", f["id"]);
         assert!(
-            series
-                .iter()
-                .all(|s| !s["points"].as_array().unwrap().is_empty()),
+            list.iter().all(|s| !s[key].as_array().unwrap().is_empty()),
             "{}",
             f["id"]
         );
         assert!(f["command"].as_str().unwrap().contains("--paper"));
     }
+    assert!(boxes >= 1, "the hazards section draws EPR distributions as box plots");
     assert!(json["machine"]["cpu"]
         .as_str()
         .is_some_and(|c| !c.is_empty()));
+    // The grid of the hazards section: every hazard-prone algorithm under every policy.
+    let grid = std::fs::read_to_string(out.join("hazards-grid.csv")).unwrap();
+    for p in ["random", "pct:2", "pct:3", "warp:32", "far-first", "parallel"] {
+        assert!(grid.contains(&format!(",{p},")), "{p} missing from the grid");
+    }
+    // Regenerating one section keeps the others on the page, with their own machine line.
+    let again = PaperConfig {
+        papers: vec![Paper::Presorted],
+        ..cfg
+    };
+    report::generate(&again, &|_: &str| {}).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let kept: Vec<&str> = json["sections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["paper"].as_str().unwrap())
+        .collect();
+    assert_eq!(kept.len(), Paper::ALL.len(), "{kept:?}");
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(html.contains("hazards-grid.csv") && html.contains("figure6-epr-views.png"));
+    assert!(html.contains("--paper all"), "the page's whole command");
     std::fs::remove_dir_all(&out).ok();
 }

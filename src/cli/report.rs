@@ -270,6 +270,7 @@ fn cmd_paper(a: &ReportArgs, papers: &str) -> Result<()> {
         out,
         quick: a.quick,
         models: a.models.clone(),
+        peer: a.peer.clone(),
         threads: a
             .threads
             .unwrap_or_else(fragrace_emu::exec::default_threads),

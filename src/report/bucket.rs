@@ -110,12 +110,14 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
             points: Vec::new(),
         })
         .collect();
+    // The mesh is read once; each view only changes the camera.
+    let mut loaded = ctx(run::load(&spec(&scene, size, k, cfg.threads)), || name.clone())?;
     for v in 0..views {
         let azimuth = 360.0 * v as f32 / views as f32;
         progress.step(&format!("bucket: Figure 6, view {} of {views}", v + 1));
         let mut base = spec(&scene, size, k, cfg.threads);
         base.camera = Camera::new(azimuth, 0.0);
-        let loaded = ctx(run::load(&base), || name.clone())?;
+        loaded.view_proj = loaded.scene.view_proj(&base.camera, size, size);
         let truth = ctx(run::truth(&base, &loaded), || format!("{name}: the truth"))?;
         for (line, algo) in series.iter_mut().zip(FIGURE6) {
             let mut sp = base.clone();
@@ -141,7 +143,7 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
             "EPR of the bucket schemes and the k-buffer over {views} azimuths of {name}: a pixel \
              is an error when its k nearest depths differ from the truth's."
         ),
-        plot,
+        plot: plot.into(),
         command: cfg.command(Paper::Bucket),
     });
     Ok(s)

@@ -1,7 +1,7 @@
 //! The machine a report ran on, and when: every table and figure states them.
 
 /// CPU model, threads and date (UTC) of a report.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Machine {
     /// `model name` of /proc/cpuinfo (`unknown CPU` where there is none).
     pub cpu: String,

@@ -24,13 +24,13 @@ pub mod presorted;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::plot::{LinePlot, PlotError};
+use crate::plot::{BoxPlot, LinePlot, PlotError};
 use crate::run::RunError;
 
 pub use machine::Machine;
 
 /// One section of the report (`--paper NAME`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Paper {
     DepthFighting,
@@ -94,6 +94,8 @@ pub struct PaperConfig {
     pub models: Option<PathBuf>,
     /// Threads of each run.
     pub threads: usize,
+    /// The llvmpipe peer's script (`oit.py`), run next to the k-buffer's race when given.
+    pub peer: Option<PathBuf>,
 }
 
 impl PaperConfig {
@@ -111,6 +113,9 @@ impl PaperConfig {
         }
         if let Some(m) = &self.models {
             c += &format!(" --models {}", m.display());
+        }
+        if let (Paper::Hazards, Some(p)) = (paper, &self.peer) {
+            c += &format!(" --peer {}", p.display());
         }
         c
     }
@@ -165,7 +170,7 @@ pub fn mesh_name(p: &Path) -> String {
 }
 
 /// A table: its rows as text (CSV, Markdown, HTML) and as values (report.json).
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Table {
     /// File stem (`ID.csv`, `ID.md`) and anchor.
     pub id: String,
@@ -177,18 +182,66 @@ pub struct Table {
     pub command: String,
 }
 
-/// A figure: a line plot and the command that regenerates it.
-#[derive(Clone, Debug)]
+/// A figure: a plot and the command that regenerates it. In report.json the plot's fields
+/// (title, axis labels, series with their points) sit beside the figure's own.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Figure {
     /// File stem (`ID.svg`, `ID.png`) and anchor.
     pub id: String,
     pub caption: String,
-    pub plot: LinePlot,
+    #[serde(flatten)]
+    pub plot: Plot,
+    pub command: String,
+}
+
+/// What a figure draws: lines over x, or one box per labelled sample.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+pub enum Plot {
+    Lines(LinePlot),
+    Boxes(BoxPlot),
+}
+
+impl Plot {
+    pub fn title(&self) -> &str {
+        match self {
+            Plot::Lines(p) => &p.title,
+            Plot::Boxes(p) => &p.title,
+        }
+    }
+
+    pub fn write(&self, path: &Path) -> Result<(), PlotError> {
+        match self {
+            Plot::Lines(p) => p.write(path),
+            Plot::Boxes(p) => p.write(path),
+        }
+    }
+}
+
+impl From<LinePlot> for Plot {
+    fn from(p: LinePlot) -> Plot {
+        Plot::Lines(p)
+    }
+}
+
+impl From<BoxPlot> for Plot {
+    fn from(p: BoxPlot) -> Plot {
+        Plot::Boxes(p)
+    }
+}
+
+/// A picture the section wrote itself (an image strip), with its command.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct Picture {
+    /// File stem (`ID.png`) and anchor.
+    pub id: String,
+    pub title: String,
+    pub caption: String,
     pub command: String,
 }
 
 /// One section as measured.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Section {
     pub paper: Paper,
     pub title: String,
@@ -196,7 +249,15 @@ pub struct Section {
     pub text: Vec<String>,
     pub tables: Vec<Table>,
     pub figures: Vec<Figure>,
+    #[serde(default)]
+    pub pictures: Vec<Picture>,
     pub seconds: f64,
+    /// Where and when this section was measured (sections of one page may come from
+    /// different runs: `--paper bucket` redoes one and keeps the others).
+    pub machine: Option<Machine>,
+    /// Whether it was measured by a `--quick` report.
+    #[serde(default)]
+    pub quick: bool,
 }
 
 impl Section {
@@ -207,7 +268,10 @@ impl Section {
             text: Vec::new(),
             tables: Vec::new(),
             figures: Vec::new(),
+            pictures: Vec::new(),
             seconds: 0.0,
+            machine: None,
+            quick: false,
         }
     }
 }
@@ -229,6 +293,8 @@ pub enum ReportError {
     },
     #[error(transparent)]
     Plot(#[from] PlotError),
+    #[error("drawing a picture: {0}")]
+    Render(#[from] crate::render::RenderError),
     #[error(transparent)]
     Bench(#[from] crate::racebench::BenchError),
     #[error("writing {path}: {source}")]
@@ -268,7 +334,34 @@ pub struct Written {
     pub seconds: f64,
 }
 
-/// Measures every section of `cfg` and writes the directory.
+/// The sections of an earlier report in `cfg.out` that this run does not redo, when that
+/// report was of the same kind (quick or full): regenerating one section keeps the others on
+/// the page, each with the machine and date it was measured on. An unreadable or foreign
+/// `report.json` keeps nothing.
+pub fn kept_sections(cfg: &PaperConfig) -> Vec<Section> {
+    #[derive(serde::Deserialize)]
+    struct Earlier {
+        quick: bool,
+        sections: Vec<Section>,
+    }
+    let Ok(text) = std::fs::read_to_string(cfg.out.join("report.json")) else {
+        return Vec::new();
+    };
+    let Ok(earlier) = serde_json::from_str::<Earlier>(&text) else {
+        return Vec::new();
+    };
+    if earlier.quick != cfg.quick {
+        return Vec::new();
+    }
+    earlier
+        .sections
+        .into_iter()
+        .filter(|s| !cfg.papers.contains(&s.paper) && s.machine.is_some())
+        .collect()
+}
+
+/// Measures every section of `cfg` and writes the directory, with the sections of an
+/// earlier report there that this run does not redo ([`kept_sections`]).
 pub fn generate(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Written, ReportError> {
     let max = fragrace_emu::exec::max_threads();
     if !(1..=max).contains(&cfg.threads) {
@@ -276,7 +369,11 @@ pub fn generate(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Written, R
     }
     let start = Instant::now();
     let machine = Machine::this(cfg.threads);
-    let mut sections = Vec::new();
+    std::fs::create_dir_all(&cfg.out).map_err(|source| ReportError::Io {
+        path: cfg.out.clone(),
+        source,
+    })?;
+    let mut sections = kept_sections(cfg);
     for &paper in &cfg.papers {
         let t = Instant::now();
         progress.step(paper.name());
@@ -289,8 +386,12 @@ pub fn generate(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Written, R
             Paper::Hazards => hazards::section(cfg, progress)?,
         };
         s.seconds = t.elapsed().as_secs_f64();
+        s.machine = Some(machine.clone());
+        s.quick = cfg.quick;
+        sections.retain(|k| k.paper != paper);
         sections.push(s);
     }
+    sections.sort_by_key(|s| Paper::ALL.iter().position(|&p| p == s.paper));
     progress.step("writing the page");
     let seconds = start.elapsed().as_secs_f64();
     let files = page::write(cfg, &machine, &sections, seconds)?;

@@ -98,7 +98,7 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
             "d (map words per pixel; 32 d sub-intervals)",
             "culled fraction (culled / rasterized fragments)",
             fig4,
-        ),
+        ).into(),
         command: cfg.command(Paper::Occupancy),
     });
     let mut without = Series {
@@ -132,7 +132,7 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
             "k (fragments kept per pixel)",
             "k-buffer invocations (fragments shaded)",
             series,
-        ),
+        ).into(),
         command: cfg.command(Paper::Occupancy),
     });
     Ok(s)

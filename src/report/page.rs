@@ -115,6 +115,25 @@ table{border-collapse:collapse;font-size:0.85em;margin:0.5em 0}td,th{border:1px 
 th{background:#eee}img{max-width:100%;border:1px solid #ddd}.prov{font-size:0.8em;color:#555}\
 code{font-size:0.95em;background:#f4f4f4}.scroll{overflow-x:auto}";
 
+/// A section as report.json holds it: every field of [`Section`] (so a later run can keep
+/// it), and the files of each table, figure and picture.
+fn section_json(s: &Section) -> Value {
+    let mut v = serde_json::to_value(s).unwrap_or(Value::Null);
+    let add_files = |list: Option<&mut Value>, exts: &[&str]| {
+        if let Some(Value::Array(items)) = list {
+            for item in items {
+                let id = item["id"].as_str().unwrap_or_default().to_string();
+                let files: Vec<String> = exts.iter().map(|e| format!("{id}.{e}")).collect();
+                item["files"] = json!(files);
+            }
+        }
+    };
+    add_files(v.get_mut("tables"), &["csv", "md"]);
+    add_files(v.get_mut("figures"), &["svg", "png"]);
+    add_files(v.get_mut("pictures"), &["png"]);
+    v
+}
+
 /// Writes every file of the report to `cfg.out`; returns their paths.
 pub fn write(
     cfg: &PaperConfig,
@@ -124,7 +143,7 @@ pub fn write(
 ) -> Result<Vec<PathBuf>, ReportError> {
     std::fs::create_dir_all(&cfg.out).map_err(io(&cfg.out))?;
     let mut files = Vec::new();
-    let papers: Vec<&str> = cfg.papers.iter().map(|p| p.name()).collect();
+    let papers: Vec<&str> = sections.iter().map(|s| s.paper.name()).collect();
     let whole = format!(
         "{} report --paper {} --out {}{}{}",
         crate::run::CLI,
@@ -143,7 +162,8 @@ pub fn write(
     let mut html = format!(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>fragrace report</title>\
          <style>{STYLE}</style></head><body>\n<h1>fragrace report</h1>\n\
-         <p>{} report, made in {seconds:.0} s on {}.<br>Whole report: <code>{}</code></p>\n<ul>\n",
+         <p>{} report; this run took {seconds:.0} s on {}. Each section names the machine, \
+         date and time it was measured with.<br>Whole report: <code>{}</code></p>\n<ul>\n",
         if cfg.quick { "Quick (built-in and shipped scenes)" } else { "Full" },
         esc(&m.line()),
         esc(&whole)
@@ -158,16 +178,22 @@ pub fn write(
     html += "</ul>\n";
     let mut json_sections = Vec::new();
     for s in sections {
+        // A section kept from an earlier run keeps the machine and date it was measured on.
+        let m = s.machine.as_ref().unwrap_or(m);
         html += &format!(
-            "<h2 id=\"{}\">{}</h2>\n<p class=\"prov\">{:.1} s</p>\n",
+            "<h2 id=\"{}\">{}</h2>\n<p class=\"prov\">{:.1} s{}</p>\n",
             s.paper.name(),
             esc(&s.title),
-            s.seconds
+            s.seconds,
+            if s.quick && !cfg.quick {
+                " (a quick run)"
+            } else {
+                ""
+            }
         );
         for p in &s.text {
             html += &format!("<p>{}</p>\n", esc(p));
         }
-        let mut tables = Vec::new();
         for t in &s.tables {
             put(
                 cfg.out.join(format!("{}.csv", t.id)),
@@ -201,13 +227,7 @@ pub fn write(
                 id = t.id
             );
             html += &provenance(&t.command, m);
-            tables.push(json!({
-                "id": t.id, "title": t.title, "caption": t.caption, "columns": t.columns,
-                "rows": t.rows, "command": t.command,
-                "files": [format!("{}.csv", t.id), format!("{}.md", t.id)],
-            }));
         }
-        let mut figures = Vec::new();
         for f in &s.figures {
             f.plot.write(&cfg.out.join(format!("{}.svg", f.id)))?;
             f.plot.write(&cfg.out.join(format!("{}.png", f.id)))?;
@@ -215,23 +235,24 @@ pub fn write(
             files.push(cfg.out.join(format!("{}.png", f.id)));
             html += &format!(
                 "<figure id=\"{id}\"><img src=\"{id}.png\" alt=\"{}\"><figcaption>{} (<a href=\"{id}.svg\">SVG</a>)</figcaption></figure>\n",
-                esc(&f.plot.title),
+                esc(f.plot.title()),
                 esc(&f.caption),
                 id = f.id
             );
             html += &provenance(&f.command, m);
-            figures.push(json!({
-                "id": f.id, "title": f.plot.title, "caption": f.caption,
-                "x_label": f.plot.x_label, "y_label": f.plot.y_label,
-                "series": f.plot.series.iter().map(|s| json!({"name": s.name, "points": s.points})).collect::<Vec<_>>(),
-                "command": f.command,
-                "files": [format!("{}.svg", f.id), format!("{}.png", f.id)],
-            }));
         }
-        json_sections.push(json!({
-            "paper": s.paper, "title": s.title, "text": s.text, "seconds": s.seconds,
-            "tables": tables, "figures": figures,
-        }));
+        for p in &s.pictures {
+            // The section wrote the picture when it was measured.
+            files.push(cfg.out.join(format!("{}.png", p.id)));
+            html += &format!(
+                "<figure id=\"{id}\"><img src=\"{id}.png\" alt=\"{}\"><figcaption>{}</figcaption></figure>\n",
+                esc(&p.title),
+                esc(&p.caption),
+                id = p.id
+            );
+            html += &provenance(&p.command, m);
+        }
+        json_sections.push(section_json(s));
     }
     html += "</body></html>\n";
     let report = json!({

@@ -3,7 +3,8 @@
 //! A plot has a title, labelled axes with ticks, one line with markers per series and a
 //! legend that names each series. Colours are the Okabe-Ito palette (distinguishable with
 //! every common colour-vision deficiency), and each series also gets its own marker shape,
-//! so the lines stay apart in greyscale. Text is drawn with DejaVu Sans, embedded in the
+//! so the lines stay apart in greyscale. Past the palette's seven colours the lines are
+//! dashed, then dotted; colour and marker alone differ for the first 28 series. Text is drawn with DejaVu Sans, embedded in the
 //! binary (`dejavu` crate), so a plot looks the same on every machine.
 //!
 //! This module does not know what it plots: callers (`report`) give it named series of
@@ -13,6 +14,9 @@ use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+
+mod boxes;
+pub use boxes::{BoxPlot, Quartiles, Sample};
 
 /// The Okabe-Ito palette, without its yellow (too light on white), in order of contrast.
 const PALETTE: [RGBColor; 7] = [
@@ -25,8 +29,36 @@ const PALETTE: [RGBColor; 7] = [
     RGBColor(0, 0, 0),       // black
 ];
 
+/// How a series' line is drawn: solid for the first round of the palette, then dashed, then
+/// dotted, so two series never share colour, marker and line together.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Dash {
+    Solid,
+    Dashed,
+    Dotted,
+}
+
+impl Dash {
+    fn of(series: usize) -> Dash {
+        match series / PALETTE.len() {
+            0 => Dash::Solid,
+            1 => Dash::Dashed,
+            _ => Dash::Dotted,
+        }
+    }
+
+    /// Dash length and gap in pixels (a solid line is one dash with no gap).
+    fn pattern(self) -> (u32, u32) {
+        match self {
+            Dash::Solid => (1000, 0),
+            Dash::Dashed => (8, 5),
+            Dash::Dotted => (2, 4),
+        }
+    }
+}
+
 /// One named line of a plot.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Series {
     /// The name shown in the legend.
     pub name: String,
@@ -35,7 +67,7 @@ pub struct Series {
 }
 
 /// A line plot: what to draw and how to label it.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LinePlot {
     pub title: String,
     /// The x axis's label, with its unit (for example "azimuth (degrees)").
@@ -86,58 +118,18 @@ impl LinePlot {
 
     /// The plot as an SVG document.
     pub fn svg(&self) -> Result<String, PlotError> {
-        let mut out = String::new();
-        {
-            let root = SVGBackend::with_string(&mut out, self.size).into_drawing_area();
-            self.draw(&root)?;
-            root.present().map_err(|e| self.draw_error(e))?;
-        }
-        Ok(out)
+        svg_of(self)
     }
 
     /// The plot as an RGB image.
     pub fn png(&self) -> Result<image::RgbImage, PlotError> {
-        let (w, h) = self.size;
-        let mut buf = vec![0u8; w as usize * h as usize * 3];
-        {
-            let root = BitMapBackend::with_buffer(&mut buf, self.size).into_drawing_area();
-            self.draw(&root)?;
-            root.present().map_err(|e| self.draw_error(e))?;
-        }
-        image::RgbImage::from_raw(w, h, buf).ok_or_else(|| PlotError::Draw {
-            title: self.title.clone(),
-            message: "the bitmap has the wrong size".into(),
-        })
+        png_of(self)
     }
 
     /// Writes the plot to `path`, as SVG or PNG by its extension, atomically (a temporary
     /// file, then a rename).
     pub fn write(&self, path: &Path) -> Result<(), PlotError> {
-        let io = |source| PlotError::Io {
-            path: path.to_path_buf(),
-            source,
-        };
-        match path.extension().and_then(|e| e.to_str()) {
-            Some("svg") => crate::output::write_atomic(path, self.svg()?.as_bytes()).map_err(io),
-            Some("png") => {
-                let mut bytes = Vec::new();
-                self.png()?
-                    .write_to(
-                        &mut std::io::Cursor::new(&mut bytes),
-                        image::ImageFormat::Png,
-                    )
-                    .map_err(|e| io(std::io::Error::other(e)))?;
-                crate::output::write_atomic(path, &bytes).map_err(io)
-            }
-            _ => Err(PlotError::Format(path.to_path_buf())),
-        }
-    }
-
-    fn draw_error<E: std::fmt::Display>(&self, e: E) -> PlotError {
-        PlotError::Draw {
-            title: self.title.clone(),
-            message: e.to_string(),
-        }
+        write_of(self, path)
     }
 
     /// The x and y ranges of the data, padded so no marker sits on the frame.
@@ -176,13 +168,16 @@ impl LinePlot {
         Ok((x, y))
     }
 
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), PlotError>
+    fn draw_lines<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+    ) -> Result<(), PlotError>
     where
         DB::ErrorType: 'static,
     {
         register_font();
         let (xr, yr) = self.ranges()?;
-        let err = |e: DrawingAreaErrorKind<DB::ErrorType>| self.draw_error(e);
+        let err = |e: DrawingAreaErrorKind<DB::ErrorType>| draw_error(self, e);
         root.fill(&WHITE).map_err(err)?;
         // The legend goes to the right of the plotting area, where no line can run under it.
         let legend_width =
@@ -210,9 +205,19 @@ impl LinePlot {
             let color = PALETTE[i % PALETTE.len()];
             let line = ShapeStyle::from(&color).stroke_width(2);
             let shape = i % 4;
-            chart
-                .draw_series(LineSeries::new(s.points.iter().copied(), line))
-                .map_err(err)?;
+            match Dash::of(i) {
+                Dash::Solid => chart.draw_series(LineSeries::new(s.points.iter().copied(), line)),
+                d => {
+                    let (size, gap) = d.pattern();
+                    chart.draw_series(DashedLineSeries::new(
+                        s.points.iter().copied(),
+                        size,
+                        gap,
+                        line,
+                    ))
+                }
+            }
+            .map_err(err)?;
             // Markers: at most about 60 per line, so dense sweeps stay readable.
             let step = (s.points.len() / 60).max(1);
             let marks = s.points.iter().copied().step_by(step);
@@ -238,8 +243,15 @@ impl LinePlot {
             let fill = ShapeStyle::from(&color).filled();
             let y = top + 22 * i as i32;
             let mid = (right + 12, y);
-            root.draw(&PathElement::new(vec![(right, y), (right + 24, y)], line))
-                .map_err(err)?;
+            // The legend's sample shows the line's dash: segments of its pattern.
+            let (size, gap) = Dash::of(i).pattern();
+            let mut x = right;
+            while x < right + 24 {
+                let end = (x + size as i32).min(right + 24);
+                root.draw(&PathElement::new(vec![(x, y), (end, y)], line))
+                    .map_err(err)?;
+                x = end + gap as i32;
+            }
             match i % 4 {
                 0 => root.draw(&Circle::new(mid, 3, fill)),
                 1 => root.draw(&TriangleMarker::new(mid, 4, fill)),
@@ -258,6 +270,85 @@ impl LinePlot {
             .map_err(err)?;
         }
         Ok(())
+    }
+}
+
+impl Drawing for LinePlot {
+    fn title(&self) -> &str {
+        &self.title
+    }
+
+    fn size(&self) -> (u32, u32) {
+        self.size
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), PlotError>
+    where
+        DB::ErrorType: 'static,
+    {
+        self.draw_lines(root)
+    }
+}
+
+/// What every kind of plot does: a title, a size, and drawing itself on a backend. The
+/// files (SVG, PNG) are made the same way for all of them.
+trait Drawing {
+    fn title(&self) -> &str;
+    fn size(&self) -> (u32, u32);
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), PlotError>
+    where
+        DB::ErrorType: 'static;
+}
+
+fn draw_error<P: Drawing, E: std::fmt::Display>(p: &P, e: E) -> PlotError {
+    PlotError::Draw {
+        title: p.title().to_string(),
+        message: e.to_string(),
+    }
+}
+
+fn svg_of<P: Drawing>(p: &P) -> Result<String, PlotError> {
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, p.size()).into_drawing_area();
+        p.draw(&root)?;
+        root.present().map_err(|e| draw_error(p, e))?;
+    }
+    Ok(out)
+}
+
+fn png_of<P: Drawing>(p: &P) -> Result<image::RgbImage, PlotError> {
+    let (w, h) = p.size();
+    let mut buf = vec![0u8; w as usize * h as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        p.draw(&root)?;
+        root.present().map_err(|e| draw_error(p, e))?;
+    }
+    image::RgbImage::from_raw(w, h, buf).ok_or_else(|| PlotError::Draw {
+        title: p.title().to_string(),
+        message: "the bitmap has the wrong size".into(),
+    })
+}
+
+fn write_of<P: Drawing>(p: &P, path: &Path) -> Result<(), PlotError> {
+    let io = |source| PlotError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("svg") => crate::output::write_atomic(path, svg_of(p)?.as_bytes()).map_err(io),
+        Some("png") => {
+            let mut bytes = Vec::new();
+            png_of(p)?
+                .write_to(
+                    &mut std::io::Cursor::new(&mut bytes),
+                    image::ImageFormat::Png,
+                )
+                .map_err(|e| io(std::io::Error::other(e)))?;
+            crate::output::write_atomic(path, &bytes).map_err(io)
+        }
+        _ => Err(PlotError::Format(path.to_path_buf())),
     }
 }
 
@@ -307,6 +398,34 @@ mod tests {
                 },
             ],
         )
+    }
+
+    #[test]
+    fn no_two_of_many_series_share_colour_marker_and_dash() {
+        let style = |i: usize| (i % PALETTE.len(), i % 4, Dash::of(i));
+        for a in 0..28 {
+            for b in 0..a {
+                assert_ne!(style(a), style(b), "series {a} and {b} look the same");
+            }
+        }
+        // The second round of colours is dashed, the third dotted.
+        assert_eq!(Dash::of(3), Dash::Solid);
+        assert_eq!(Dash::of(PALETTE.len()), Dash::Dashed);
+        assert_eq!(Dash::of(2 * PALETTE.len()), Dash::Dotted);
+        // And a plot of 16 series draws.
+        let many = LinePlot::new(
+            "many",
+            "x",
+            "y",
+            (0..16)
+                .map(|i| Series {
+                    name: format!("s{i}"),
+                    points: vec![(0.0, i as f64), (1.0, i as f64 + 0.5)],
+                })
+                .collect(),
+        );
+        let svg = many.svg().unwrap();
+        assert!(svg.contains("s15"));
     }
 
     #[test]
