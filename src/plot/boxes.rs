@@ -1,7 +1,8 @@
 //! Box plots: one horizontal box per named sample (its quartiles, median and extremes),
 //! coloured by the sample's group, with a legend naming the groups.
 //!
-//! Horizontal, so that long names (`kb-rmw, window 64`) read on the left without rotation.
+//! Horizontal, so that long names read on the left without rotation; consecutive boxes of
+//! one name (one per group) share a label.
 //! The box spans the first to the third quartile, the thick bar is the median and the
 //! whiskers reach the smallest and largest value (no outlier rule: every value is inside the
 //! whiskers, which the caption of a figure can say plainly).
@@ -192,18 +193,36 @@ impl Drawing for BoxPlot {
                     PathElement::new(vec![(q.q3, y), (q.max, y)], line),
                     PathElement::new(vec![(q.min, y - h / 2.0), (q.min, y + h / 2.0)], line),
                     PathElement::new(vec![(q.max, y - h / 2.0), (q.max, y + h / 2.0)], line),
+                    // The median in the group's colour, thick: a box of equal values is
+                    // only this bar, and it still shows its group.
                     PathElement::new(
                         vec![(q.median, y - h), (q.median, y + h)],
-                        ShapeStyle::from(&BLACK).stroke_width(3),
+                        ShapeStyle::from(&color).stroke_width(4),
                     ),
                 ])
                 .map_err(err)?;
-            // The name, right-aligned against the plotting area.
+            // The name, right-aligned against the plotting area, once per run of boxes of
+            // one name (a name's boxes sit together, one per group); a thin rule above
+            // each new name.
+            if i > 0 && self.boxes[i - 1].name == b.name {
+                continue;
+            }
+            if i > 0 {
+                let (x0, x1) = (chart.x_range().start, chart.x_range().end);
+                chart
+                    .draw_series([PathElement::new(
+                        vec![(x0, y + 0.5), (x1, y + 0.5)],
+                        ShapeStyle::from(&RGBColor(190, 190, 190)).stroke_width(1),
+                    )])
+                    .map_err(err)?;
+            }
             let (px, py) = chart.backend_coord(&(chart.x_range().start, y));
-            let label = TextStyle::from(("sans-serif", 14).into_font()).pos(plotters::style::text_anchor::Pos::new(
+            let label = TextStyle::from(("sans-serif", 14).into_font()).pos(
+                plotters::style::text_anchor::Pos::new(
                     plotters::style::text_anchor::HPos::Right,
                     plotters::style::text_anchor::VPos::Center,
-                ));
+                ),
+            );
             root.draw(&Text::new(b.name.clone(), (px - 8, py), label))
                 .map_err(err)?;
         }
@@ -243,7 +262,10 @@ mod tests {
     #[test]
     fn quartiles_interpolate_between_order_statistics() {
         let q = Quartiles::of(&[4.0, 1.0, 3.0, 2.0, 5.0]).unwrap();
-        assert_eq!((q.min, q.q1, q.median, q.q3, q.max), (1.0, 2.0, 3.0, 4.0, 5.0));
+        assert_eq!(
+            (q.min, q.q1, q.median, q.q3, q.max),
+            (1.0, 2.0, 3.0, 4.0, 5.0)
+        );
         let q = Quartiles::of(&[0.0, 1.0]).unwrap();
         assert_eq!((q.q1, q.median, q.q3), (0.25, 0.5, 0.75));
         assert!(Quartiles::of(&[]).is_none());
@@ -268,7 +290,13 @@ mod tests {
             ],
         );
         let svg = p.svg().unwrap();
-        for t in ["EPR per run", "error pixel rate", "kb-rmw", "random", "pct:3"] {
+        for t in [
+            "EPR per run",
+            "error pixel rate",
+            "kb-rmw",
+            "random",
+            "pct:3",
+        ] {
             assert!(svg.contains(t), "{t} missing");
         }
         let img = p.png().unwrap();

@@ -168,10 +168,7 @@ impl LinePlot {
         Ok((x, y))
     }
 
-    fn draw_lines<DB: DrawingBackend>(
-        &self,
-        root: &DrawingArea<DB, Shift>,
-    ) -> Result<(), PlotError>
+    fn draw_lines<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), PlotError>
     where
         DB::ErrorType: 'static,
     {

@@ -111,7 +111,9 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
         })
         .collect();
     // The mesh is read once; each view only changes the camera.
-    let mut loaded = ctx(run::load(&spec(&scene, size, k, cfg.threads)), || name.clone())?;
+    let mut loaded = ctx(run::load(&spec(&scene, size, k, cfg.threads)), || {
+        name.clone()
+    })?;
     for v in 0..views {
         let azimuth = 360.0 * v as f32 / views as f32;
         progress.step(&format!("bucket: Figure 6, view {} of {views}", v + 1));

@@ -99,7 +99,8 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
             "k (records per pixel)",
             "image error pixel rate (fraction of covered pixels)",
             error,
-        ).into(),
+        )
+        .into(),
         command: cfg.command(Paper::Merging),
     });
     s.figures.push(Figure {
@@ -110,7 +111,8 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
             "k (records per pixel)",
             "PSNR (dB, peak 1)",
             psnr,
-        ).into(),
+        )
+        .into(),
         command: cfg.command(Paper::Merging),
     });
     Ok(s)
@@ -119,14 +121,10 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
 /// The Figure 3 analogue: z-fighting surfaces (`interpenetrating`: two boxes on the same
 /// planes and two spheres of one radius tessellated differently), the exact composite next
 /// to the merging k-buffer without merging and with two thicknesses, as one image strip.
-fn figure3(
-    cfg: &PaperConfig,
-    progress: &dyn Progress,
-    s: &mut Section,
-) -> Result<(), ReportError> {
+fn figure3(cfg: &PaperConfig, progress: &dyn Progress, s: &mut Section) -> Result<(), ReportError> {
     use crate::render::{picture, run as pictures, Look, Overrides, Shade};
     progress.step("merging: Figure 3, the z-fighting strip");
-    let (size, scene) = (if cfg.quick { 96 } else { 192 }, "interpenetrating");
+    let (size, scene) = (if cfg.quick { 128 } else { 256 }, "interpenetrating");
     let mut base = RunSpec::new(SceneSpec::Builtin(scene.into()), ALGO);
     base.width = size;
     base.height = size;
@@ -148,7 +146,10 @@ fn figure3(
         beta: 0.0,
     };
     for (title, merge) in [
-        ("no merging (thickness 1e-7)", thick(Thickness::Fixed(NO_MERGE))),
+        (
+            "no merging (thickness 1e-7)",
+            thick(Thickness::Fixed(NO_MERGE)),
+        ),
         ("thickness 2 P(z)", MergeParams::default()),
         ("thickness 0.02", thick(Thickness::Fixed(WIDE))),
     ] {
@@ -157,9 +158,13 @@ fn figure3(
         let c = ctx(run::check_with(&sp, &loaded, &truth), || {
             format!("{ALGO}, {title}")
         })?;
-        let (img, _) = pictures::picture(&sp, &view, &c.rendered.result, &look)
-            .map_err(render_err)?;
-        let epr = c.metrics.image.as_ref().map_or(c.metrics.epr, |i| i.image_epr);
+        let (img, _) =
+            pictures::picture(&sp, &view, &c.rendered.result, &look).map_err(render_err)?;
+        let epr = c
+            .metrics
+            .image
+            .as_ref()
+            .map_or(c.metrics.epr, |i| i.image_epr);
         panels.push((format!("{ALGO}, {title}: image EPR {epr:.3}"), img));
     }
     let strip = picture::panels(
@@ -173,7 +178,9 @@ fn figure3(
     );
     let id = "merging-figure3-strip";
     let path = cfg.out.join(format!("{id}.png"));
-    strip.write_png(&path).map_err(|source| ReportError::Io { path, source })?;
+    strip
+        .write_png(&path)
+        .map_err(|source| ReportError::Io { path, source })?;
     s.pictures.push(Picture {
         id: id.into(),
         title: "Figure 3 analogue: z-fighting with and without merging".into(),

@@ -132,7 +132,8 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
             "k (fragments kept per pixel)",
             "k-buffer invocations (fragments shaded)",
             series,
-        ).into(),
+        )
+        .into(),
         command: cfg.command(Paper::Occupancy),
     });
     Ok(s)
