@@ -201,7 +201,9 @@ pub fn panels(panels: &[Panel<'_>]) -> Canvas {
     let line_h = text::GLYPH * scale + 2;
     let titles: Vec<Vec<String>> = panels
         .iter()
-        .map(|p| text::wrap(p.title, scale, pw))
+        // A margin of one glyph: a title that fills its panel's width would run into the
+        // next panel's title across the gap.
+        .map(|p| text::wrap(p.title, scale, pw.saturating_sub(text::GLYPH * scale)))
         .collect();
     let lines = titles.iter().map(Vec::len).max().unwrap_or(1) as u32;
     let title_h = lines * line_h + 6;

@@ -139,8 +139,16 @@ fn figure3(cfg: &PaperConfig, progress: &dyn Progress, s: &mut Section) -> Resul
         shade: Shade::Id,
         ..Look::default()
     };
+    let exact = crate::render::image(&base.algo, &truth, &view, &look)
+        .map_err(render_err)?
+        .0;
     let (t, _) = pictures::picture(&base, &view, &truth, &look).map_err(render_err)?;
     let mut panels = vec![("the exact composite".to_string(), t)];
+    // Under each image, where it differs from the exact composite by more than 1/255.
+    let mut diffs = vec![(
+        "below: pixels off the exact composite by more than 1/255".to_string(),
+        picture::Canvas::new(size, size, [255, 255, 255]),
+    )];
     let thick = |thickness| MergeParams {
         thickness,
         beta: 0.0,
@@ -160,22 +168,44 @@ fn figure3(cfg: &PaperConfig, progress: &dyn Progress, s: &mut Section) -> Resul
         })?;
         let (img, _) =
             pictures::picture(&sp, &view, &c.rendered.result, &look).map_err(render_err)?;
+        let rgba = crate::render::image(&sp.algo, &c.rendered.result, &view, &look)
+            .map_err(render_err)?
+            .0;
+        let off: Vec<bool> = exact
+            .iter()
+            .zip(&rgba)
+            .map(|(a, b)| (0..3).any(|ch| (a[ch] - b[ch]).abs() > 1.0 / 255.0))
+            .collect();
         let epr = c
             .metrics
             .image
             .as_ref()
             .map_or(c.metrics.epr, |i| i.image_epr);
         panels.push((format!("{ALGO}, {title}: image EPR {epr:.3}"), img));
+        diffs.push((
+            format!("{} pixels off", off.iter().filter(|&&o| o).count()),
+            picture::difference(size, size, &exact, &rgba, &off),
+        ));
     }
-    let strip = picture::panels(
-        &panels
-            .iter()
-            .map(|(title, image)| picture::Panel {
-                title,
-                image: image.clone(),
-            })
-            .collect::<Vec<_>>(),
+    let row = |list: &[(String, picture::Canvas)]| {
+        picture::panels(
+            &list
+                .iter()
+                .map(|(title, image)| picture::Panel {
+                    title,
+                    image: image.clone(),
+                })
+                .collect::<Vec<_>>(),
+        )
+    };
+    let (top, bottom) = (row(&panels), row(&diffs));
+    let mut strip = picture::Canvas::new(
+        top.width.max(bottom.width),
+        top.height + bottom.height,
+        [255, 255, 255],
     );
+    strip.blit(&top, 0, 0);
+    strip.blit(&bottom, 0, top.height);
     let id = "merging-figure3-strip";
     let path = cfg.out.join(format!("{id}.png"));
     strip
@@ -190,7 +220,9 @@ fn figure3(cfg: &PaperConfig, progress: &dyn Progress, s: &mut Section) -> Resul
              tessellated differently, so their fragments tie or differ by a rounding step. \
              Without merging the k-buffer keeps whichever of the tied fragments rounding \
              puts first: the speckle of z-fighting. A thickness wider than the gaps merges \
-             them into one blended layer (the paper's Figure 3, right).",
+             them into one blended layer (the paper's Figure 3, right). The second row marks \
+             the pixels of each image off the exact composite by more than 1/255 (brighter: \
+             a larger difference).",
             k = base.params.k
         ),
         command: cfg.command(Paper::Merging),
