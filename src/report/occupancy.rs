@@ -11,10 +11,16 @@ use fragrace_kernels::occupancy::Occupancy;
 /// The culled algorithm.
 pub const ALGO: &str = "kplus";
 
-/// The scene of the section: hairball (quick) or the first mesh.
-fn scene(cfg: &PaperConfig) -> Result<(String, SceneSpec), ReportError> {
+/// The scenes of the section: hairball (the paper's case: high depth complexity, where
+/// culling pays), and in the full report also the dragon of `--models` (or its first mesh),
+/// where few pixels hold more than k fragments and little is culled.
+fn scenes(cfg: &PaperConfig) -> Result<Vec<(String, SceneSpec)>, ReportError> {
+    let mut out = vec![(
+        "hairball".to_string(),
+        SceneSpec::Builtin("hairball".into()),
+    )];
     if cfg.quick {
-        return Ok(("hairball".into(), SceneSpec::Builtin("hairball".into())));
+        return Ok(out);
     }
     let meshes = cfg.meshes()?;
     let p = meshes
@@ -23,13 +29,14 @@ fn scene(cfg: &PaperConfig) -> Result<(String, SceneSpec), ReportError> {
         .or(meshes.first())
         .cloned()
         .ok_or_else(|| ReportError::NoModels(cfg.models.clone().unwrap_or_default()))?;
-    Ok((
+    out.push((
         mesh_name(&p),
         SceneSpec::Obj {
             path: p,
             sha256: None,
         },
-    ))
+    ));
+    Ok(out)
 }
 
 /// One culled run: (culled fraction, k-buffer invocations with, without).
@@ -60,15 +67,35 @@ pub fn culled(
 
 /// The section.
 pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, ReportError> {
+    let mut s = Section::new(Paper::Occupancy, "Occupancy maps: culling against d and k");
+    for (i, (name, scene)) in scenes(cfg)?.into_iter().enumerate() {
+        // The first scene keeps the figures' plain ids; the others get their name.
+        let suffix = if i == 0 {
+            String::new()
+        } else {
+            format!("-{name}")
+        };
+        scene_figures(cfg, progress, &mut s, &name, scene, &suffix)?;
+    }
+    Ok(s)
+}
+
+/// Figures 4 and 5 on one scene.
+fn scene_figures(
+    cfg: &PaperConfig,
+    progress: &dyn Progress,
+    s: &mut Section,
+    name: &str,
+    scene: SceneSpec,
+    suffix: &str,
+) -> Result<(), ReportError> {
     let size = if cfg.quick { 96 } else { 512 };
-    let (name, scene) = scene(cfg)?;
     let mut base = RunSpec::new(scene, ALGO);
     base.width = size;
     base.height = size;
     base.exec.mode = fragrace_emu::ExecMode::Parallel;
     base.exec.threads = cfg.threads;
-    let loaded = ctx(run::load(&base), || name.clone())?;
-    let mut s = Section::new(Paper::Occupancy, "Occupancy maps: culling against d and k");
+    let loaded = ctx(run::load(&base), || name.to_string())?;
     s.text.push(format!(
         "{ALGO} on {name} ({size}x{size}) with occupancy culling (--occupancy d: 32 d depth \
          sub-intervals per pixel, the exact depth range, atomic fill). Culled fraction: \
@@ -82,7 +109,7 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
     for &k in &ks[..3] {
         let mut points = Vec::new();
         for &d in &ds {
-            progress.step(&format!("occupancy: Figure 4, k = {k}, d = {d}"));
+            progress.step(&format!("occupancy: Figure 4, {name}, k = {k}, d = {d}"));
             points.push((f64::from(d), culled(&base, &loaded, k, d)?.0));
         }
         fig4.push(Series {
@@ -91,7 +118,7 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
         });
     }
     s.figures.push(Figure {
-        id: "figure4-culled-fraction".into(),
+        id: format!("figure4-culled-fraction{suffix}"),
         caption: format!("Fraction of the rasterized fragments culled by the occupancy map against d, one line per k ({name})."),
         plot: LinePlot::new(
             &format!("Culled fraction against d ({ALGO}, {name}, {size}x{size})"),
@@ -114,7 +141,7 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
         .collect();
     for &k in &ks {
         for (line, d) in with.iter_mut().zip([1u32, 4]) {
-            progress.step(&format!("occupancy: Figure 5, k = {k}, d = {d}"));
+            progress.step(&format!("occupancy: Figure 5, {name}, k = {k}, d = {d}"));
             let (_, w, wo) = culled(&base, &loaded, k, d)?;
             line.points.push((f64::from(k), w));
             if d == 1 {
@@ -125,7 +152,7 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
     let mut series = vec![without];
     series.extend(with);
     s.figures.push(Figure {
-        id: "figure5-invocations".into(),
+        id: format!("figure5-invocations{suffix}"),
         caption: format!("k-buffer invocations against k, without culling and with it ({name})."),
         plot: LinePlot::new(
             &format!("k-buffer invocations against k ({ALGO}, {name}, {size}x{size})"),
@@ -136,5 +163,5 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
         .into(),
         command: cfg.command(Paper::Occupancy),
     });
-    Ok(s)
+    Ok(())
 }
