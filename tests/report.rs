@@ -142,14 +142,27 @@ fn quick_report_of_every_section_is_complete() {
         );
         assert!(f["command"].as_str().unwrap().contains("--paper"));
     }
-    assert!(boxes >= 1, "the hazards section draws EPR distributions as box plots");
+    assert!(
+        boxes >= 1,
+        "the hazards section draws EPR distributions as box plots"
+    );
     assert!(json["machine"]["cpu"]
         .as_str()
         .is_some_and(|c| !c.is_empty()));
     // The grid of the hazards section: every hazard-prone algorithm under every policy.
     let grid = std::fs::read_to_string(out.join("hazards-grid.csv")).unwrap();
-    for p in ["random", "pct:2", "pct:3", "warp:32", "far-first", "parallel"] {
-        assert!(grid.contains(&format!(",{p},")), "{p} missing from the grid");
+    for p in [
+        "random",
+        "pct:2",
+        "pct:3",
+        "warp:32",
+        "far-first",
+        "parallel",
+    ] {
+        assert!(
+            grid.contains(&format!(",{p},")),
+            "{p} missing from the grid"
+        );
     }
     // Regenerating one section keeps the others on the page, with their own machine line.
     let again = PaperConfig {
