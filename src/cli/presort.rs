@@ -121,6 +121,8 @@ pub(crate) fn cmd_presort(a: &PresortArgs) -> Result<()> {
                 "b_f_duplications": s.scan.bf_dups,
                 "whole_moves": s.scan.whole_moves,
                 "lp_calls": s.scan.lp_calls,
+                "touching_tests": s.scan.touching_tests,
+                "touching_planes": s.scan.touching_planes,
                 "graph_s": s.graph_time.as_secs_f64(),
                 "scan_s": s.scan_time.as_secs_f64(),
             })
@@ -129,6 +131,7 @@ pub(crate) fn cmd_presort(a: &PresortArgs) -> Result<()> {
     let summary = serde_json::json!({
         "mesh": a.mesh,
         "triangles": lists.triangles,
+        "non_manifold_edges": presorted::input::non_manifold_edges(&mesh),
         "partitions": a.partitions,
         "threads": threads,
         "seconds": secs,

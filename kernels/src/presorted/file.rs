@@ -2,8 +2,9 @@
 //! preprocessing happens once per mesh.
 //!
 //! Little-endian binary: magic `FRPRESRT`, version, mesh hash, triangle count, the
-//! normalized frame, the face normals, then per segment its instances (triangle, flags,
-//! test planes), and last an FNV-1a checksum of everything before it. Written to a
+//! normalized frame, the face normals, the pieces (input triangle and corner vertex ids;
+//! the input triangles themselves unless some crossed) and the new corners, then per
+//! segment its instances (piece, flags, test planes), and last an FNV-1a checksum of everything before it. Written to a
 //! temporary file in the same directory, flushed to disk, then renamed over the target:
 //! an interrupted run leaves at most a temporary file, never a truncated file under the
 //! target's name, and a truncated or altered file fails the checksum. A file made for
@@ -16,10 +17,10 @@ use fragrace_emu::Mesh;
 use glam::DVec3;
 
 use super::input::mesh_hash;
-use super::{Frame3, Instance, Presorted, Segment};
+use super::{Frame3, Instance, Piece, Presorted, Segment};
 
 const MAGIC: &[u8; 8] = b"FRPRESRT";
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 
 /// Why a stored result cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -74,10 +75,23 @@ pub fn encode(p: &Presorted) -> Vec<u8> {
             b.extend_from_slice(&c.to_le_bytes());
         }
     }
+    b.extend_from_slice(&(p.extra_positions.len() as u32).to_le_bytes());
+    for v in &p.extra_positions {
+        for c in v {
+            b.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    b.extend_from_slice(&(p.pieces.len() as u32).to_le_bytes());
+    for pc in &p.pieces {
+        b.extend_from_slice(&pc.tri.to_le_bytes());
+        for v in pc.verts {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+    }
     for s in &p.segments {
         b.extend_from_slice(&(s.instances.len() as u32).to_le_bytes());
         for i in &s.instances {
-            b.extend_from_slice(&i.tri.to_le_bytes());
+            b.extend_from_slice(&i.piece.to_le_bytes());
             let flags = u32::from(i.back) | (u32::from(i.last) << 1);
             b.extend_from_slice(&flags.to_le_bytes());
             b.extend_from_slice(&(i.planes.len() as u32).to_le_bytes());
@@ -194,14 +208,31 @@ pub fn decode(bytes: &[u8], path: &Path) -> Result<Presorted, FileError> {
     for _ in 0..nd {
         dirs.push(DVec3::new(r.f64()?, r.f64()?, r.f64()?));
     }
+    let ne = r.u32()? as usize;
+    let mut extra_positions = Vec::with_capacity(ne.min(body.len() / 12));
+    for _ in 0..ne {
+        extra_positions.push([r.f32()?, r.f32()?, r.f32()?]);
+    }
+    let npieces = r.u32()?;
+    let mut pieces = Vec::with_capacity((npieces as usize).min(body.len() / 16));
+    for _ in 0..npieces {
+        let tri = r.u32()?;
+        if tri >= triangles {
+            return Err(corrupt(format!("piece of triangle {tri} of {triangles}")));
+        }
+        pieces.push(Piece {
+            tri,
+            verts: [r.u32()?, r.u32()?, r.u32()?],
+        });
+    }
     let mut segments = Vec::with_capacity(nd);
     for _ in 0..nd {
         let n = r.u32()? as usize;
         let mut instances = Vec::with_capacity(n.min(body.len() / 12));
         for _ in 0..n {
-            let tri = r.u32()?;
-            if tri >= triangles {
-                return Err(corrupt(format!("triangle {tri} of {triangles}")));
+            let piece = r.u32()?;
+            if piece >= npieces {
+                return Err(corrupt(format!("piece {piece} of {npieces}")));
             }
             let flags = r.u32()?;
             let np = r.u32()? as usize;
@@ -210,7 +241,7 @@ pub fn decode(bytes: &[u8], path: &Path) -> Result<Presorted, FileError> {
                 planes.push([r.f32()?, r.f32()?, r.f32()?, r.f32()?]);
             }
             instances.push(Instance {
-                tri,
+                piece,
                 back: flags & 1 != 0,
                 last: flags & 2 != 0,
                 planes,
@@ -224,10 +255,13 @@ pub fn decode(bytes: &[u8], path: &Path) -> Result<Presorted, FileError> {
     Ok(Presorted {
         mesh_hash,
         triangles,
+        pieces,
+        extra_positions,
         frame: Frame3 { center, radius },
         dirs,
         segments,
         stats: Vec::new(),
+        split: Default::default(),
     })
 }
 
@@ -246,6 +280,13 @@ pub fn load(path: &Path, mesh: &Mesh) -> Result<Presorted, FileError> {
             actual,
             stored_tris: p.triangles,
             actual_tris: mesh.indices.len() as u32,
+        });
+    }
+    let nv = (mesh.positions.len() + p.extra_positions.len()) as u32;
+    if let Some(pc) = p.pieces.iter().find(|pc| pc.verts.iter().any(|&v| v >= nv)) {
+        return Err(FileError::Corrupt {
+            path: path.to_path_buf(),
+            what: format!("piece corner {:?} past the {nv} vertices", pc.verts),
         });
     }
     Ok(p)

@@ -249,6 +249,26 @@ impl Region {
         (lo, hi)
     }
 
+    /// The faces' unit normals.
+    pub fn normals(&self) -> Vec<DVec3> {
+        self.planes.iter().map(|p| p.n).collect()
+    }
+
+    /// The edges' unit directions, each once (an edge bounds two faces; parallel edges are
+    /// one direction).
+    pub fn edge_dirs(&self) -> Vec<DVec3> {
+        let mut out: Vec<DVec3> = Vec::new();
+        for l in &self.loops {
+            for i in 0..l.len() {
+                let d = (l[(i + 1) % l.len()] - l[i]).normalize_or_zero();
+                if d != DVec3::ZERO && !out.iter().any(|e| e.cross(d).length_squared() < 1e-20) {
+                    out.push(d);
+                }
+            }
+        }
+        out
+    }
+
     /// The intersection with another region.
     pub fn intersect(&self, o: &Region) -> Region {
         if self.is_empty() || o.is_empty() {

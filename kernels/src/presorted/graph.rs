@@ -10,11 +10,12 @@ use std::sync::Arc;
 use glam::DVec3;
 
 use super::geom::{occlusion_planes, Plane, Region, EPS};
+use super::separate::Shape;
 
 /// One triangle instance.
 #[derive(Clone, Debug)]
 pub struct Node {
-    /// Input triangle.
+    /// Its triangle (a piece of the input: an index into [`Graph::tris`]).
     pub tri: u32,
     /// The back-facing duplicate (rendered from behind the triangle's plane).
     pub back: bool,
@@ -200,6 +201,21 @@ impl Graph {
             .iter()
             .map(|&e| &self.edges[e])
             .filter(|e| e.alive)
+    }
+
+    /// The reduced occlusion region of edge `e` (eq. 1) as the separating-axis test sees it
+    /// (recomputed: edges keep only its vertices).
+    pub fn edge_shape(&self, e: usize) -> Shape {
+        let ed = &self.edges[e];
+        let r = self.nodes[ed.from]
+            .region
+            .cut(&ed.occl)
+            .intersect(&self.nodes[ed.to].region);
+        Shape {
+            normals: r.normals(),
+            edges: r.edge_dirs(),
+            verts: ed.verts.clone(),
+        }
     }
 
     /// Live edge count.

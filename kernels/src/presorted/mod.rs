@@ -13,7 +13,8 @@
 //! - [`graph`]: the occlusion graph of a partition (back-facing duplicates included);
 //! - [`order`]: the preliminary order (depth sort and feedback-arc heuristic);
 //! - [`scan`]: the back-edge scan with duplication and cutting planes (section 4.1);
-//! - [`input`]: what meshes are accepted; [`file`]: the stored result.
+//! - [`input`]: what meshes are accepted; [`split`]: intersecting triangles split apart;
+//!   [`file`]: the stored result.
 //!
 //! Run time (section 5): [`runtime`] (`presorted`, `presorted-vs`, `presorted-ssbo`,
 //! `presorted-ssbo-interlock`).
@@ -27,6 +28,7 @@ pub mod partition;
 pub mod runtime;
 pub mod scan;
 pub mod separate;
+pub mod split;
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -59,8 +61,9 @@ impl Default for PresortConfig {
 /// One triangle instance of a segment, in draw order.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Instance {
-    /// Input triangle (its primitive id in the mesh).
-    pub tri: u32,
+    /// The piece it draws ([`Presorted::pieces`]; piece `i` is input triangle `i` when no
+    /// triangle had to be split).
+    pub piece: u32,
     /// The back-facing duplicate: rendered only from behind the triangle's plane.
     pub back: bool,
     /// The last instance of its triangle and facing in the segment: its test planes are
@@ -91,22 +94,43 @@ pub struct PartitionStats {
     pub scan_time: Duration,
 }
 
+/// A piece of an input triangle: the whole triangle, or a part of one that crossed another
+/// ([`split`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Piece {
+    /// The input triangle.
+    pub tri: u32,
+    /// Corners: vertex ids of the mesh, or past its last vertex, ids into
+    /// [`Presorted::extra_positions`] (the points where a cut crossed an edge).
+    pub verts: [u32; 3],
+}
+
 /// The preprocessing's result: one segment per partition.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Presorted {
     pub mesh_hash: u64,
     pub triangles: u32,
+    /// What is drawn: the input triangles, or pieces of them where triangles crossed.
+    pub pieces: Vec<Piece>,
+    /// New corners of the pieces (world space), numbered after the mesh's vertices.
+    pub extra_positions: Vec<[f32; 3]>,
     pub frame: Frame3,
     pub dirs: Vec<DVec3>,
     pub segments: Vec<Segment>,
     /// Per partition (empty for a result read from a file).
     pub stats: Vec<PartitionStats>,
+    /// What splitting crossing triangles did (zero for a result read from a file).
+    pub split: split::SplitStats,
 }
 
 impl Presorted {
     /// Instances in all segments.
     pub fn total_instances(&self) -> usize {
         self.segments.iter().map(|s| s.instances.len()).sum()
+    }
+    /// Whether some input triangle was split (pieces are then not the input triangles).
+    pub fn is_split(&self) -> bool {
+        self.pieces.len() != self.triangles as usize
     }
     /// Memory ratio of the paper's figure 5: all instances over the input triangles.
     pub fn duplication_ratio(&self) -> f64 {
@@ -129,6 +153,8 @@ impl Presorted {
 pub enum PresortError {
     #[error(transparent)]
     Input(#[from] InputError),
+    #[error(transparent)]
+    Split(#[from] split::SplitError),
     #[error("{0}")]
     Config(String),
     /// (The scan's error is part of this message, not a `source`: error chains would
@@ -167,11 +193,14 @@ pub fn presort(
     let dirs = partition::directions(cfg.partitions).map_err(PresortError::Config)?;
     input::check(mesh)?;
     let frame = Frame3::of(&mesh.positions);
-    let tris: Arc<[[DVec3; 3]]> = mesh
+    let input: Vec<[DVec3; 3]> = mesh
         .indices
         .iter()
         .map(|t| t.map(|i| frame.to_local(mesh.positions[i as usize].as_dvec3())))
         .collect();
+    let (split_pieces, split_stats) = split::split_crossing(&input)?;
+    let tris: Arc<[[DVec3; 3]]> = split_pieces.iter().map(|p| p.pos).collect();
+    let (pieces, extra_positions) = world_pieces(mesh, &frame, &split_pieces);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(cfg.threads)
         .build()
@@ -193,11 +222,45 @@ pub fn presort(
     Ok(Presorted {
         mesh_hash: input::mesh_hash(mesh),
         triangles: mesh.indices.len() as u32,
+        pieces,
+        extra_positions,
         frame,
         dirs,
         segments,
         stats,
+        split: split_stats,
     })
+}
+
+/// The pieces with world-space corners: an input corner is the mesh's vertex (bit for
+/// bit), a new one the cut point rounded to `f32` (one new vertex per distinct point).
+fn world_pieces(
+    mesh: &Mesh,
+    frame: &Frame3,
+    pieces: &[split::Piece],
+) -> (Vec<Piece>, Vec<[f32; 3]>) {
+    let base = mesh.positions.len() as u32;
+    let mut extra: Vec<[f32; 3]> = Vec::new();
+    let mut ids: std::collections::HashMap<[u64; 3], u32> = std::collections::HashMap::new();
+    let out = pieces
+        .iter()
+        .map(|p| {
+            let t = mesh.indices[p.tri as usize];
+            let verts = p.corners.map(|c| match c {
+                split::Corner::Input(k) => t[k as usize],
+                split::Corner::New(v) => {
+                    let key = v.to_array().map(f64::to_bits);
+                    *ids.entry(key).or_insert_with(|| {
+                        let w = frame.to_world(v).as_vec3().to_array();
+                        extra.push(w);
+                        base + extra.len() as u32 - 1
+                    })
+                }
+            });
+            Piece { tri: p.tri, verts }
+        })
+        .collect();
+    (out, extra)
 }
 
 /// One partition: graph, preliminary order, scan, and the segment.
@@ -254,7 +317,7 @@ fn segment_of(g: &graph::Graph, order: &[usize], frame: &Frame3) -> Segment {
         .map(|(&x, last)| {
             let n = &g.nodes[x];
             Instance {
-                tri: n.tri,
+                piece: n.tri,
                 back: n.back,
                 last,
                 planes: n

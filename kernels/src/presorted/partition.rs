@@ -49,6 +49,9 @@ impl Frame3 {
     pub fn to_local(&self, v: DVec3) -> DVec3 {
         (v - self.center) / self.radius
     }
+    pub fn to_world(&self, v: DVec3) -> DVec3 {
+        v * self.radius + self.center
+    }
     /// A plane of the normalized frame as a plane of world space, `[n, e]` with
     /// `n . v - e` of the sign of the normalized plane's value (the run-time test
     /// `dot(p, [v, -1]) > 0`).

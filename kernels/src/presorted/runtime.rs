@@ -43,7 +43,10 @@ use crate::common::{self, capture_state, framebuffer, pixels};
 #[derive(Debug)]
 pub struct SegmentData {
     pub mesh: Mesh,
+    /// Each instance's input triangle (its colour and facing).
     pub tri: Vec<u32>,
+    /// Each instance's piece (the input triangle unless triangles were split).
+    pub piece: Vec<u32>,
     pub last: Vec<bool>,
     pub facing: Vec<[f32; 4]>,
     /// Instance i's planes are `planes[offsets[i]..offsets[i + 1]]`.
@@ -67,6 +70,8 @@ pub fn facing_plane(mesh: &Mesh, tri: u32, back: bool) -> [f32; 4] {
 
 impl Prepared {
     pub fn new(mesh: &Mesh, lists: Presorted) -> Prepared {
+        let mut positions = mesh.positions.clone();
+        positions.extend(lists.extra_positions.iter().map(|v| Vec3::from_array(*v)));
         let segments = lists
             .segments
             .iter()
@@ -77,23 +82,30 @@ impl Prepared {
                     planes.extend_from_slice(&i.planes);
                     offsets.push(planes.len() as u32);
                 }
+                let tri: Vec<u32> = s
+                    .instances
+                    .iter()
+                    .map(|i| lists.pieces[i.piece as usize].tri)
+                    .collect();
                 SegmentData {
                     mesh: Mesh {
-                        positions: mesh.positions.clone(),
+                        positions: positions.clone(),
                         normals: None,
                         indices: s
                             .instances
                             .iter()
-                            .map(|i| mesh.indices[i.tri as usize])
+                            .map(|i| lists.pieces[i.piece as usize].verts)
                             .collect(),
                     },
-                    tri: s.instances.iter().map(|i| i.tri).collect(),
-                    last: s.instances.iter().map(|i| i.last).collect(),
                     facing: s
                         .instances
                         .iter()
-                        .map(|i| facing_plane(mesh, i.tri, i.back))
+                        .zip(&tri)
+                        .map(|(i, &t)| facing_plane(mesh, t, i.back))
                         .collect(),
+                    tri,
+                    piece: s.instances.iter().map(|i| i.piece).collect(),
+                    last: s.instances.iter().map(|i| i.last).collect(),
                     offsets,
                     planes,
                 }
@@ -424,7 +436,7 @@ impl Algorithm for PresortedAlgo {
                 (report, image, device.memory.bytes())
             }
         };
-        let mut checks = vec![selection_check(seg, eye32, prep.lists.triangles, k)];
+        let mut checks = vec![selection_check(seg, eye32, &prep.lists, k)];
         // Each input triangle drawn exactly once: the fragments blended (past the LESS test
         // for the fixed-function variants, past the kernel's selection for the SSBO ones)
         // are exactly those of the input mesh (an extra pass, not in the report).
@@ -487,14 +499,14 @@ pub fn vertex_stage(seg: &SegmentData, eye: Vec3) -> Mesh {
     }
 }
 
-/// Host check of the selection: with every copy's exact planes, each input triangle has
-/// exactly one instance that passes (so the LESS chain, which draws the first passing copy
-/// or the last one, draws exactly that one).
-fn selection_check(seg: &SegmentData, eye: Vec3, triangles: u32, k: usize) -> Check {
-    let mut count = vec![0u32; triangles as usize];
-    for i in 0..seg.tri.len() {
+/// Host check of the selection: with every copy's exact planes, each piece (each input
+/// triangle, unless some were split) has exactly one instance that passes (so the LESS
+/// chain, which draws the first passing copy or the last one, draws exactly that one).
+fn selection_check(seg: &SegmentData, eye: Vec3, lists: &Presorted, k: usize) -> Check {
+    let mut count = vec![0u32; lists.pieces.len()];
+    for i in 0..seg.piece.len() {
         if seg.passes(i, eye, true) {
-            count[seg.tri[i] as usize] += 1;
+            count[seg.piece[i] as usize] += 1;
         }
     }
     let bad: Vec<(usize, u32)> = count
@@ -504,14 +516,23 @@ fn selection_check(seg: &SegmentData, eye: Vec3, triangles: u32, k: usize) -> Ch
         .map(|(t, &c)| (t, c))
         .take(5)
         .collect();
+    let what = if lists.is_split() {
+        format!(
+            "{} triangles as {} pieces (crossing triangles split), segment {k}",
+            lists.triangles,
+            lists.pieces.len()
+        )
+    } else {
+        format!("{} triangles, segment {k}", lists.triangles)
+    };
     Check::new(
         "every input triangle's front or back copy selected exactly once",
         bad.is_empty(),
         if bad.is_empty() {
-            format!("{triangles} triangles, segment {k}")
+            what
         } else {
             format!(
-                "{} triangles selected other than once, first (triangle, copies): {bad:?}",
+                "{} pieces selected other than once, first (piece, copies): {bad:?}; {what}",
                 count.iter().filter(|&&c| c != 1).count()
             )
         },

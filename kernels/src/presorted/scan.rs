@@ -39,6 +39,9 @@ pub struct ScanStats {
     pub bf_dups: u64,
     pub whole_moves: u64,
     pub lp_calls: u64,
+    /// Separations decided by the touching test (hulls at distance zero).
+    pub touching_tests: u64,
+    pub touching_planes: u64,
 }
 
 /// The scan could not progress.
@@ -56,32 +59,42 @@ pub struct ScanError {
     pub edges: usize,
 }
 
-/// A cutting plane with every `pos` point strictly on the positive side and every `neg`
-/// point on the negative side (section 4.1.2), if the hulls of the two sets are disjoint.
+/// A cutting plane with every `pos` point on the positive side and every `neg` point on the
+/// negative side (section 4.1.2), if the hulls of the two sets have disjoint interiors.
 ///
 /// `prev`, the plane that separated the previous, smaller set in the greedy growth of
 /// `R_f`, is tried first (one check of every point); then the hulls' distance decides
-/// ([`separate::separate`]) and gives the plane halfway between them. The paper tries the
-/// regions' faces and vertex-edge planes after its LP because the LP only says whether the
-/// hulls intersect; the distance computation returns the plane of largest margin itself.
+/// ([`separate::separate`]) and gives the plane halfway between them. When the hulls touch
+/// (distance zero), the paper's candidates decide ([`separate::separate_touching`]: face
+/// planes, then planes through an edge of each): `shapes` gives the two polytopes' faces
+/// and edges, computed only then.
 fn cutting_plane(
     pos: &[DVec3],
     neg: &[DVec3],
     prev: Option<Plane>,
+    shapes: impl FnOnce() -> (separate::Shape, separate::Shape),
     stats: &mut ScanStats,
 ) -> Option<Plane> {
     if let Some(p) = prev {
-        if separate::verify(&p, pos, neg) {
+        // (Within the touching tolerance: the previous plane may be a touching one.)
+        let t = separate::TOUCH;
+        if pos.iter().all(|v| p.eval(*v) >= -t) && neg.iter().all(|v| p.eval(*v) <= t) {
             return Some(p);
         }
     }
-    // A point both sets share (regions meeting at a corner of the partition): the hulls
-    // intersect.
-    if shares_point(pos, neg) {
-        return None;
-    }
     stats.lp_calls += 1;
-    separate::separate(pos, neg)
+    // A point both sets share (regions meeting at a corner of the partition): the hulls
+    // touch or intersect, GJK would only find a zero distance.
+    if !shares_point(pos, neg) {
+        if let Some(p) = separate::separate(pos, neg) {
+            return Some(p);
+        }
+    }
+    stats.touching_tests += 1;
+    let (a, b) = shapes();
+    let p = separate::separate_touching(&a, &b);
+    stats.touching_planes += u64::from(p.is_some());
+    p
 }
 
 /// Whether two point sets have a point in common (within [`EPS`]).
@@ -180,16 +193,38 @@ pub fn scan(
             .collect();
         // Greedy growth of R_f (eq. 3-5).
         let mut rf: Vec<DVec3> = Vec::new();
+        let mut rf_edges: Vec<usize> = Vec::new();
         let mut plane: Option<Plane> = None;
         let lps_before = stats.lp_calls;
+        let mut rb_shape: Option<separate::Shape> = None;
         for &e in &fs {
             if stats.lp_calls - lps_before >= GREEDY_LPS {
                 break;
             }
             let mut cand = rf.clone();
             cand.extend(g.edges[e].verts.iter().copied());
-            if let Some(p) = cutting_plane(&cand, &rb, plane, stats) {
+            let shapes = || {
+                let rbs = rb_shape
+                    .get_or_insert_with(|| {
+                        separate::Shape::union(
+                            backs
+                                .iter()
+                                .map(|&b| g.edge_shape(b))
+                                .collect::<Vec<_>>()
+                                .iter(),
+                        )
+                    })
+                    .clone();
+                let parts: Vec<separate::Shape> = rf_edges
+                    .iter()
+                    .chain([&e])
+                    .map(|&f| g.edge_shape(f))
+                    .collect();
+                (separate::Shape::union(parts.iter()), rbs)
+            };
+            if let Some(p) = cutting_plane(&cand, &rb, plane, shapes, stats) {
                 rf = cand;
+                rf_edges.push(e);
                 plane = Some(p);
             }
         }
@@ -205,7 +240,10 @@ pub fn scan(
         const PAIRS: usize = 8;
         'pairs: for &f in fs.iter().rev().take(PAIRS) {
             for &b in backs.iter().take(PAIRS) {
-                if let Some(p) = cutting_plane(&g.edges[f].verts, &g.edges[b].verts, None, stats) {
+                let shapes = || (g.edge_shape(f), g.edge_shape(b));
+                if let Some(p) =
+                    cutting_plane(&g.edges[f].verts, &g.edges[b].verts, None, shapes, stats)
+                {
                     pair = Some(p);
                     break 'pairs;
                 }
@@ -294,7 +332,8 @@ fn dup_b_or_f(
     let bf_v = g.edges[bf].verts.clone();
     let fx = g.edges[f_edge].verts.clone();
     // Duplicate b: the copy that serves x -> b goes before x.
-    if let Some(p) = cutting_plane(&bf_v, &xb, None, stats) {
+    let shapes = || (g.edge_shape(bf), g.edge_shape(b_edge));
+    if let Some(p) = cutting_plane(&bf_v, &xb, None, shapes, stats) {
         let (new, keep) = g.split(b, p);
         if let Some(n) = new {
             order.insert(pos[x], n);
@@ -306,7 +345,8 @@ fn dup_b_or_f(
     }
     // Duplicate f: x moves after b, and the copy of f that serves f -> x follows it; the
     // original f keeps the viewpoints of b -> f.
-    if let Some(p) = cutting_plane(&bf_v, &fx, None, stats) {
+    let shapes = || (g.edge_shape(bf), g.edge_shape(f_edge));
+    if let Some(p) = cutting_plane(&bf_v, &fx, None, shapes, stats) {
         let (new, keep) = g.split(f, p);
         order.retain(|&y| y != x);
         let at = order.iter().position(|&y| y == b).expect("b placed") + 1;

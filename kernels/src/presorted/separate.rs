@@ -205,6 +205,110 @@ pub fn separate(pos: &[DVec3], neg: &[DVec3]) -> Option<Plane> {
     verify(&plane, pos, neg).then_some(plane)
 }
 
+/// Overlap a touching separation tolerates (normalized frame): below the width
+/// ([`super::geom::MIN_WIDTH`]) under which a clipped region counts as empty, so that the
+/// part of a region left on the wrong side of such a plane is a sliver no edge survives in.
+pub const TOUCH: f64 = 1e-8;
+
+/// A convex polytope as the separating-axis test sees it: its vertices, its face normals and
+/// its edge directions (unit vectors, either orientation).
+#[derive(Clone, Debug, Default)]
+pub struct Shape {
+    pub verts: Vec<DVec3>,
+    pub normals: Vec<DVec3>,
+    pub edges: Vec<DVec3>,
+}
+
+impl Shape {
+    /// The union of shapes, as far as the test below can use it: all vertices and face
+    /// normals (the hull of a union has other faces too, so the test is then incomplete).
+    pub fn union<'a>(parts: impl IntoIterator<Item = &'a Shape>) -> Shape {
+        let mut s = Shape::default();
+        for p in parts {
+            s.verts.extend_from_slice(&p.verts);
+            s.normals.extend_from_slice(&p.normals);
+            s.edges.extend_from_slice(&p.edges);
+        }
+        s
+    }
+}
+
+/// Most edge-direction pairs [`separate_touching`] tries (beyond, only face normals).
+const MAX_EDGE_PAIRS: usize = 4096;
+
+/// A plane that separates two convex polytopes whose interiors are disjoint, when they may
+/// touch ("Depth-Presorted Triangle Lists", section 4.1.2: "we check if any of the bounding
+/// planes of the two regions is suitable as a cutting plane ... then planes are formed
+/// using all possible combinations of vertices from one region and edges from the other").
+/// [`separate`] needs a margin; regions of triangles that share an edge or a vertex touch
+/// along the shared feature's line (and the wedges of a fan of triangles around one edge
+/// meet along that edge), where only a plane through the contact separates them.
+///
+/// The candidates are the separating-axis theorem's: the face normals of either polytope
+/// and the cross products of an edge of one with an edge of the other (the normal of the
+/// plane through a vertex of one and an edge of the other when an edge of each meet), a
+/// complete set for two convex polytopes. An axis `n` separates when the smallest `n.p`
+/// over `pos` is at least the largest `n.q` over `neg`, less [`TOUCH`]; of those, the one
+/// with the widest gap wins and the plane is put in the middle of the gap. Each side must
+/// still reach [`super::geom::MIN_WIDTH`] beyond the plane (a plane containing a region is
+/// no cut).
+pub fn separate_touching(pos: &Shape, neg: &Shape) -> Option<Plane> {
+    if pos.verts.is_empty() || neg.verts.is_empty() {
+        return None;
+    }
+    let mut best: Option<(f64, DVec3, f64, f64)> = None;
+    let mut try_axis = |n: DVec3| {
+        let len = n.length();
+        if len.is_nan() || len < 1e-9 {
+            return;
+        }
+        let n = n / len;
+        for s in [n, -n] {
+            let lo = pos
+                .verts
+                .iter()
+                .map(|p| s.dot(*p))
+                .fold(f64::INFINITY, f64::min);
+            let hi = neg
+                .verts
+                .iter()
+                .map(|q| s.dot(*q))
+                .fold(f64::NEG_INFINITY, f64::max);
+            let gap = lo - hi;
+            if gap >= -TOUCH && best.is_none_or(|b| gap > b.0) {
+                best = Some((gap, s, lo, hi));
+            }
+        }
+    };
+    pos.normals
+        .iter()
+        .chain(&neg.normals)
+        .for_each(|n| try_axis(*n));
+    if pos.edges.len() * neg.edges.len() <= MAX_EDGE_PAIRS {
+        for a in &pos.edges {
+            for b in &neg.edges {
+                try_axis(a.cross(*b));
+            }
+        }
+    }
+    let (_, n, lo, hi) = best?;
+    let plane = Plane {
+        n,
+        d: -(lo + hi) * 0.5,
+    };
+    let reach_pos = pos
+        .verts
+        .iter()
+        .map(|p| plane.eval(*p))
+        .fold(f64::NEG_INFINITY, f64::max);
+    let reach_neg = neg
+        .verts
+        .iter()
+        .map(|q| plane.eval(*q))
+        .fold(f64::INFINITY, f64::min);
+    (reach_pos >= super::geom::MIN_WIDTH && reach_neg <= -super::geom::MIN_WIDTH).then_some(plane)
+}
+
 /// Whether `plane` puts `pos` strictly on its positive side and `neg` on its negative side.
 pub fn verify(plane: &Plane, pos: &[DVec3], neg: &[DVec3]) -> bool {
     pos.iter().all(|p| plane.eval(*p) > EPS) && neg.iter().all(|q| plane.eval(*q) < -EPS)

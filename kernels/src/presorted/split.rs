@@ -1,0 +1,358 @@
+//! Splitting intersecting triangles before the graph ("Depth-Presorted Triangle Lists",
+//! section 4: "we assume intersecting triangles have been split prior to invocation of our
+//! preprocessing algorithm ... Additional preprocessing can break cycles by splitting
+//! triangles when needed").
+//!
+//! Two triangles that cross each other are seen in both depth orders from one viewpoint
+//! (each hides part of the other): no order of whole triangles is right for that view, and
+//! the scan could never remove that cycle. Splitting one of them, `a`, by the other's
+//! plane is enough: each piece lies in one closed half-space of `b`'s plane, and a triangle
+//! `x` in a closed half-space of triangle `y`'s plane is never seen both in front of and
+//! behind `y` from one viewpoint (from `x`'s side, the segment from the eye to `x` stays on
+//! that side and cannot pass through `y`; from the other side, the segment to `y` cannot
+//! reach `x`).
+//!
+//! Pieces are kept in `f64` (the graph sees them exactly); a piece's corners are either
+//! corners of its input triangle (kept bit for bit at run time) or new points (rounded to
+//! `f32` at run time, where they move by a rounding error: only pixels whose centre is within
+//! that distance of the cut can see it).
+
+use std::collections::HashMap;
+
+use glam::DVec3;
+
+use super::geom::EPS;
+use super::graph::facing;
+
+/// A corner of a piece: a corner of its input triangle, or a new point (normalized frame).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Corner {
+    Input(u8),
+    New(DVec3),
+}
+
+/// A piece of an input triangle (the whole triangle when it is not split).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Piece {
+    pub tri: u32,
+    pub corners: [Corner; 3],
+    /// The corners' positions (normalized frame).
+    pub pos: [DVec3; 3],
+}
+
+/// What splitting did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SplitStats {
+    /// Crossing pairs found (each cured by splitting one triangle of the pair).
+    pub crossings: u64,
+    /// Pieces beyond the input triangles.
+    pub extra_pieces: u64,
+}
+
+/// Why splitting failed.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum SplitError {
+    #[error(
+        "triangles {first} and {second} overlap in one plane: no viewpoint sees them in one \
+         order (remove one, or cut them so that they no longer overlap)"
+    )]
+    Coplanar { first: u32, second: u32 },
+    #[error("splitting intersecting triangles made more than {limit} pieces: the mesh intersects itself too much")]
+    TooMany { limit: usize },
+}
+
+/// Pieces a mesh may grow to (per input triangle) before splitting gives up.
+pub const MAX_PIECES_PER_TRIANGLE: usize = 16;
+
+/// Signed distances below this (normalized frame) count as on a plane.
+const ON: f64 = EPS;
+
+/// Splits the triangles `tris` (normalized frame) until no two pieces cross.
+pub fn split_crossing(tris: &[[DVec3; 3]]) -> Result<(Vec<Piece>, SplitStats), SplitError> {
+    let mut pieces: Vec<Piece> = tris
+        .iter()
+        .enumerate()
+        .map(|(t, p)| Piece {
+            tri: t as u32,
+            corners: [Corner::Input(0), Corner::Input(1), Corner::Input(2)],
+            pos: *p,
+        })
+        .collect();
+    let mut stats = SplitStats::default();
+    let limit = MAX_PIECES_PER_TRIANGLE * tris.len().max(1);
+    // A uniform grid over the pieces' bounding boxes; rebuilt each round (rounds are few).
+    loop {
+        let pairs = candidate_pairs(&pieces);
+        let mut split: HashMap<usize, [DVec3; 3]> = HashMap::new();
+        for (i, j) in pairs {
+            if split.contains_key(&i) || split.contains_key(&j) {
+                continue;
+            }
+            match crossing(&pieces[i].pos, &pieces[j].pos) {
+                Cross::No => {}
+                Cross::Coplanar => {
+                    if pieces[i].tri != pieces[j].tri {
+                        return Err(SplitError::Coplanar {
+                            first: pieces[i].tri.min(pieces[j].tri),
+                            second: pieces[i].tri.max(pieces[j].tri),
+                        });
+                    }
+                }
+                Cross::Yes => {
+                    stats.crossings += 1;
+                    split.insert(i, pieces[j].pos);
+                }
+            }
+        }
+        if split.is_empty() {
+            break;
+        }
+        let mut next: Vec<Piece> = Vec::with_capacity(pieces.len() + 2 * split.len());
+        for (i, p) in pieces.into_iter().enumerate() {
+            match split.get(&i) {
+                None => next.push(p),
+                Some(by) => next.extend(cut(&p, by)),
+            }
+        }
+        pieces = next;
+        if pieces.len() > limit {
+            return Err(SplitError::TooMany { limit });
+        }
+    }
+    stats.extra_pieces = (pieces.len() - tris.len()) as u64;
+    Ok((pieces, stats))
+}
+
+/// Pairs of pieces whose bounding boxes overlap (`i < j`).
+fn candidate_pairs(pieces: &[Piece]) -> Vec<(usize, usize)> {
+    let boxes: Vec<(DVec3, DVec3)> = pieces
+        .iter()
+        .map(|p| {
+            (
+                p.pos[0].min(p.pos[1]).min(p.pos[2]) - DVec3::splat(ON),
+                p.pos[0].max(p.pos[1]).max(p.pos[2]) + DVec3::splat(ON),
+            )
+        })
+        .collect();
+    // Cell size: the average box extent (at least a small absolute size).
+    let avg = boxes
+        .iter()
+        .map(|(lo, hi)| (*hi - *lo).max_element())
+        .sum::<f64>()
+        / boxes.len().max(1) as f64;
+    let cell = avg.max(1e-6);
+    let key = |v: DVec3| (v / cell).floor().as_ivec3();
+    let mut grid: HashMap<glam::IVec3, Vec<usize>> = HashMap::new();
+    for (i, (lo, hi)) in boxes.iter().enumerate() {
+        let (a, b) = (key(*lo), key(*hi));
+        for x in a.x..=b.x {
+            for y in a.y..=b.y {
+                for z in a.z..=b.z {
+                    grid.entry(glam::IVec3::new(x, y, z)).or_default().push(i);
+                }
+            }
+        }
+    }
+    let mut pairs: Vec<(usize, usize)> = Vec::new();
+    for ids in grid.values() {
+        for (k, &i) in ids.iter().enumerate() {
+            for &j in &ids[k + 1..] {
+                let (bi, bj) = (&boxes[i], &boxes[j]);
+                if bi.0.cmple(bj.1).all() && bj.0.cmple(bi.1).all() {
+                    pairs.push((i.min(j), i.max(j)));
+                }
+            }
+        }
+    }
+    pairs.sort_unstable();
+    pairs.dedup();
+    pairs
+}
+
+enum Cross {
+    No,
+    Yes,
+    Coplanar,
+}
+
+/// Whether triangles `a` and `b` cross: each has corners strictly on both sides of the
+/// other's plane, and the two segments where each meets the other's plane overlap (more
+/// than a point). Coplanar triangles whose interiors overlap are reported as such.
+fn crossing(a: &[DVec3; 3], b: &[DVec3; 3]) -> Cross {
+    let pa = facing(a, false);
+    let pb = facing(b, false);
+    let da = b.map(|q| pa.eval(q));
+    let db = a.map(|p| pb.eval(p));
+    let straddles = |d: &[f64; 3]| d.iter().any(|x| *x > ON) && d.iter().any(|x| *x < -ON);
+    if da.iter().all(|x| x.abs() <= ON) {
+        return if coplanar_overlap(a, b, pa.n) {
+            Cross::Coplanar
+        } else {
+            Cross::No
+        };
+    }
+    if !straddles(&da) || !straddles(&db) {
+        return Cross::No;
+    }
+    // The line of the two planes; each triangle's segment on it.
+    let dir = pa.n.cross(pb.n);
+    if dir.length_squared() < 1e-24 {
+        return Cross::No;
+    }
+    let seg = |t: &[DVec3; 3], d: &[f64; 3]| {
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        for k in 0..3 {
+            let l = (k + 1) % 3;
+            let (x, y) = (d[k], d[l]);
+            if x.abs() <= ON {
+                let s = dir.dot(t[k]);
+                lo = lo.min(s);
+                hi = hi.max(s);
+            }
+            if (x > ON && y < -ON) || (x < -ON && y > ON) {
+                let p = t[k] + (t[l] - t[k]) * (x / (x - y));
+                let s = dir.dot(p);
+                lo = lo.min(s);
+                hi = hi.max(s);
+            }
+        }
+        (lo, hi)
+    };
+    let (alo, ahi) = seg(a, &db);
+    let (blo, bhi) = seg(b, &da);
+    let overlap = ahi.min(bhi) - alo.max(blo);
+    if overlap > ON * dir.length() {
+        Cross::Yes
+    } else {
+        Cross::No
+    }
+}
+
+/// Whether two coplanar triangles (normal `n`) overlap in more than a boundary: no edge of
+/// either separates them (2D separating axes).
+fn coplanar_overlap(a: &[DVec3; 3], b: &[DVec3; 3], n: DVec3) -> bool {
+    for (t, o) in [(a, b), (b, a)] {
+        for k in 0..3 {
+            let e = t[(k + 1) % 3] - t[k];
+            let axis = n.cross(e);
+            let pt = t.map(|p| axis.dot(p));
+            let po = o.map(|p| axis.dot(p));
+            let (tlo, thi) = (
+                pt.iter().copied().fold(f64::INFINITY, f64::min),
+                pt.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            );
+            let (olo, ohi) = (
+                po.iter().copied().fold(f64::INFINITY, f64::min),
+                po.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            );
+            let tol = ON * axis.length();
+            if thi <= olo + tol || ohi <= tlo + tol {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// The pieces of `p` on either side of `by`'s plane (a triangle and a quad, the quad in two
+/// triangles; corners on the plane go to both sides).
+fn cut(p: &Piece, by: &[DVec3; 3]) -> Vec<Piece> {
+    let h = facing(by, false);
+    let d = p.pos.map(|v| h.eval(v));
+    let mut out = Vec::with_capacity(3);
+    for sign in [1.0f64, -1.0] {
+        let mut poly: Vec<(Corner, DVec3)> = Vec::with_capacity(4);
+        for k in 0..3 {
+            let l = (k + 1) % 3;
+            let (x, y) = (d[k] * sign, d[l] * sign);
+            if x >= -ON {
+                poly.push((p.corners[k], p.pos[k]));
+            }
+            if (x > ON && y < -ON) || (x < -ON && y > ON) {
+                let v = p.pos[k] + (p.pos[l] - p.pos[k]) * (d[k] / (d[k] - d[l]));
+                poly.push((Corner::New(v), v));
+            }
+        }
+        for k in 1..poly.len().saturating_sub(1) {
+            out.push(Piece {
+                tri: p.tri,
+                corners: [poly[0].0, poly[k].0, poly[k + 1].0],
+                pos: [poly[0].1, poly[k].1, poly[k + 1].1],
+            });
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn two_crossing_triangles_are_split_into_non_crossing_pieces() {
+        // A horizontal triangle and a vertical one through its middle.
+        let a = [
+            DVec3::new(-1.0, -1.0, 0.0),
+            DVec3::new(1.0, -1.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.0),
+        ];
+        let b = [
+            DVec3::new(0.0, -0.5, -1.0),
+            DVec3::new(0.0, 0.5, -1.0),
+            DVec3::new(0.1, 0.0, 1.0),
+        ];
+        assert!(matches!(crossing(&a, &b), Cross::Yes));
+        let (pieces, stats) = split_crossing(&[a, b]).unwrap();
+        assert_eq!(stats.crossings, 1);
+        assert!(pieces.len() >= 4, "{}", pieces.len());
+        for i in 0..pieces.len() {
+            for j in i + 1..pieces.len() {
+                assert!(matches!(
+                    crossing(&pieces[i].pos, &pieces[j].pos),
+                    Cross::No
+                ));
+            }
+        }
+        // The pieces of a cover a's area.
+        let area = |t: &[DVec3; 3]| 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length();
+        let split_tri = pieces[0].tri;
+        let total: f64 = pieces
+            .iter()
+            .filter(|p| p.tri == split_tri)
+            .map(|p| area(&p.pos))
+            .sum();
+        let whole = area(if split_tri == 0 { &a } else { &b });
+        assert!((total - whole).abs() < 1e-12, "{total} vs {whole}");
+    }
+
+    #[test]
+    fn adjacent_and_touching_triangles_are_left_alone() {
+        let a = [
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.0),
+        ];
+        // Shares an edge, folded up.
+        let b = [
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.0),
+            DVec3::new(1.0, 1.0, 0.7),
+        ];
+        // Touches a's interior with one corner from above.
+        let c = [
+            DVec3::new(0.2, 0.2, 0.0),
+            DVec3::new(0.2, 0.5, 1.0),
+            DVec3::new(0.5, 0.2, 1.0),
+        ];
+        let (pieces, stats) = split_crossing(&[a, b, c]).unwrap();
+        assert_eq!(stats.crossings, 0);
+        assert_eq!(pieces.len(), 3);
+        // Coplanar overlap is refused.
+        let d = a.map(|p| p + DVec3::new(0.1, 0.1, 0.0));
+        assert!(matches!(
+            split_crossing(&[a, d]),
+            Err(SplitError::Coplanar { .. })
+        ));
+    }
+}
