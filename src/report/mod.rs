@@ -382,7 +382,7 @@ pub fn generate(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Written, R
             Paper::Bucket => bucket::section(cfg, progress)?,
             Paper::Occupancy => occupancy::section(cfg, progress)?,
             Paper::Merging => merging::section(cfg, progress)?,
-            Paper::Presorted => presorted::section(cfg),
+            Paper::Presorted => presorted::section(cfg, progress)?,
             Paper::Hazards => hazards::section(cfg, progress)?,
         };
         s.seconds = t.elapsed().as_secs_f64();

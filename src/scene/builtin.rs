@@ -307,6 +307,39 @@ pub fn spheres() -> Mesh {
     mesh
 }
 
+/// A torus of `n` x `m` quads (two triangles each), radii 1 and 0.4 about the y axis: the
+/// smallest closed surface whose triangles occlude each other in cycles across viewpoints
+/// (the depth-presorted lists' case; not a named scene). Angles through [`sin_cos`], so it
+/// is bit-identical everywhere.
+pub fn torus(n: u32, m: u32) -> Mesh {
+    let (big, small) = (1.0f64, 0.4f64);
+    let mut positions = Vec::with_capacity(n as usize * m as usize);
+    for i in 0..n {
+        let (su, cu) = sin_cos(std::f64::consts::TAU * f64::from(i) / f64::from(n));
+        for j in 0..m {
+            let (sv, cv) = sin_cos(std::f64::consts::TAU * f64::from(j) / f64::from(m));
+            let r = big + small * cv;
+            positions.push(DVec3::new(r * cu, small * sv, r * su).as_vec3());
+        }
+    }
+    let mut indices = Vec::with_capacity(2 * n as usize * m as usize);
+    for i in 0..n {
+        for j in 0..m {
+            let a = i * m + j;
+            let b = ((i + 1) % n) * m + j;
+            let c = ((i + 1) % n) * m + (j + 1) % m;
+            let d = i * m + (j + 1) % m;
+            indices.push([a, b, c]);
+            indices.push([a, c, d]);
+        }
+    }
+    Mesh {
+        positions,
+        normals: None,
+        indices,
+    }
+}
+
 /// `object-grid[:N]`: `N x N x N` small closed spheres (radius 0.3, 8 stacks, 12 slices:
 /// 168 triangles each) on a grid of spacing 1, each sphere one object (the depth-fighting
 /// paper's geometry culling, section 3.3, needs a scene of many objects). Seen from the
