@@ -23,9 +23,10 @@ pub const PARTITIONS: [u32; 4] = [4, 6, 16, 64];
 pub const TIME_PARTITIONS: u32 = 6;
 
 /// Meshes above this many triangles are left out of the report's time figure (and named):
-/// the preprocessing's occlusion graph and scan grow faster than the triangles, and the
-/// larger meshes' times are measured apart (docs/algorithms.md).
-pub const MAX_TRIANGLES: usize = 4_000;
+/// the preprocessing's occlusion graph and scan grow faster than the triangles; on the
+/// shipped teapot (992 triangles) the scan does not finish yet (docs/algorithms.md), so
+/// only what finishes is timed here.
+pub const MAX_TRIANGLES: usize = 600;
 
 /// One preprocessing, timed.
 struct Measured {
@@ -83,8 +84,8 @@ fn meshes(cfg: &PaperConfig, s: &mut Section) -> Result<Vec<(String, Mesh)>, Rep
         if mesh.indices.len() > MAX_TRIANGLES {
             s.text.push(format!(
                 "{name} ({} triangles) is left out of the time figure: above {MAX_TRIANGLES} \
-                 triangles the preprocessing is measured by `fragrace presort` alone \
-                 (docs/algorithms.md).",
+                 triangles the scan does not finish yet (the teapot's 992 ran past 15 \
+                 minutes; docs/algorithms.md, presorted lists).",
                 mesh.indices.len()
             ));
             continue;
