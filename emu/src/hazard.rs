@@ -603,8 +603,8 @@ impl Detector {
 
     /// A memory access at `step` by `seq`, started in `lane` (see [`Detector::start`]);
     /// `lock` is the interlock section it holds, if any; `record` is `(base, len, word)` for
-    /// record accesses; `read` is the value an atomic access read (the word before it),
-    /// 0 for plain ones. A compare-exchange that did not write (it failed) is an
+    /// record accesses; `read` is the value an atomic load or a compare-exchange read (the
+    /// word before it; 0 for other operations). A compare-exchange that did not write (it failed) is an
     /// [`OpKind::AtomicLoad`]: it read the word, and acquires as one.
     #[allow(clippy::too_many_arguments)] // one call site, in the executor's hot loop
     #[inline]

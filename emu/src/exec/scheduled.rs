@@ -328,11 +328,11 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 _ => None,
             };
             inv.cas_failed.set(false);
-            // What an atomic access reads (for the detector's ABA rule).
-            let read = if op.is_plain() {
-                0
-            } else {
+            // What an atomic load or a compare-exchange reads (the detector's ABA rule).
+            let read = if matches!(op, OpKind::AtomicLoad | OpKind::CompareExchange) {
                 env.memory.bits(addr)
+            } else {
+                0
             };
             Some((input.seq, addr, op, read, lock, rec))
         } else {
