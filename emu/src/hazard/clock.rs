@@ -94,7 +94,7 @@ impl Clocks {
             w
         };
         let old = self.stride;
-        let lanes = if old == 0 { 0 } else { self.lane.len() / old };
+        let lanes = self.lane.len().checked_div(old).unwrap_or(0);
         self.lane = widen(&self.lane, old, lanes);
         self.lane.resize(stride * stride, 0);
         self.words = widen(&self.words, old, self.used as usize);
