@@ -1,22 +1,34 @@
 //! The hazard detector of the `scheduled` executor. It sees every step in the order the
 //! schedule ran them and reports:
-//! - **lost updates**: A plain-loads X, another invocation B writes X, then A plain-stores
-//!   X (B's write is overwritten by a value computed from a stale read);
+//! - **lost updates**: A loads X, another invocation B writes X, then A stores X (B's write
+//!   is overwritten by a value computed from a stale read). With a plain load and a plain
+//!   store, always; when either is atomic (an atomicity violation: check-then-act written
+//!   as an atomic load and an atomic store), only if B's write does not happen before A's
+//!   store (see below), so that a store made after taking a lock B released is not one;
 //! - **data races**: conflicting accesses to X (at least one a write, at least one plain)
-//!   by two invocations whose lifetimes overlap, not both inside critical sections that
-//!   exclude each other (interlock of the same pixel; per-sample interlock only when the
-//!   two share a covered sample: see [`LockKey`]);
+//!   by two invocations, neither happening before the other, and not both inside critical
+//!   sections that exclude each other (interlock of the same pixel; per-sample interlock
+//!   only when the two share a covered sample: see [`LockKey`]);
 //! - **torn records**: another invocation writes a word of a multi-word record while A is
 //!   part-way through loading it ([`crate::Frag::load_record`]).
 //!
-//! Atomic-vs-atomic is never a race here (it is what atomics are for); the lost updates and
-//! atomicity violations built from atomics show up in the algorithms' invariant oracles.
-//! This module knows nothing of kernels or policies: the executor feeds it steps.
+//! Happens-before ([`clock`]): program order, release -> acquire through atomics (as the
+//! emulator's acquire-release atomics order them), and finish -> start (an invocation that
+//! finished before another started). So a plain section under a lock built from atomics
+//! (compare-exchange acquire, atomic-store release) is ordered; one released by a plain
+//! store is not. Atomic-vs-atomic is never a race here (it is what atomics are for); the
+//! atomicity violations other than the load-then-store above show up in the algorithms'
+//! invariant oracles. This module knows nothing of kernels or policies: the executor feeds
+//! it steps.
+
+mod clock;
 
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
 use crate::memory::{Addr, OpKind};
+pub use clock::MAX_CLOCK_LANES;
+use clock::{Clocks, NO_CLOCK, NO_LANE, UNTRACKED};
 
 /// The kinds of hazard.
 #[derive(
@@ -116,8 +128,12 @@ struct Access {
     seq: u64,
     step: u64,
     /// The interlock section held at the time (a [`LockKey`]), [`NO_LOCK`] if none (not an
-    /// `Option`: this keeps an access at 24 bytes, and `Option<Access>` too).
+    /// `Option`: this keeps an access at 32 bytes, and `Option<Access>` too).
     lock: u64,
+    /// The invocation's epoch at the access, and its lane ([`clock`]; `UNTRACKED` and
+    /// `NO_LANE` outside the clocks).
+    epoch: u32,
+    lane: u16,
     plain: bool,
 }
 
@@ -146,6 +162,10 @@ fn same_section(a: u64, b: u64) -> bool {
 struct AddrState {
     addr: Addr,
     last_write: Option<Access>,
+    /// The release clock of the word ([`clock::NO_CLOCK`] until an atomic writes it), and
+    /// whether its current value carries it (written by an atomic, not by a plain store).
+    clock: u32,
+    synced: bool,
     /// Reads since the last write (one entry per invocation, latest).
     reads: Vec<Access>,
     /// In-flight invocations that touched it, as a set of detector lanes (see
@@ -218,12 +238,23 @@ struct InvState {
 /// (at most the executor's window are live at once), so their vectors are allocated once.
 #[derive(Default)]
 struct Lane {
-    /// Step of this invocation's latest plain load, per address.
-    loads: Vec<(Addr, u64)>,
+    /// This invocation's latest load (plain or atomic, the latter including a failed
+    /// compare-exchange) per address.
+    loads: Vec<Load>,
     /// Slab entries whose toucher set holds this lane (cleared when it finishes).
     touched: Vec<u32>,
     /// An open record load: (base, len, interrupted by (who, step)).
     record: Option<OpenRecord>,
+}
+
+/// An invocation's latest load of an address.
+#[derive(Clone, Copy)]
+struct Load {
+    addr: Addr,
+    step: u64,
+    /// The value it read (atomic loads; 0 for plain ones).
+    value: u64,
+    plain: bool,
 }
 
 /// An open record load: (base, len, interrupted by (who, step)).
@@ -417,6 +448,8 @@ pub struct Detector {
     rep: Reports,
     /// Invocations with an open record load (few at a time).
     open_records: Vec<u64>,
+    /// Happens-before through atomics.
+    clocks: Clocks,
 }
 
 impl Detector {
@@ -440,6 +473,7 @@ impl Detector {
                 seen: FastMap::default(),
             },
             open_records: Vec::new(),
+            clocks: Clocks::new(),
         }
     }
 
@@ -457,6 +491,8 @@ impl Detector {
         self.table.clear();
         for a in &mut self.slab[..self.slab_len] {
             a.last_write = None;
+            a.clock = NO_CLOCK;
+            a.synced = false;
             a.reads.clear();
             a.touch = 0;
             // (Guarded: even an empty `fill` is a call to memset, which showed in profiles.)
@@ -487,6 +523,7 @@ impl Detector {
             self.rep.seen.clear();
         }
         self.open_records.clear();
+        self.clocks.reset();
     }
 
     /// Sets the smallest `seq` this run will admit (invocations are indexed from it).
@@ -510,6 +547,10 @@ impl Detector {
         }
         // (Normally empty: it was cleared when its last invocation finished.)
         self.clear_lane(lane as u32);
+        self.clocks.ensure(lane);
+        if self.clocks.tracked(Some(lane as u32)).is_some() {
+            self.clocks.start(lane);
+        }
         let lane = lane as u32;
         self.invs.all[i] = InvState {
             id: Some(id),
@@ -540,6 +581,9 @@ impl Detector {
         if let Some(l) = lane {
             self.clear_lane(l);
         }
+        if let Some(l) = self.clocks.tracked(lane) {
+            self.clocks.finish(l);
+        }
         self.open_records.retain(|&o| o != seq);
     }
 
@@ -559,7 +603,9 @@ impl Detector {
 
     /// A memory access at `step` by `seq`, started in `lane` (see [`Detector::start`]);
     /// `lock` is the interlock section it holds, if any; `record` is `(base, len, word)` for
-    /// record accesses.
+    /// record accesses; `read` is the value an atomic load or a compare-exchange read (the
+    /// word before it; 0 for other operations). A compare-exchange that did not write (it failed) is an
+    /// [`OpKind::AtomicLoad`]: it read the word, and acquires as one.
     #[allow(clippy::too_many_arguments)] // one call site, in the executor's hot loop
     #[inline]
     pub fn access(
@@ -568,6 +614,7 @@ impl Detector {
         seq: u64,
         addr: Addr,
         op: OpKind,
+        read: u64,
         step: u64,
         lock: Option<LockKey>,
         record: Option<(Addr, u32, u32)>,
@@ -575,12 +622,6 @@ impl Detector {
         let plain = op.is_plain();
         let write = op.is_write();
         let lock = lock.map_or(NO_LOCK, |l| l.0);
-        let me = Access {
-            seq,
-            step,
-            lock,
-            plain,
-        };
         let slot = self.slot(addr);
         // The lane only counts if `seq` is the invocation started in it and in flight.
         let lane = (self.invs.lane(seq) == Some(lane as u32)).then_some(lane as u32);
@@ -589,9 +630,26 @@ impl Detector {
             lanes,
             slab,
             rep,
+            clocks,
             ..
         } = self;
+        let me_clock = clocks.tracked(lane);
         let st = &mut slab[slot];
+        // An atomic read of a released value acquires it (before the access: a
+        // read-modify-write's own accesses come after its read). An atomic store reads
+        // nothing.
+        let atomic_read = !plain & (op != OpKind::AtomicStore);
+        if let (true, true, Some(l)) = (atomic_read, st.synced, me_clock) {
+            clocks.acquire(l, st.clock);
+        }
+        let me = Access {
+            seq,
+            step,
+            lock,
+            epoch: me_clock.map_or(UNTRACKED, |l| clocks.epoch(l)),
+            lane: me_clock.map_or(NO_LANE, |l| l as u16),
+            plain,
+        };
         st.accesses += 1;
         // Peak concurrency: in-flight invocations that touched it, this one included.
         if let Some(l) = lane {
@@ -600,26 +658,28 @@ impl Detector {
             }
         }
         st.peak = st.peak.max(st.live);
+        // Whether access `c` happens before this one or excludes it: same critical section,
+        // synchronised through atomics, or made by an invocation whose lifetime did not
+        // overlap ours (the clocks know that too, except outside them).
+        let ordered = |c: &Access| {
+            same_section(c.lock, lock)
+                || clocks.knows(me_clock, c.lane, c.epoch)
+                || !invs.overlapped(c.seq, seq)
+        };
         // Races: conflicts with the last write and, for a write, with the reads since it,
         // in that order (the order hazards are reported in).
-        let race = |rep: &mut Reports, c: &Access| {
-            let ordered = same_section(c.lock, lock);
-            if !ordered && invs.overlapped(c.seq, seq) {
-                rep.report(invs, HazardKind::Race, addr, seq, c.seq, step);
-            }
-        };
         // (Conditions combined with `&` and `|`: one rarely taken branch, where `&&` made
         // several that random schedules mispredict.)
         let prev_write = st.last_write;
         if let Some(w) = &prev_write {
-            if (w.seq != seq) & (plain | w.plain) {
-                race(rep, w);
+            if (w.seq != seq) & (plain | w.plain) && !ordered(w) {
+                rep.report(invs, HazardKind::Race, addr, seq, w.seq, step);
             }
         }
         if write {
             for r in &st.reads {
-                if (r.seq != seq) & (plain | r.plain) {
-                    race(rep, r);
+                if (r.seq != seq) & (plain | r.plain) && !ordered(r) {
+                    rep.report(invs, HazardKind::Race, addr, seq, r.seq, step);
                 }
             }
             st.reads.clear();
@@ -630,24 +690,56 @@ impl Detector {
             }
             st.reads.push(me);
         }
-        // Lost update: my plain store after my plain load, with another's write between.
+        // Lost update: my store after my load, with another's write between (when the load
+        // or the store is atomic, a write that does not happen before the store); and ABA:
+        // my compare-exchange succeeds on the value I loaded although another invocation
+        // wrote the word since (the value went and came back: the exchange validated a
+        // stale read).
         if let Some(l) = lane {
             let loads = &mut lanes[l as usize].loads;
+            let since_my_load =
+                |ld: &Load| prev_write.filter(|w| (w.seq != seq) & (w.step > ld.step));
             match op {
-                OpKind::Store => {
-                    let my_load = loads.iter().find(|l| l.0 == addr).map(|l| l.1);
-                    if let (Some(load_step), Some(w)) = (my_load, prev_write) {
-                        if (w.seq != seq) & (w.step > load_step) {
+                OpKind::Store | OpKind::AtomicStore => {
+                    let my_load = loads.iter().find(|l| l.addr == addr);
+                    if let Some(w) = my_load.and_then(since_my_load) {
+                        let both_plain = my_load.is_some_and(|l| l.plain) & plain;
+                        if both_plain || !ordered(&w) {
                             rep.report(invs, HazardKind::LostUpdate, addr, seq, w.seq, step);
                         }
                     }
                 }
-                OpKind::Load => match loads.iter_mut().find(|l| l.0 == addr) {
-                    Some(l) => l.1 = step,
-                    None => loads.push((addr, step)),
-                },
+                OpKind::CompareExchange => {
+                    let my_load = loads.iter().find(|l| l.addr == addr && !l.plain);
+                    if let Some(w) = my_load.filter(|l| l.value == read).and_then(since_my_load) {
+                        rep.report(invs, HazardKind::LostUpdate, addr, seq, w.seq, step);
+                    }
+                }
+                OpKind::Load | OpKind::AtomicLoad => {
+                    let now = Load {
+                        addr,
+                        step,
+                        value: read,
+                        plain,
+                    };
+                    match loads.iter_mut().find(|l| l.addr == addr) {
+                        Some(l) => *l = now,
+                        None => loads.push(now),
+                    }
+                }
                 _ => {}
             }
+        }
+        // Atomic writes release (a read-modify-write after acquiring: the release sequence
+        // goes on); a plain store ends the word's release sequence.
+        if write {
+            st.synced = match me_clock {
+                Some(l) if !plain => {
+                    clocks.release(l, &mut st.clock);
+                    true
+                }
+                _ => false,
+            };
         }
         // Torn records: my record load interrupted by another's write.
         if let (Some((base, len, word)), OpKind::Load, Some(l)) = (record, op, lane) {
@@ -724,3 +816,6 @@ impl Detector {
         v
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -6,7 +6,11 @@
 //! explores (loom also models weak memory: a relaxed load may read a stale value). A
 //! `racy` kernel must show a wrong result or a hang in some execution; a `race-free`
 //! kernel in none. So the labels the detector is measured against are checked, not only
-//! asserted.
+//! asserted. The models run emu's own atomics (acquire-release for kernel atomics, relaxed
+//! for plain accesses), the semantics the detector's happens-before follows: loom finding
+//! no bug in `spin-plain-section` (a plain section under a compare-exchange / atomic-store
+//! lock) is what makes the detector's silence there right, and loom finding the bug in
+//! `spin-plain-release` (released by a plain, relaxed store) what makes its report right.
 //!
 //! Run with `RUSTFLAGS="--cfg loom" cargo test --release --target-dir target/loom
 //! -p fragrace-kernels --test loom_racebench` (or `bash ci/loom.sh`); `-- --nocapture`

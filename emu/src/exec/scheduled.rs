@@ -14,6 +14,7 @@ use super::{ExecConfig, ScheduleConfig};
 use crate::hazard::{Detector, HazardCounts};
 use crate::invocation::{Frag, Invocation, PassEnv, StepKind};
 use crate::kernel::{FaultKind, FragInput, FragmentKernel};
+use crate::memory::OpKind;
 
 /// Reusable state of the scheduled executor (everything but the futures), so that
 /// exploring many schedules of one model allocates nothing per execution.
@@ -302,7 +303,9 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         }
         let s = cands[k].slot as usize;
         let inv = &slots[s];
-        if let Some(StepKind::Mem {
+        // The detector sees a memory step after it ran (a compare-exchange's outcome
+        // decides whether it wrote), with what held before it.
+        let mem_step = if let Some(StepKind::Mem {
             addr,
             op,
             record: rec,
@@ -324,22 +327,41 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 }
                 _ => None,
             };
-            detector.access(
-                s,
-                input.seq,
-                addr,
-                op,
-                step,
-                lock,
-                rec.map(|r| (r.base, r.len, r.word)),
-            );
-        }
+            inv.cas_failed.set(false);
+            // What an atomic load or a compare-exchange reads (the detector's ABA rule).
+            let read = if matches!(op, OpKind::AtomicLoad | OpKind::CompareExchange) {
+                env.memory.bits(addr)
+            } else {
+                0
+            };
+            Some((input.seq, addr, op, read, lock, rec))
+        } else {
+            None
+        };
         if let Some(m) = simt.as_mut() {
             m.before_step(k, s, inv, env.memory);
         }
         inv.granted.set(true);
         step += 1;
         let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
+        if let Some((seq, addr, op, read, lock, rec)) = mem_step {
+            // A compare-exchange that failed only read the word: an atomic load.
+            let op = if op == OpKind::CompareExchange && inv.cas_failed.get() {
+                OpKind::AtomicLoad
+            } else {
+                op
+            };
+            detector.access(
+                s,
+                seq,
+                addr,
+                op,
+                read,
+                step - 1,
+                lock,
+                rec.map(|r| (r.base, r.len, r.word)),
+            );
+        }
         if let Some(m) = simt.as_mut() {
             m.after_step(env.memory);
         }

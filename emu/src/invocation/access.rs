@@ -205,6 +205,14 @@ impl<T: Word> Request<'_, T> {
         inv.ops[k].set(inv.ops[k].get() + 1);
         // One thread runs every invocation: no locked instruction needed.
         let bits = env.memory.apply_exclusive::<T>(addr, self.op);
+        if let MemOp::CompareExchange(expected, _) = self.op {
+            let wide = T::WIDE;
+            inv.cas_failed.set(if wide {
+                bits != expected
+            } else {
+                bits as u32 != expected as u32
+            });
+        }
         Poll::Ready(T::from_bits(bits))
     }
 }

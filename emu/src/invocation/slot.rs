@@ -33,6 +33,9 @@ pub(crate) struct Invocation {
     // Cold: what only some kernels or executors use.
     pub waits: Cell<u64>,
     pub pending: Cell<Option<StepKind>>,
+    /// Scheduled executor: the last compare-exchange performed failed (wrote nothing), for
+    /// the hazard detector, which counts it as an atomic load.
+    pub cas_failed: Cell<bool>,
     /// Why the invocation ended early; `None` while it runs. Read through [`Self::faulted`]
     /// (a flag, so the hot path never touches the `RefCell`).
     fault: RefCell<Option<FaultKind>>,
@@ -152,6 +155,7 @@ impl Invocation {
             discarded: Cell::new(false),
             depth_out: Cell::new(None),
             pending: Cell::new(None),
+            cas_failed: Cell::new(false),
             granted: Cell::new(false),
             steps: Cell::new(0),
             waits: Cell::new(0),

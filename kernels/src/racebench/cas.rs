@@ -188,7 +188,7 @@ impl Spec for FreeListAba {
         words: &[Words::all("fl_head"), Words::all("fl_next")],
         kinds: &[Kind::LostUpdate],
         pair: Some("cas-tagged-freelist"),
-        limitation: Some(Limitation::AtomicsOnly),
+        limitation: None,
         what: "per-pixel free list popped by compare-exchange of an untagged head (ABA)",
     };
     fn build(dev: &mut Device, pixels: u32) -> Self {

@@ -5,7 +5,7 @@
 use fragrace_emu::{Buf, Device, Fragment, FragmentKernel, KernelInfo, Memory};
 
 use super::run::{buffer, read};
-use super::{case, Case, Fragments, Kind, Label, Limitation, Meta, Spec, Violation, Words};
+use super::{case, Case, Fragments, Kind, Label, Meta, Spec, Violation, Words};
 
 pub(super) fn cases() -> Vec<Box<dyn Case>> {
     vec![
@@ -111,7 +111,7 @@ impl Spec for FlagAtomicLoadStore {
         words: &[Words::all("flag")],
         kinds: &[Kind::LostUpdate],
         pair: Some("flag-cas"),
-        limitation: Some(Limitation::AtomicsOnly),
+        limitation: None,
         what: "first-arrival flag tested by atomic load, then set by atomic store",
     };
     fn build(dev: &mut Device, pixels: u32) -> Self {

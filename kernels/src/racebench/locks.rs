@@ -1,14 +1,14 @@
 //! Per-pixel spinlocks, as written where pixel interlock is missing (the spinlock k-buffer
 //! of docs/hazards.md): compare-exchange 0 -> 1 to acquire, retried up to a cap, a count
 //! of critical sections entered inside, a store of 0 to release. Variants: released by a
-//! plain store, a plain critical section under a correct lock (which the detector cannot
-//! order), a coherent (atomic) critical section, no cap, and a lock held across an early
-//! return.
+//! plain store, a plain critical section under a correct lock (ordered for the detector
+//! by the release store and the acquiring compare-exchange), a coherent (atomic) critical
+//! section, no cap, and a lock held across an early return.
 
 use fragrace_emu::{Buf, Device, Fragment, FragmentKernel, KernelInfo, Memory};
 
 use super::run::{buffer, read};
-use super::{case, Case, Fragments, Kind, Label, Limitation, Meta, Spec, Violation, Words};
+use super::{case, Case, Fragments, Kind, Label, Meta, Spec, Violation, Words};
 
 pub(super) fn cases() -> Vec<Box<dyn Case>> {
     vec![
@@ -183,7 +183,7 @@ lock_kernel!(
         words: &[],
         kinds: &[],
         pair: Some("spin-plain-release"),
-        limitation: Some(Limitation::LockFromAtomics),
+        limitation: None,
         what: "capped spinlock (acquire compare-exchange, release store) around a plain \
                critical section",
     }

@@ -117,18 +117,16 @@ impl Words {
 #[serde(rename_all = "kebab-case")]
 pub enum Limitation {
     /// A racy kernel whose conflicting accesses are all atomic: an atomicity violation,
-    /// not a data race. The detector never reports atomic-vs-atomic; the oracle finds it.
+    /// not a data race, and not the one the detector knows (an atomic load, another's
+    /// write, then a store of the loaded word: a lost update). The detector never reports
+    /// atomic-vs-atomic; the oracle finds it.
     AtomicsOnly,
-    /// A race-free kernel whose plain accesses are ordered by a lock built from atomics:
-    /// the detector orders accesses by pixel interlock only, so it reports them.
-    LockFromAtomics,
 }
 
 impl Limitation {
     pub fn name(self) -> &'static str {
         match self {
             Limitation::AtomicsOnly => "atomics-only",
-            Limitation::LockFromAtomics => "lock-from-atomics",
         }
     }
 }

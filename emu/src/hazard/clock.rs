@@ -1,0 +1,175 @@
+//! Happens-before through atomics, for the hazard detector: vector clocks over the
+//! detector's lanes (the executor's slots, one in-flight invocation each), as the
+//! emulator's atomics behave. Kernel atomics run with acquire-release ordering
+//! (`Frag::perform_counted`): an atomic load or a failed compare-exchange acquires, an
+//! atomic store releases, a read-modify-write does both (and continues the release sequence
+//! of the value it replaces). A plain store to a word ends its release sequence: whoever
+//! reads that value synchronises with nobody.
+//!
+//! Happens-before is the transitive closure of
+//! - program order within an invocation,
+//! - release -> acquire: an atomic write, then an atomic read of the value it wrote,
+//! - finish -> start: an invocation that finished before another started (the detector's
+//!   rule since before there were clocks: lifetimes that do not overlap are ordered).
+//!
+//! Costs are bounded by the lanes, not by the pass: a clock has one entry per lane in use
+//! (at most [`MAX_CLOCK_LANES`]); each lane holds the clock of its invocation, each atomic
+//! word written in the pass one clock (the one its last release published). An acquire
+//! joins two clocks, a release copies one, a start copies and a finish joins one.
+//!
+//! Epochs: lane `u`'s entry counts that lane's releases. They are never reset within a
+//! pass, so an invocation started in a lane begins past every epoch its predecessors in the
+//! lane used; knowing lane `u` up to epoch `e` means knowing every access made in lane `u`
+//! at an epoch up to `e`, by whichever invocation (the earlier ones finished before the
+//! later started: ordered by the third rule).
+
+/// Lanes whose invocations get clocks. Invocations in lanes past it (windows over 256)
+/// are ordered by interlock and lifetimes only, as before the clocks: a clock costs 4
+/// bytes per lane, for every lane and every atomic word written in the pass.
+pub const MAX_CLOCK_LANES: usize = 256;
+
+/// No clock (an atomic word that was never released to); a word's clock is otherwise
+/// `1 + ` its index among the pass's word clocks.
+pub(super) const NO_CLOCK: u32 = 0;
+
+/// The epoch of an access made outside the clocks (no invocation's clock ever reaches it).
+pub(super) const UNTRACKED: u32 = u32::MAX;
+
+/// The lane of an access made outside the clocks.
+pub(super) const NO_LANE: u16 = u16::MAX;
+
+/// The vector clocks of one pass (see the module's documentation).
+pub(super) struct Clocks {
+    /// Entries per clock: a power of two, at least the lanes in use (at most
+    /// [`MAX_CLOCK_LANES`]).
+    stride: usize,
+    /// Lane `l`'s clock at `lane[l * stride ..][.. stride]`.
+    lane: Vec<u32>,
+    /// Per lane: the epoch the next invocation started in it begins at.
+    next: Vec<u32>,
+    /// The join of the clocks of every invocation finished so far in the pass.
+    done: Vec<u32>,
+    /// Release clocks of atomic words, `used` of them in this pass (a word's index into
+    /// them is in its state).
+    words: Vec<u32>,
+    used: u32,
+}
+
+impl Clocks {
+    pub fn new() -> Clocks {
+        Clocks {
+            stride: 0,
+            lane: Vec::new(),
+            next: Vec::new(),
+            done: Vec::new(),
+            words: Vec::new(),
+            used: 0,
+        }
+    }
+
+    /// Forgets the pass, keeping allocations (lane clocks are written when a lane starts).
+    pub fn reset(&mut self) {
+        self.next.fill(1);
+        self.done.fill(0);
+        self.used = 0;
+    }
+
+    /// The lane as a clock index, if its invocations get clocks.
+    #[inline]
+    pub fn tracked(&self, lane: Option<u32>) -> Option<usize> {
+        lane.map(|l| l as usize).filter(|&l| l < self.stride)
+    }
+
+    /// Makes room for lanes `0..=lane` (up to [`MAX_CLOCK_LANES`]), keeping every clock.
+    pub fn ensure(&mut self, lane: usize) {
+        if lane < self.stride || self.stride >= MAX_CLOCK_LANES {
+            return;
+        }
+        let stride = (lane + 1).next_power_of_two().clamp(8, MAX_CLOCK_LANES);
+        let widen = |v: &[u32], old: usize, n: usize| -> Vec<u32> {
+            let mut w = vec![0; n * stride];
+            for i in 0..n {
+                w[i * stride..i * stride + old].copy_from_slice(&v[i * old..(i + 1) * old]);
+            }
+            w
+        };
+        let old = self.stride;
+        let lanes = self.lane.len().checked_div(old).unwrap_or(0);
+        self.lane = widen(&self.lane, old, lanes);
+        self.lane.resize(stride * stride, 0);
+        self.words = widen(&self.words, old, self.used as usize);
+        self.done.resize(stride, 0);
+        self.next.resize(stride, 1);
+        self.stride = stride;
+    }
+
+    /// An invocation starts in lane `l`: it knows what every finished one knew.
+    pub fn start(&mut self, l: usize) {
+        let s = self.stride;
+        self.lane[l * s..(l + 1) * s].copy_from_slice(&self.done);
+        self.lane[l * s + l] = self.next[l];
+    }
+
+    /// The invocation in lane `l` finished: its successors in the lane start past its
+    /// epochs, and every invocation started from now on knows what it knew.
+    pub fn finish(&mut self, l: usize) {
+        let s = self.stride;
+        self.next[l] = self.lane[l * s + l] + 1;
+        let (done, lane) = (&mut self.done, &self.lane[l * s..(l + 1) * s]);
+        for (d, &c) in done.iter_mut().zip(lane) {
+            *d = (*d).max(c);
+        }
+    }
+
+    /// The current epoch of the invocation in lane `l` (that of its next access).
+    #[inline]
+    pub fn epoch(&self, l: usize) -> u32 {
+        self.lane[l * self.stride + l]
+    }
+
+    /// Whether the invocation in lane `me` knows (has synchronised with) an access made in
+    /// lane `lane` at `epoch`: the access happens before whatever `me` does next.
+    #[inline]
+    pub fn knows(&self, me: Option<usize>, lane: u16, epoch: u32) -> bool {
+        match me {
+            Some(m) => {
+                let l = lane as usize;
+                l < self.stride && self.lane[m * self.stride + l] >= epoch
+            }
+            None => false,
+        }
+    }
+
+    /// Lane `l` acquires the release clock `word` (an atomic read of a released value).
+    #[inline]
+    pub fn acquire(&mut self, l: usize, word: u32) {
+        let s = self.stride;
+        let w = (word - 1) as usize;
+        let w = &self.words[w * s..(w + 1) * s];
+        let mine = &mut self.lane[l * s..(l + 1) * s];
+        for (m, &c) in mine.iter_mut().zip(w) {
+            *m = (*m).max(c);
+        }
+    }
+
+    /// Lane `l` releases into `word` (allocated here on a word's first release): the
+    /// word's clock becomes the lane's (after an acquire of the same read-modify-write the
+    /// lane's clock already holds what the word's did, so the release sequence goes on),
+    /// and the lane moves to its next epoch.
+    #[inline]
+    pub fn release(&mut self, l: usize, word: &mut u32) {
+        let s = self.stride;
+        if *word == NO_CLOCK {
+            self.used += 1;
+            *word = self.used;
+            let need = self.used as usize * s;
+            if self.words.len() < need {
+                self.words.resize(need, 0);
+            }
+        }
+        let w = (*word - 1) as usize;
+        let (words, lane) = (&mut self.words, &self.lane);
+        words[w * s..(w + 1) * s].copy_from_slice(&lane[l * s..(l + 1) * s]);
+        self.lane[l * s + l] += 1;
+    }
+}
