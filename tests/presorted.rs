@@ -89,6 +89,7 @@ fn executors() -> Vec<ExecConfig> {
                 seed,
                 window: 16,
                 record: false,
+                ..Default::default()
             }),
             ..ExecConfig::parallel(2)
         });
@@ -220,6 +221,7 @@ fn ssbo_blending_races_without_interlock() {
                 seed,
                 window: 32,
                 record: false,
+                ..Default::default()
             }),
             ..ExecConfig::parallel(2)
         };
