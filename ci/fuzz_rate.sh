@@ -5,7 +5,7 @@
 # With BASE=PATH, each algorithm's campaign also runs under that binary just before this
 # tree's (alternated, on these noisy machines), and the row gives both rates and their ratio.
 # Usage: bash ci/fuzz_rate.sh [TIME] [ALGO...]   (defaults: 20s; kb-interlock ll kb-rmw
-# count abuffer)
+# count fab)
 # Env: FRAGRACE=PATH runs that binary instead of this tree's release build; SCHEDULES=N
 # passes --schedules N (default: the binary's default).
 set -euo pipefail
@@ -13,7 +13,7 @@ cd "$(dirname "$0")/.."
 time=${1:-20s}
 shift || true
 algos=("$@")
-[ ${#algos[@]} -gt 0 ] || algos=(kb-interlock ll kb-rmw count abuffer)
+[ ${#algos[@]} -gt 0 ] || algos=(kb-interlock ll kb-rmw count fab)
 if [ -n "${FRAGRACE:-}" ]; then
     F=$FRAGRACE
 else
@@ -35,7 +35,8 @@ names = [("generate_s", "generation"), ("load_s", "load"), ("truth_s", "truth"),
          ("run_s", "run"), ("oracle_s", "oracle"), ("cases_s", "cases")]
 total = sum(p.get(k, 0) for k, _ in names)
 parts = ", ".join(f"{n} {100 * p.get(k, 0) / total:.0f} %" for k, n in names) if total else "-"
-print(f"{rate:.1f}|{d.get(\"schedules\", 1)}|{parts}")
+schedules = d.get("schedules", 1)
+print(f"{rate:.1f}|{schedules}|{parts}")
 '
 }
 echo "| algorithm | executions/s | schedules per scene | where the time goes |$([ -n "${BASE:-}" ] && echo " before (BASE) | ratio |")"
