@@ -62,6 +62,7 @@ fn ll_push(c: &mut Criterion) {
             seed: 0,
             window: 4,
             record: true,
+            ..Default::default()
         };
         g.bench_function(policy.to_string(), |b| {
             b.iter(|| {

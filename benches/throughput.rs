@@ -62,6 +62,7 @@ fn scheduled_steps(c: &mut Criterion) {
             seed: 1,
             window: 64,
             record: true,
+            ..Default::default()
         }),
         ..ExecConfig::default()
     };

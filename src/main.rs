@@ -88,6 +88,10 @@ struct FuzzArgs {
     /// Largest viewport side.
     #[arg(long, default_value_t = 48)]
     max_size: u32,
+    /// Schedules run on each generated scene: its scene is loaded and its truth computed
+    /// once, then this many executions of its run (other seeds) are checked against it.
+    #[arg(long, default_value_t = fragrace::fuzz::DEFAULT_SCHEDULES)]
+    schedules: u64,
     /// Only these built-in scenes (comma-separated; default: a random mix).
     #[arg(long, value_delimiter = ',')]
     scene: Vec<String>,
@@ -110,6 +114,7 @@ struct FuzzArgs {
     #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = [
         "time", "iterations", "resume", "algo", "jobs", "seed", "meshes", "shrink_secs",
         "max_size", "scene", "memory_limit", "occupancy", "range", "occupancy_fill",
+        "schedules",
     ])]
     merge: Vec<PathBuf>,
 }
@@ -460,14 +465,17 @@ fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
         },
     };
     let mut exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)?;
-    exec.block = a.block;
-    exec.reduce = a.reduce;
+    // The scheduled executor's own settings (refused above under the other executors).
+    if let fragrace::emu::ExecMode::Scheduled(s) = &mut exec.mode {
+        s.block = a.block;
+        s.reduce = a.reduce;
+        s.simt = a.simt;
+    }
     exec.spurious_cas_per_mille = a.spurious_cas;
     exec.batch = a.lanes;
     exec.lockstep = !a.no_lockstep;
     exec.segment = a.segment;
     exec.binning = a.binning;
-    exec.simt = a.simt;
     if fragrace_kernels::algorithm(&a.algo).is_none() {
         bail!(
             "unknown algorithm `{}`; known: {}, and after `fragrace presort`: {}",

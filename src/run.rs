@@ -297,16 +297,16 @@ impl RunSpec {
         if let Some(s) = self.schedule() {
             c += &format!(
                 " --policy {} --seed {} --window {} --block {}",
-                s.policy, s.seed, s.window, self.exec.block
+                s.policy, s.seed, s.window, s.block
             );
-            if self.exec.reduce {
+            if s.reduce {
                 c += " --reduce";
             }
             if self.exec.spurious_cas_per_mille > 0 {
                 c += &format!(" --spurious-cas {}", self.exec.spurious_cas_per_mille);
             }
-            if self.exec.simt > 0 {
-                c += &format!(" --simt {}", self.exec.simt);
+            if s.simt > 0 {
+                c += &format!(" --simt {}", s.simt);
             }
         } else if self.exec.mode == ExecMode::Parallel {
             c += &format!(
@@ -482,11 +482,17 @@ pub fn check_with(
     loaded: &Loaded,
     truth: &AlgoResult,
 ) -> Result<Checked, RunError> {
-    let mut rendered = render(spec, loaded)?;
+    let rendered = render(spec, loaded)?;
+    Ok(check_rendered(spec, rendered, truth))
+}
+
+/// The oracle alone: a rendered run compared with the truth (and the occupancy stage's
+/// checks), as [`check_with`] does after rendering.
+pub fn check_rendered(spec: &RunSpec, mut rendered: Rendered, truth: &AlgoResult) -> Checked {
     let metrics = compare(&rendered.info, &rendered.result, truth, &spec.params);
     let culling_checks = crate::culling::checks(&metrics, &rendered.result);
     rendered.result.checks.extend(culling_checks);
-    Ok(Checked { rendered, metrics })
+    Checked { rendered, metrics }
 }
 
 /// The summary of a run as one JSON object (the CLI's `--json`).
@@ -631,6 +637,7 @@ pub fn exec_config(
                 seed,
                 window,
                 record: false,
+                ..Default::default()
             })
         }
         other => return Err(crate::validate::SpecError::UnknownExec(other.to_string())),

@@ -20,6 +20,7 @@ fn scheduled(policy: Policy, seed: u64) -> ExecConfig {
             seed,
             window: 64,
             record: true,
+            ..Default::default()
         }),
         ..ExecConfig::default()
     }

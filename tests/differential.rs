@@ -57,6 +57,7 @@ fn executors(seeds: u64) -> Vec<ExecConfig> {
                     seed,
                     window: 32,
                     record: false,
+                    ..Default::default()
                 }),
                 ..ExecConfig::parallel(2)
             });

@@ -165,6 +165,18 @@ fn values_out_of_range_are_refused_not_clamped() {
         &["fuzz", "--iterations", "1", "--max-size", "4", "--out", out],
         &["max_size (--max-size) = 4", "from 8 to 16384"],
     );
+    refused(
+        &[
+            "fuzz",
+            "--iterations",
+            "1",
+            "--schedules",
+            "0",
+            "--out",
+            out,
+        ],
+        &["schedules (--schedules) = 0", "from 1 to 1048576"],
+    );
 }
 
 #[test]

@@ -31,6 +31,7 @@ fn scheduled(policy: Policy, seed: u64) -> ExecConfig {
             seed,
             window: 32,
             record: false,
+            ..Default::default()
         }),
         ..ExecConfig::parallel(2)
     }

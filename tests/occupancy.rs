@@ -34,6 +34,7 @@ fn scheduled(policy: Policy, seed: u64) -> ExecConfig {
             seed,
             window: 32,
             record: false,
+            ..Default::default()
         }),
         ..ExecConfig::default()
     }

@@ -99,6 +99,7 @@ fn executors() -> Vec<ExecConfig> {
                 seed,
                 window: 16,
                 record: false,
+                ..Default::default()
             }),
             ..ExecConfig::parallel(2)
         });
@@ -230,6 +231,7 @@ fn ssbo_blending_races_without_interlock() {
                 seed,
                 window: 32,
                 record: false,
+                ..Default::default()
             }),
             ..ExecConfig::parallel(2)
         };

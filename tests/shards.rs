@@ -33,8 +33,13 @@ fn config(out: &Path, seed: u64, iterations: u64, shard: Shard) -> FuzzConfig {
         scenes: vec!["coplanar-stack".into(), "cubes".into()],
         occupancy: None,
         shard,
+        schedules: SCHEDULES,
     }
 }
+
+/// Schedules per scene: more than one, so that the merged campaign also checks that each
+/// iteration's later schedules are a function of the campaign (`fuzz::execution_spec`).
+const SCHEDULES: u64 = 2;
 
 fn run(cfg: &FuzzConfig) -> CampaignState {
     let progress = Progress {
@@ -90,7 +95,7 @@ fn merged_shards_report_the_findings_of_one_run() {
     let seed = deterministic_seed(n);
     let d = tmp("merge");
     let whole = run(&config(&d.join("whole"), seed, n, Shard::WHOLE));
-    assert_eq!(whole.executions, n);
+    assert_eq!(whole.executions, n * SCHEDULES);
     assert!(
         whole.expected_findings > 0,
         "the campaign should find kb-rmw's race: {whole:?}"
@@ -99,10 +104,10 @@ fn merged_shards_report_the_findings_of_one_run() {
     let mut per_shard = 0;
     for (i, dir) in dirs.iter().enumerate() {
         let st = run(&config(dir, seed, n, Shard::new(i as u64 + 1, 3).unwrap()));
-        assert_eq!(st.executions, n / 3, "shard {}", i + 1);
+        assert_eq!(st.executions, n / 3 * SCHEDULES, "shard {}", i + 1);
         per_shard += st.executions;
     }
-    assert_eq!(per_shard, n);
+    assert_eq!(per_shard, n * SCHEDULES);
     let merged = fuzz::merge(&dirs, &d.join("merged")).unwrap();
     assert_eq!(merged.executions, whole.executions);
     assert_eq!(merged.violations, whole.violations);
@@ -176,6 +181,8 @@ fn the_cli_runs_shards_and_merges_them() {
             "16",
             "--shrink-secs",
             "0",
+            "--schedules",
+            "1",
             "--shard",
             &format!("{i}/2"),
             "--out",

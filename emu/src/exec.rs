@@ -24,6 +24,7 @@
 
 mod direct;
 pub(crate) mod fused;
+mod legacy;
 mod limits;
 mod policy;
 mod scheduled;
@@ -49,6 +50,25 @@ pub struct ScheduleConfig {
     pub window: usize,
     /// Record the schedule (one byte per step) for replay with [`Policy::Bytes`].
     pub record: bool,
+    /// Fragments of a rasterized pass are admitted block by block (`block` x `block`
+    /// pixels, each block's fragments in API order), as a GPU's fine rasterizer hands out
+    /// small screen tiles; so overlapping primitives of one block are in flight together.
+    #[serde(default = "default_block")]
+    pub block: u32,
+    /// Interleave only where it can matter. When some runnable invocation's next access
+    /// touches an address (or pixel) another in-flight invocation is about to touch, the
+    /// policy chooses among those; otherwise the earliest runs on. Fragments of different
+    /// pixels on different addresses commute, so the steps go where hazards can be.
+    #[serde(default)]
+    pub reduce: bool,
+    /// Lockstep forward progress, as on GPUs without independent thread scheduling
+    /// (pre-Volta SIMT). Invocations form warps of `simt` lanes in admission order, and
+    /// within a warp, lanes that keep spinning in a loop run before lanes past it, so a lock
+    /// holder whose warp-mates spin on its lock never gets to release it: a
+    /// [`crate::FaultKind::SimtDeadlock`]. 0: lanes progress independently (the default).
+    /// See `docs/verification.md` for the rule and what it cannot see.
+    #[serde(default)]
+    pub simt: u32,
 }
 
 impl Default for ScheduleConfig {
@@ -58,6 +78,9 @@ impl Default for ScheduleConfig {
             seed: 0,
             window: 64,
             record: false,
+            block: default_block(),
+            reduce: false,
+            simt: 0,
         }
     }
 }
@@ -82,6 +105,7 @@ impl ExecMode {
 
 /// Executor configuration.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(from = "legacy::ExecConfigFile")]
 pub struct ExecConfig {
     pub mode: ExecMode,
     /// Worker threads (rasterization and the parallel executor).
@@ -98,18 +122,6 @@ pub struct ExecConfig {
     /// Measure per-address contention in the parallel executor (three extra atomics per
     /// access).
     pub contention: bool,
-    /// Scheduled executor: fragments are admitted block by block (`block` x `block` pixels,
-    /// each block's fragments in API order), as a GPU's fine rasterizer hands out small
-    /// screen tiles; so overlapping primitives of one block are in flight together.
-    #[serde(default = "default_block")]
-    pub block: u32,
-    /// Scheduled executor: interleave only where it can matter. When some runnable
-    /// invocation's next access touches an address (or pixel) another in-flight invocation
-    /// is about to touch, the policy chooses among those; otherwise the earliest runs on.
-    /// Fragments of different pixels on different addresses commute, so the steps go where
-    /// hazards can be.
-    #[serde(default)]
-    pub reduce: bool,
     /// Per-mille probability that a weak compare-exchange
     /// ([`crate::Frag::atomic_compare_exchange_weak`]) fails spuriously (decided by a hash
     /// of the invocation and its step count: deterministic for a given schedule).
@@ -122,14 +134,6 @@ pub struct ExecConfig {
     /// targets, no stencil, no depth writes; other passes keep a tile on one thread).
     #[serde(default = "default_segment")]
     pub segment: u32,
-    /// Scheduled executor: lockstep forward progress, as on GPUs without independent thread
-    /// scheduling (pre-Volta SIMT). Invocations form warps of `simt` lanes in admission
-    /// order, and within a warp, lanes that keep spinning in a loop run before lanes past
-    /// it, so a lock holder whose warp-mates spin on its lock never gets to release it: a
-    /// [`crate::FaultKind::SimtDeadlock`]. 0: lanes progress independently (the default).
-    /// See `docs/verification.md` for the rule and what it cannot see.
-    #[serde(default)]
-    pub simt: u32,
     /// Parallel executor: whether triangles are binned into tiles for every pass, or only
     /// where a pass needs the framebuffer (see [`Binning`]).
     // Left out of case files when it is the default: older files stay as they were.
@@ -173,11 +177,11 @@ impl Binning {
     }
 }
 
-fn default_segment() -> u32 {
+pub(crate) fn default_segment() -> u32 {
     128
 }
 
-fn default_block() -> u32 {
+pub(crate) fn default_block() -> u32 {
     4
 }
 
@@ -191,11 +195,8 @@ impl Default for ExecConfig {
             max_steps: 1 << 20,
             max_waits: 1 << 26,
             contention: false,
-            block: default_block(),
-            reduce: false,
             spurious_cas_per_mille: 0,
             segment: default_segment(),
-            simt: 0,
             binning: Binning::Auto,
         }
     }

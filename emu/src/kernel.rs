@@ -151,7 +151,7 @@ pub enum FaultKind {
     /// The invocation waited on interlock (or for its ordered turn) for too long, or every
     /// invocation in flight was blocked.
     Deadlock { waits: u64 },
-    /// Lockstep forward-progress mode (`ExecConfig::simt`): lanes of one warp share a
+    /// Lockstep forward-progress mode (`ScheduleConfig::simt`): lanes of one warp share a
     /// program counter, the `spinning` ones kept looping, and the `held` ones (past the
     /// loop, possibly holding what the spinners wait for) could not run until they leave
     /// it. Invocations by `seq`; the warp by its number in admission order (within the

@@ -52,6 +52,7 @@ fn scheduled(policy: Policy, seed: u64) -> ExecConfig {
             seed,
             window: 16,
             record: true,
+            ..Default::default()
         }),
         ..ExecConfig::default()
     }
@@ -581,8 +582,15 @@ fn weak_compare_exchange_fails_spuriously_when_asked() {
 fn reduction_keeps_every_step_and_still_finds_lost_updates() {
     let plain = |reduce: bool| {
         let e = ExecConfig {
-            reduce,
-            ..scheduled(Policy::Random, 5)
+            mode: ExecMode::Scheduled(ScheduleConfig {
+                policy: Policy::Random,
+                seed: 5,
+                window: 16,
+                record: true,
+                reduce,
+                ..Default::default()
+            }),
+            ..ExecConfig::default()
         };
         run_counter(&e, false)
     };

@@ -89,6 +89,7 @@ fn execs() -> Vec<ExecConfig> {
                     seed,
                     window: 16,
                     record: false,
+                    ..Default::default()
                 }),
                 ..ExecConfig::default()
             });
@@ -220,6 +221,7 @@ fn split_pixels<K: FragmentKernel>(dev: &Device, kernel: &K, seed: u64) -> PassR
             seed,
             window: 32,
             record: false,
+            ..Default::default()
         }),
         ..ExecConfig::default()
     };
@@ -390,6 +392,7 @@ fn invocations_that_can_never_enter_are_reported_as_deadlocked() {
                 seed: 0,
                 window: 4,
                 record: false,
+                ..Default::default()
             }),
             ..ExecConfig::default()
         },

@@ -1,4 +1,4 @@
-//! Lockstep forward progress (`ExecConfig::simt`): spinlocks whose holder shares a warp
+//! Lockstep forward progress (`ScheduleConfig::simt`): spinlocks whose holder shares a warp
 //! with its spinners deadlock (reported, never hung), lock-free retry loops and bounded
 //! spins complete.
 
@@ -76,8 +76,9 @@ fn exec(policy: Policy, seed: u64, simt: u32) -> ExecConfig {
             seed,
             window: 64,
             record: true,
+            simt,
+            ..Default::default()
         }),
-        simt,
         ..ExecConfig::default()
     }
 }

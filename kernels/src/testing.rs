@@ -163,7 +163,10 @@ pub fn executors(seeds: u64) -> Vec<(String, ExecConfig)> {
     v.push((
         "scheduled random simt 32".to_string(),
         ExecConfig {
-            simt: 32,
+            mode: ExecMode::Scheduled(ScheduleConfig {
+                simt: 32,
+                ..Default::default()
+            }),
             ..scheduled(Policy::Random, 0)
         },
     ));

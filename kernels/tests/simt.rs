@@ -1,4 +1,4 @@
-//! The algorithms under lockstep forward progress (`ExecConfig::simt`, lanes of a warp
+//! The algorithms under lockstep forward progress (`ScheduleConfig::simt`, lanes of a warp
 //! without independent scheduling): the spinlock k-buffer deadlocks when fragments of one
 //! pixel share a warp (reported, not hung); counters, lists, atomic k-buffers and hardware
 //! interlock complete and match the truth.
@@ -34,9 +34,9 @@ fn exec(policy: Policy, seed: u64, simt: u32) -> ExecConfig {
         mode: ExecMode::Scheduled(ScheduleConfig {
             policy,
             seed,
+            simt,
             ..ScheduleConfig::default()
         }),
-        simt,
         ..ExecConfig::default()
     }
 }

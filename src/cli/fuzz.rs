@@ -72,6 +72,7 @@ pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
         scenes: a.scene.clone(),
         occupancy: fuzz_occupancy(a)?,
         shard,
+        schedules: a.schedules,
     };
     if cfg.time.is_none() && cfg.iterations.is_none() {
         bail!("give --time or --iterations (a campaign needs a budget)");
@@ -161,6 +162,20 @@ fn print_summary(a: &FuzzArgs, state: &CampaignState) -> Result<()> {
         state.cases.len(),
         a.out.display()
     );
+    let total: f64 = state.phases.named().iter().map(|(_, s)| s).sum();
+    if total > 0.0 {
+        let parts: Vec<String> = state
+            .phases
+            .named()
+            .iter()
+            .map(|(name, s)| format!("{name} {s:.1} s ({:.0} %)", 100.0 * s / total))
+            .collect();
+        println!(
+            "  {} schedules per scene; where the workers' time went: {}",
+            state.schedules,
+            parts.join(", ")
+        );
+    }
     println!(
         "  violations: runs where an algorithm broke what its class promises (a hazard-free one raced or differed, a fault, a failed invariant): bugs\n  expected findings: hazard-prone algorithms showing the race they are known for: not bugs, the hazards this tool exists to show"
     );

@@ -12,7 +12,7 @@ use fragrace_emu::{ExecConfig, Policy};
 use fragrace_kernels::HazardClass;
 use serde::{Deserialize, Serialize};
 
-use super::generate::{iteration_spec, policy_name, Shard};
+use super::generate::{execution_spec, iteration_spec, policy_name, Shard};
 use crate::case::{self, Case, Observation};
 use crate::run::{self, Checked, RunSpec, SceneSpec};
 
@@ -39,6 +39,68 @@ pub struct FuzzConfig {
     pub occupancy: Option<fragrace_kernels::occupancy::Occupancy>,
     /// The slice of the iterations this run takes ([`Shard::WHOLE`]: all of them).
     pub shard: Shard,
+    /// Executions per iteration: each iteration's scene is loaded and its truth computed
+    /// once, then this many schedules of its run are checked against it
+    /// ([`execution_spec`]). A resumed campaign keeps its own (as it keeps its seed).
+    pub schedules: u64,
+}
+
+/// Schedules per generated scene by default (`fuzz --schedules`): with its scene and truth
+/// computed once, the scene's setup is then a small part of an execution's time on the
+/// scenes the campaigns draw (docs/performance.md, "Fuzz campaigns").
+pub const DEFAULT_SCHEDULES: u64 = 16;
+/// Most schedules per scene (`fuzz --schedules`).
+pub const MAX_SCHEDULES: u64 = 1 << 20;
+
+/// Where a campaign's time went, summed over its workers, in seconds: drawing each
+/// iteration's run, loading its scene, computing its truth, the runs themselves (the
+/// algorithm's frame and self-checks), the oracle (the comparison with the truth, the
+/// verdict, the signature and observation of findings), and shrinking and writing case
+/// files.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Phases {
+    pub generate_s: f64,
+    pub load_s: f64,
+    pub truth_s: f64,
+    pub run_s: f64,
+    pub oracle_s: f64,
+    pub cases_s: f64,
+}
+
+impl Phases {
+    /// Adds `other`'s times.
+    pub fn add(&mut self, other: &Phases) {
+        self.generate_s += other.generate_s;
+        self.load_s += other.load_s;
+        self.truth_s += other.truth_s;
+        self.run_s += other.run_s;
+        self.oracle_s += other.oracle_s;
+        self.cases_s += other.cases_s;
+    }
+
+    /// The phases by name, in order.
+    pub fn named(&self) -> [(&'static str, f64); 6] {
+        [
+            ("scene generation", self.generate_s),
+            ("scene load", self.load_s),
+            ("truth", self.truth_s),
+            ("run", self.run_s),
+            ("oracle", self.oracle_s),
+            ("shrinking and case files", self.cases_s),
+        ]
+    }
+}
+
+/// Runs `f`, adding its time (seconds) to `acc`.
+fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
+    let t = Instant::now();
+    let v = f();
+    *acc += t.elapsed().as_secs_f64();
+    v
+}
+
+fn one() -> u64 {
+    1
 }
 
 /// The campaign's persistent state (`DIR/campaign.json`).
@@ -70,6 +132,13 @@ pub struct CampaignState {
     #[serde(default)]
     pub case_of: BTreeMap<String, String>,
     pub elapsed_s: f64,
+    /// Executions per iteration ([`FuzzConfig::schedules`]; campaigns saved before it
+    /// existed ran one).
+    #[serde(default = "one")]
+    pub schedules: u64,
+    /// Where the time went ([`Phases`]; zero in campaigns saved before it was measured).
+    #[serde(default)]
+    pub phases: Phases,
 }
 
 /// Why a campaign cannot run.
@@ -180,7 +249,8 @@ impl FuzzConfig {
             self.max_size.into(),
             8,
             fragrace_emu::framebuffer::MAX_DIMENSION.into(),
-        )
+        )?;
+        range("schedules (--schedules)", self.schedules, 1, MAX_SCHEDULES)
     }
 }
 
@@ -227,6 +297,7 @@ pub fn campaign(
             seed: cfg.seed,
             algos,
             shard: (cfg.shard != Shard::WHOLE).then_some(cfg.shard),
+            schedules: cfg.schedules,
             ..Default::default()
         }
     };
@@ -257,6 +328,7 @@ pub fn campaign(
     }
     let cfg = FuzzConfig {
         seed: state.seed,
+        schedules: state.schedules.max(1),
         ..cfg.clone()
     };
     let meshes: Vec<PathBuf> = match &cfg.meshes {
@@ -292,10 +364,14 @@ pub fn campaign(
         let handles: Vec<_> = (0..jobs)
             .map(|_| {
                 s.spawn(|| -> Result<(), FuzzError> {
-                    loop {
-                        if stop.load(Ordering::Relaxed)
+                    let stopped = || {
+                        stop.load(Ordering::Relaxed)
                             || cfg.time.is_some_and(|t| start.elapsed() >= t)
-                        {
+                    };
+                    // This worker's times since it last added them to the state.
+                    let mut phases = Phases::default();
+                    loop {
+                        if stopped() {
                             return Ok(());
                         }
                         let slot = next.fetch_add(1, Ordering::Relaxed);
@@ -309,43 +385,68 @@ pub fn campaign(
                             .0
                             .algos
                             .clone();
-                        let spec = iteration_spec(&cfg, &algos, &meshes, i);
-                        let outcome = run_one(&spec);
+                        let base = timed(&mut phases.generate_s, || {
+                            iteration_spec(&cfg, &algos, &meshes, i)
+                        });
+                        // The scene and its truth once, for every schedule of the iteration.
+                        let loaded = timed(&mut phases.load_s, || run::load(&base).ok());
+                        let truth = timed(&mut phases.truth_s, || {
+                            loaded.as_ref().and_then(|l| run::truth(&base, l).ok())
+                        });
+                        for j in 0..cfg.schedules {
+                            // A time budget may end an iteration between its schedules.
+                            if j > 0 && stopped() {
+                                break;
+                            }
+                            let spec = timed(&mut phases.generate_s, || {
+                                execution_spec(cfg.seed, &base, i, j)
+                            });
+                            let outcome = match (&loaded, &truth) {
+                                (Some(l), Some(t)) => run_one(&spec, l, t, &mut phases),
+                                _ => None,
+                            };
+                            let mut guard = shared.lock().unwrap_or_else(|e| e.into_inner());
+                            let (st, _) = &mut *guard;
+                            st.executions += 1;
+                            st.phases.add(&std::mem::take(&mut phases));
+                            progress.executions.fetch_add(1, Ordering::Relaxed);
+                            *st.coverage
+                                .entry(format!("{} x {}", spec.algo, policy_name(&spec)))
+                                .or_default() += 1;
+                            let Some((obs, verdict, violation, key)) = outcome else {
+                                continue;
+                            };
+                            let first = !st.signatures.contains_key(&key);
+                            *st.signatures.entry(key.clone()).or_default() += 1;
+                            if violation {
+                                st.violations += 1;
+                                progress.violations.fetch_add(1, Ordering::Relaxed);
+                            } else {
+                                st.expected_findings += 1;
+                            }
+                            if !first {
+                                continue;
+                            }
+                            drop(guard);
+                            // Shrink outside the lock, then write the case atomically.
+                            let written = timed(&mut phases.cases_s, || {
+                                write_case(&cfg, &spec, &obs, &verdict, i, j)
+                            })?;
+                            let mut guard = shared.lock().unwrap_or_else(|e| e.into_inner());
+                            guard.0.case_of.insert(key, written.clone());
+                            guard.0.cases.push(written);
+                            progress.cases.fetch_add(1, Ordering::Relaxed);
+                            guard.0.elapsed_s = elapsed_before + start.elapsed().as_secs_f64();
+                            save(&guard.0)?;
+                        }
+                        // The state's next slot is the first one not yet finished.
                         let mut guard = shared.lock().unwrap_or_else(|e| e.into_inner());
                         let (st, done) = &mut *guard;
-                        st.executions += 1;
-                        progress.executions.fetch_add(1, Ordering::Relaxed);
-                        *st.coverage
-                            .entry(format!("{} x {}", spec.algo, policy_name(&spec)))
-                            .or_default() += 1;
-                        // The state's next slot is the first one not yet finished.
+                        st.phases.add(&std::mem::take(&mut phases));
                         done.insert(slot);
                         while done.remove(&st.next_iteration) {
                             st.next_iteration += 1;
                         }
-                        let Some((obs, verdict, violation, key)) = outcome else {
-                            continue;
-                        };
-                        let first = !st.signatures.contains_key(&key);
-                        *st.signatures.entry(key.clone()).or_default() += 1;
-                        if violation {
-                            st.violations += 1;
-                            progress.violations.fetch_add(1, Ordering::Relaxed);
-                        } else {
-                            st.expected_findings += 1;
-                        }
-                        if !first {
-                            continue;
-                        }
-                        drop(guard);
-                        // Shrink outside the lock, then write the case atomically.
-                        let written = write_case(&cfg, &spec, &obs, &verdict, i)?;
-                        let mut guard = shared.lock().unwrap_or_else(|e| e.into_inner());
-                        guard.0.case_of.insert(key, written.clone());
-                        guard.0.cases.push(written);
-                        progress.cases.fetch_add(1, Ordering::Relaxed);
-                        guard.0.elapsed_s = elapsed_before + start.elapsed().as_secs_f64();
-                        save(&guard.0)?;
                     }
                 })
             })
@@ -395,16 +496,28 @@ pub fn signature(c: &Checked, obs: &Observation) -> String {
     format!("{}{culled} ({}): {what}", info.name, info.hazard.name())
 }
 
-/// Runs one spec; `Some((observation, verdict, is_violation, signature))` when anything is
-/// anomalous.
-fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool, String)> {
-    let loaded = run::load(spec).ok()?;
-    let truth = run::truth(spec, &loaded).ok()?;
-    let c = run::check_with(spec, &loaded, &truth).ok()?;
+/// Runs one spec on its loaded scene and checks it against the truth;
+/// `Some((observation, verdict, is_violation, signature))` when anything is anomalous. The
+/// run's time goes to `phases.run_s`, the oracle's to `phases.oracle_s`.
+fn run_one(
+    spec: &RunSpec,
+    loaded: &run::Loaded,
+    truth: &fragrace_kernels::AlgoResult,
+    phases: &mut Phases,
+) -> Option<(Observation, String, bool, String)> {
+    let rendered = timed(&mut phases.run_s, || run::render(spec, loaded).ok())?;
+    timed(&mut phases.oracle_s, || {
+        classify(spec, run::check_rendered(spec, rendered, truth))
+    })
+}
+
+/// The verdict on a checked run (see [`run_one`]).
+fn classify(spec: &RunSpec, c: Checked) -> Option<(Observation, String, bool, String)> {
     let class = c.rendered.info.hazard;
     let approximate = c.rendered.info.capacity == fragrace_kernels::Capacity::Image
         || c.rendered.result.dropped > 0;
-    let obs = Observation::of(&c);
+    // Only findings need their observation (its digest hashes the whole result).
+    let observe = || Observation::of(&c);
     // The plain occupancy fill races by design (it loses bits, which only moves the bound
     // farther): its hazards are expected whatever the algorithm behind it; the atomic one's
     // would be a violation.
@@ -424,6 +537,7 @@ fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool, String)> {
             || broken
             || c.rendered.result.dropped > 0)
             .then(|| {
+                let obs = observe();
                 let sig = signature(&c, &obs);
                 (
                     obs,
@@ -433,6 +547,7 @@ fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool, String)> {
                 )
             }),
         _ if !(hazard || errors || faults || broken) && stage_hazard => {
+            let obs = observe();
             let sig = signature(&c, &obs);
             Some((
                 obs,
@@ -455,6 +570,7 @@ fn run_one(spec: &RunSpec) -> Option<(Observation, String, bool, String)> {
             } else {
                 "hazard detected"
             };
+            let obs = observe();
             let sig = signature(&c, &obs);
             (
                 obs,
@@ -472,6 +588,7 @@ fn write_case(
     obs: &Observation,
     verdict: &str,
     i: u64,
+    j: u64,
 ) -> Result<String, FuzzError> {
     let shrunk = super::shrink::shrink(spec, obs, cfg.shrink_budget);
     let case = match shrunk {
@@ -492,7 +609,17 @@ fn write_case(
             shrunk_size: None,
         },
     };
-    let name = format!("{}-{}-{i}.json", spec.algo, obs.signature().join("+"));
+    // Iteration `i`'s first execution keeps the name it had when an iteration ran one.
+    let execution = if j == 0 {
+        String::new()
+    } else {
+        format!(".{j}")
+    };
+    let name = format!(
+        "{}-{}-{i}{execution}.json",
+        spec.algo,
+        obs.signature().join("+")
+    );
     let path = cfg.out.join(&name);
     case::write(&path, &case).map_err(|e| FuzzError::Io {
         path: path.display().to_string(),

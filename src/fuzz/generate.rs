@@ -123,6 +123,7 @@ pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i:
                 seed: rng.gen(),
                 window,
                 record: false,
+                ..Default::default()
             }),
             threads: 1,
             ..ExecConfig::default()
@@ -134,8 +135,10 @@ pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i:
     let camera = Camera::new(rng.gen_range(0.0..360.0), rng.gen_range(-60.0..60.0));
     let mut exec = exec;
     // Drawn last, so the rest of every spec is what it was before the mode existed.
-    if exec.mode != ExecMode::Parallel && rng.gen_bool(0.1) {
-        exec.simt = [4, 32][rng.gen_range(0..2)];
+    if let ExecMode::Scheduled(s) = &mut exec.mode {
+        if rng.gen_bool(0.1) {
+            s.simt = [4, 32][rng.gen_range(0..2)];
+        }
     }
     // Occupancy culling, for the algorithms that take it, when the campaign asks for it.
     let takes = fragrace_kernels::algorithm(&algo).is_some_and(|a| a.takes_occupancy());
@@ -155,6 +158,34 @@ pub fn iteration_spec(cfg: &FuzzConfig, algos: &[String], meshes: &[PathBuf], i:
     }
 }
 
+/// The run of execution `j` of iteration `i`, whose scene, view, algorithm and executor
+/// settings are `base`'s (iteration `i`'s spec): execution 0 is `base` itself, and each later
+/// one draws another schedule of the same run: another seed under the scheduled executor
+/// (and another byte string, of another length, for `bytes:` schedules), a pure function of the campaign's seed,
+/// `i` and `j`. Under the parallel executor the run is repeated as it is: its interleavings
+/// are the threads' timing, another on every run.
+pub fn execution_spec(campaign_seed: u64, base: &RunSpec, i: u64, j: u64) -> RunSpec {
+    let mut spec = base.clone();
+    if j == 0 {
+        return spec;
+    }
+    let mut rng = SmallRng::seed_from_u64(
+        campaign_seed
+            ^ i.wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ j.wrapping_mul(0xD1B5_4A32_D192_ED03),
+    );
+    if let ExecMode::Scheduled(s) = &mut spec.exec.mode {
+        s.seed = rng.gen();
+        if let Policy::Bytes(b) = &mut s.policy {
+            // As `iteration_spec` draws them: up to 63 bytes.
+            let len = rng.gen_range(0..64);
+            b.clear();
+            b.extend((0..len).map(|_| rng.gen::<u8>()));
+        }
+    }
+    spec
+}
+
 pub(super) fn policy_name(spec: &RunSpec) -> String {
     let name: String = match &spec.exec.mode {
         ExecMode::Scheduled(s) => match &s.policy {
@@ -165,7 +196,7 @@ pub(super) fn policy_name(spec: &RunSpec) -> String {
         },
         m => m.name().into(),
     };
-    if spec.exec.simt > 0 {
+    if spec.schedule().is_some_and(|s| s.simt > 0) {
         name + "+simt"
     } else {
         name

@@ -76,6 +76,15 @@ fn check_disjoint(dirs: &[PathBuf], states: &[CampaignState]) -> Result<Vec<Shar
                 first.algos.join(",")
             ));
         }
+        if st.schedules != first.schedules {
+            return err(format!(
+                "{} ran {} schedules per scene and {} {}: the shards of one campaign run the same",
+                dir.display(),
+                st.schedules,
+                first_dir.display(),
+                first.schedules
+            ));
+        }
         let shard = st.shard.unwrap_or(Shard::WHOLE);
         if let Some(other) = seen.insert(shard, dir) {
             return err(format!(
@@ -131,6 +140,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<CampaignState, FuzzError> {
     let mut merged = CampaignState {
         seed: states[0].seed,
         algos: states[0].algos.clone(),
+        schedules: states[0].schedules,
         merged_shards: shards,
         ..Default::default()
     };
@@ -141,6 +151,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<CampaignState, FuzzError> {
         merged.violations += st.violations;
         merged.expected_findings += st.expected_findings;
         merged.elapsed_s += st.elapsed_s;
+        merged.phases.add(&st.phases);
         for (sig, n) in &st.signatures {
             *merged.signatures.entry(sig.clone()).or_default() += n;
         }

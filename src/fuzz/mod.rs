@@ -9,7 +9,8 @@
 //!   a case file. Campaigns lose nothing when killed: cases and the campaign state are
 //!   written atomically as they happen, and `--resume` continues where the state file says.
 //! - [`generate`]: the run of each iteration, a pure function of (campaign seed, iteration),
-//!   and the [`Shard`]s that split a campaign's iterations into disjoint slices.
+//!   the schedules run on each iteration's scene (its scene and truth computed once), and
+//!   the [`Shard`]s that split a campaign's iterations into disjoint slices.
 //! - [`merge`](mod@merge): `fuzz --merge`: shards' case directories combined into one campaign.
 //! - [`shrink`](mod@shrink): reducing a failing run while it fails the same way.
 //! - [`targets`]: the logic of the cargo-fuzz targets in `fuzz/` (libFuzzer, ClusterFuzzLite).
@@ -20,6 +21,9 @@ pub mod merge;
 pub mod shrink;
 pub mod targets;
 
-pub use campaign::{campaign, signature, CampaignState, FuzzConfig, FuzzError, Progress};
-pub use generate::{iteration_spec, Shard, ShardError};
+pub use campaign::{
+    campaign, signature, CampaignState, FuzzConfig, FuzzError, Phases, Progress, DEFAULT_SCHEDULES,
+    MAX_SCHEDULES,
+};
+pub use generate::{execution_spec, iteration_spec, Shard, ShardError};
 pub use merge::merge;

@@ -54,8 +54,6 @@ pub(crate) fn shade<K: FragmentKernel>(
             colors,
             targets,
             &mut outcome,
-            cfg.reduce,
-            cfg.simt,
         ),
     }
     outcome

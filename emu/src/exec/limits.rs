@@ -73,13 +73,6 @@ impl ExecConfig {
         range("max_steps", self.max_steps, 1, u64::MAX, "")?;
         range("max_waits", self.max_waits, 1, u64::MAX, "")?;
         range(
-            "block (--block)",
-            u64::from(self.block),
-            1,
-            u64::from(crate::framebuffer::MAX_DIMENSION),
-            " (pixels per side)",
-        )?;
-        range(
             "spurious_cas_per_mille (--spurious-cas)",
             u64::from(self.spurious_cas_per_mille),
             0,
@@ -93,14 +86,21 @@ impl ExecConfig {
             u64::from(u32::MAX),
             "",
         )?;
-        range(
-            "simt (--simt)",
-            u64::from(self.simt),
-            0,
-            u64::from(MAX_SIMT),
-            " (0: independent lanes)",
-        )?;
         if let ExecMode::Scheduled(s) = &self.mode {
+            range(
+                "block (--block)",
+                u64::from(s.block),
+                1,
+                u64::from(crate::framebuffer::MAX_DIMENSION),
+                " (pixels per side)",
+            )?;
+            range(
+                "simt (--simt)",
+                u64::from(s.simt),
+                0,
+                u64::from(MAX_SIMT),
+                " (0: independent lanes)",
+            )?;
             range(
                 "window (--window)",
                 s.window as u64,

@@ -12,6 +12,7 @@ use super::slots::{
 };
 use super::{ExecConfig, ScheduleConfig};
 use crate::hazard::{Detector, HazardCounts};
+use crate::interlock::Claim;
 use crate::invocation::{Frag, Invocation, PassEnv, StepKind};
 use crate::kernel::{FaultKind, FragInput, FragmentKernel};
 use crate::memory::OpKind;
@@ -27,12 +28,17 @@ pub(crate) struct SchedScratch {
     inflight: Vec<usize>,
     /// The runnable ones, in the same order (see `schedule_once`).
     cands: Vec<Candidate>,
+    /// Per slot, the interlock words its invocation claims (with interlock only): a claim
+    /// is a function of the fragment, computed at admission rather than at every step for
+    /// every invocation waiting to enter (a fifth of a fuzz campaign's time on
+    /// `kb-interlock`, docs/performance.md).
+    claims: Vec<Option<Claim>>,
     pub record: Vec<u8>,
     conflicting: Vec<usize>,
     sub_cands: Vec<Candidate>,
-    /// Interleave only conflicting invocations (ExecConfig::reduce).
+    /// Interleave only conflicting invocations (ScheduleConfig::reduce).
     pub reduce: bool,
-    /// Lockstep forward progress (ExecConfig::simt).
+    /// Lockstep forward progress (ScheduleConfig::simt).
     pub simt: Option<Simt>,
 }
 
@@ -45,6 +51,7 @@ impl SchedScratch {
             free: Vec::new(),
             inflight: Vec::new(),
             cands: Vec::new(),
+            claims: Vec::new(),
             record: Vec::new(),
             conflicting: Vec::new(),
             sub_cands: Vec::new(),
@@ -74,16 +81,14 @@ pub(super) fn run_scheduled<K: FragmentKernel>(
     colors: &mut [[u32; 4]],
     targets: usize,
     outcome: &mut ShadeOutcome,
-    reduce: bool,
-    simt: u32,
 ) {
     let width = sc.window.max(1);
     let slots: Vec<Invocation> = (0..width).map(|_| Invocation::new()).collect();
     let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
     futs.resize_with(width, || None);
     let mut scratch = SchedScratch::new(env.width, env.height);
-    scratch.reduce = reduce;
-    scratch.simt = (simt > 0).then(|| Simt::new(simt));
+    scratch.reduce = sc.reduce;
+    scratch.simt = (sc.simt > 0).then(|| Simt::new(sc.simt));
     let mut acc = Acc::default();
     schedule_once(
         &slots,
@@ -141,6 +146,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         free,
         inflight,
         cands,
+        claims,
         record,
         conflicting,
         sub_cands,
@@ -166,6 +172,8 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     free.extend((0..width).rev());
     inflight.clear();
     cands.clear();
+    claims.clear();
+    claims.resize(width, None);
     for f in futs.iter_mut() {
         *f = None;
     }
@@ -207,6 +215,14 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         while next < inputs.len() {
             let Some(s) = free.pop() else { break };
             slots[s].reset(inputs[next]);
+            if env.interlock.is_some() {
+                claims[s] = Frag {
+                    inv: &slots[s],
+                    env,
+                }
+                .claim()
+                .map(|(_, _, c)| c);
+            }
             which[s] = next;
             futs[s] = Some(make(&slots[s]));
             detector.start(id_of(&inputs[next]), step, s);
@@ -233,13 +249,16 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             cands.clear();
             for &s in inflight.iter() {
                 let inv = &slots[s];
+                // (`Frag::claim` is `None` without interlock, and so is the slot's.)
+                let claim = match (&claims[s], env.interlock, env.interlock_mode) {
+                    (Some(c), Some(l), Some(m)) => Some((l, m, c)),
+                    _ => None,
+                };
                 let runnable = match inv.pending.get() {
-                    Some(StepKind::InterlockBegin) => Frag { inv, env }
-                        .claim()
-                        .is_none_or(|(l, m, c)| l.can_enter_claim(m, &c)),
-                    Some(StepKind::PassTurn) => Frag { inv, env }
-                        .claim()
-                        .is_none_or(|(l, _, c)| l.is_turn_claim(&c)),
+                    Some(StepKind::InterlockBegin) => {
+                        claim.is_none_or(|(l, m, c)| l.can_enter_claim(m, c))
+                    }
+                    Some(StepKind::PassTurn) => claim.is_none_or(|(l, _, c)| l.is_turn_claim(c)),
                     Some(_) => true,
                     None => false,
                 };
@@ -269,7 +288,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             continue;
         }
         let k = if reduce {
-            // Only interleave where it can matter (see ExecConfig::reduce).
+            // Only interleave where it can matter (see ScheduleConfig::reduce).
             let key = |s: usize| match slots[s].pending.get() {
                 Some(StepKind::Mem { addr, .. }) => Some(addr.0),
                 _ => None,
@@ -411,7 +430,9 @@ pub(crate) fn explore<K: FragmentKernel>(
     futs.resize_with(width, || None);
     let mut scratch = SchedScratch::new(env.width, env.height);
     let mut outs = vec![FragOut::default(); inputs.len()];
-    let mut colors = vec![[0u32; 4]; inputs.len() * 8];
+    // No colour targets: an execution shows its callback the memory, never colours, so
+    // harvesting copies none (it copied all eight outputs of every invocation).
+    let mut colors: Vec<[u32; 4]> = Vec::new();
     let mut sc = sc.clone();
     let mut n = 0;
     for seed in seeds {
@@ -430,7 +451,7 @@ pub(crate) fn explore<K: FragmentKernel>(
             inputs,
             &mut outs,
             &mut colors,
-            8,
+            0,
             &mut scratch,
             &mut acc,
         );
@@ -451,7 +472,7 @@ pub(crate) fn explore<K: FragmentKernel>(
 }
 
 /// The scheduled executor across the waves of one rasterized pass: fragments are admitted
-/// block by block (`ExecConfig::block` pixels a side, API order within a block), as a GPU's
+/// block by block (`ScheduleConfig::block` pixels a side, API order within a block), as a GPU's
 /// fine rasterizer hands out small screen tiles; each wave gets its own seed (the
 /// schedule's, advanced by the wave's number); an explicit `bytes:` schedule runs on across
 /// waves, each continuing where the previous one stopped reading it.
@@ -486,7 +507,7 @@ impl Waves {
             b.drain(..self.bytes_used.min(b.len()));
         }
         // Admission order: pixel block by block, API order within a block.
-        let block = exec.block.max(1);
+        let block = sc.block.max(1);
         let blocks_per_row = env.width.div_ceil(block) as u64;
         let mut order: Vec<usize> = (0..inputs.len()).collect();
         order.sort_by_key(|&i| {
@@ -510,8 +531,6 @@ impl Waves {
             &mut s_colors,
             targets,
             &mut outcome,
-            exec.reduce,
-            exec.simt,
         );
         for (k, &i) in order.iter().enumerate() {
             outs[i] = s_outs[k];

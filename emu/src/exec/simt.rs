@@ -1,4 +1,4 @@
-//! Lockstep forward progress for the scheduled executor ([`super::ExecConfig::simt`]): the
+//! Lockstep forward progress for the scheduled executor ([`super::ScheduleConfig::simt`]): the
 //! lanes of a warp share one program counter, as on GPUs without independent thread
 //! scheduling (NVIDIA before Volta, and most others).
 //!

@@ -120,6 +120,7 @@ pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
             seed: u64::arbitrary(u)?,
             window: usize::arbitrary(u)?,
             record: bool::arbitrary(u)?,
+            ..Default::default()
         }),
     };
     let spec = RunSpec {
@@ -184,17 +185,24 @@ pub fn arbitrary_case(u: &mut Unstructured<'_>) -> arbitrary::Result<Case> {
             // A file path drawn at random would read arbitrary files: never fuzzed.
             presorted: None,
         },
-        exec: ExecConfig {
-            mode,
-            threads: usize::arbitrary(u)?,
-            batch: usize::arbitrary(u)?,
-            lockstep: bool::arbitrary(u)?,
-            max_steps: u64::arbitrary(u)?,
-            max_waits: u64::arbitrary(u)?,
-            contention: bool::arbitrary(u)?,
-            block: u32::arbitrary(u)?,
-            // Fields added later keep their defaults (and still round-trip).
-            ..ExecConfig::default()
+        exec: {
+            let mut exec = ExecConfig {
+                mode,
+                threads: usize::arbitrary(u)?,
+                batch: usize::arbitrary(u)?,
+                lockstep: bool::arbitrary(u)?,
+                max_steps: u64::arbitrary(u)?,
+                max_waits: u64::arbitrary(u)?,
+                contention: bool::arbitrary(u)?,
+                // Fields added later keep their defaults (and still round-trip).
+                ..ExecConfig::default()
+            };
+            // Drawn where it was drawn before it moved into the schedule.
+            let block = u32::arbitrary(u)?;
+            if let ExecMode::Scheduled(s) = &mut exec.mode {
+                s.block = block;
+            }
+            exec
         },
     };
     let observed = Observation {

@@ -87,6 +87,7 @@ impl KernelInput {
                     seed: 0,
                     window: 2 + self.window as usize % 7,
                     record: false,
+                    ..Default::default()
                 }),
                 threads: 1,
                 max_steps: 1 << 16,
