@@ -93,7 +93,7 @@ impl TileMemory {
             h,
             tile_size,
             samples,
-            color: (0..targets).map(|_| vec![[0u32; 4]; n]).collect(),
+            color: (0..targets).map(|_| TILE_COLORS.zeroed(n)).collect(),
             depth: Vec::new(),
             stencil: Vec::new(),
             depth_clear: 1.0,
@@ -300,6 +300,68 @@ pub struct Framebuffer {
     pub tiles_y: u32,
     pub formats: Vec<Format>,
     tiles: Vec<TileMemory>,
+}
+
+/// The colour planes of dropped framebuffers' tiles, for the next framebuffer's.
+///
+/// Why: a 2048x2048 RGBA32F resolve target is 64 MiB in 1024 tiles of 64 KiB, allocated for
+/// every frame (every run has its framebuffer). Freed, they went back to the OS (the top of
+/// `malloc`'s heap is trimmed), so each frame's resolve faulted them in again, a page fault
+/// per 4 KiB as it wrote its first pixel of each page. A tile here takes a kept plane of its
+/// size and zeroes it, as a fresh one is. Plain `std` mutex: bookkeeping.
+static TILE_COLORS: TilePlanes = TilePlanes {
+    free: std::sync::Mutex::new(Vec::new()),
+};
+
+/// Most bytes of tile planes kept (a 4096x4096 RGBA32F target).
+const MAX_KEPT_TILE_BYTES: usize = 256 << 20;
+
+struct TilePlanes {
+    free: std::sync::Mutex<Vec<Vec<[u32; 4]>>>,
+}
+
+impl TilePlanes {
+    /// `n` texels of zero: a kept plane of that length when there is one.
+    fn zeroed(&self, n: usize) -> Vec<[u32; 4]> {
+        let kept = {
+            let mut free = self.free.lock().unwrap_or_else(|e| e.into_inner());
+            match free.last() {
+                Some(v) if v.len() == n => free.pop(),
+                _ => None,
+            }
+        };
+        match kept {
+            Some(mut v) => {
+                v.fill([0; 4]);
+                v
+            }
+            None => vec![[0u32; 4]; n],
+        }
+    }
+
+    /// Keeps the planes of `tiles` (all of one length in a framebuffer), up to the bound.
+    fn give(&self, tiles: &mut [TileMemory]) {
+        let mut free = self.free.lock().unwrap_or_else(|e| e.into_inner());
+        // Planes of another length are of another framebuffer size: the newest size wins.
+        let n = tiles.first().and_then(|t| t.color.first()).map(Vec::len);
+        if free.first().map(Vec::len) != n {
+            free.clear();
+        }
+        let mut bytes: usize = free.iter().map(|v| v.len() * 16).sum();
+        for plane in tiles.iter_mut().flat_map(|t| t.color.drain(..)) {
+            bytes += plane.len() * 16;
+            if bytes > MAX_KEPT_TILE_BYTES || Some(plane.len()) != n {
+                break;
+            }
+            free.push(plane);
+        }
+    }
+}
+
+impl Drop for Framebuffer {
+    fn drop(&mut self) {
+        TILE_COLORS.give(&mut self.tiles);
+    }
 }
 
 impl Framebuffer {

@@ -323,6 +323,18 @@ pub struct TargetState {
 }
 
 impl TargetState {
+    /// A plain write of every channel of a four-channel 32-bit format (a resolve's target):
+    /// [`TargetState::combine`] gives the output's bits, whatever the stored texel, as its
+    /// general case computes them.
+    #[inline]
+    pub fn plain_write(&self) -> bool {
+        self.format.channels() == 4
+            && self.write_mask & 0xf == 0xf
+            && self.blend.is_none()
+            && self.logic_op.is_none()
+            && self.format != Format::RGBA8
+    }
+
     pub fn new(format: Format) -> TargetState {
         TargetState {
             format,
@@ -350,14 +362,7 @@ impl TargetState {
     #[inline]
     pub fn combine(&self, src: [u32; 4], dst: [u32; 4]) -> [u32; 4] {
         let n = self.format.channels();
-        // A plain write of every channel of a four-channel 32-bit format (a resolve's
-        // target): the output's bits, as the general case below computes them.
-        if n == 4
-            && self.write_mask & 0xf == 0xf
-            && self.blend.is_none()
-            && self.logic_op.is_none()
-            && self.format != Format::RGBA8
-        {
+        if self.plain_write() {
             return src;
         }
         let new: [u32; 4] = match self.format {

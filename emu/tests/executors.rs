@@ -270,9 +270,92 @@ fn all_execs() -> Vec<ExecConfig> {
     vec![
         small(ExecConfig::ordered()),
         small(ExecConfig::parallel(2)),
+        // Independent lanes: full-screen passes shade and write pixel by pixel.
+        small(ExecConfig {
+            lockstep: false,
+            ..ExecConfig::parallel(2)
+        }),
         small(scheduled(Policy::Random, 1)),
         small(scheduled(Policy::Pct { depth: 2 }, 1)),
     ]
+}
+
+/// Writes a colour per pixel to two targets, discards on some pixels, and adds to a
+/// per-pixel counter: what a resolve does, with the cases its write path distinguishes.
+struct TwoTargets {
+    seen: Buf<u32>,
+}
+
+impl FragmentKernel for TwoTargets {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("two-targets").with_discard()
+    }
+    async fn shade(&self, f: impl Fragment) {
+        f.atomic_add(self.seen, f.pixel_index(), 1).await;
+        if (f.x() + f.y()).is_multiple_of(5) {
+            f.discard();
+            return;
+        }
+        let v = f.pixel_index() as f32 / 64.0;
+        f.output(0, [v, 0.5, f.x() as f32, 1.0]);
+        if f.y().is_multiple_of(2) {
+            f.output(1, [0.25, v, 0.0, 0.5]);
+        }
+    }
+}
+
+#[test]
+fn full_screen_writes_are_the_same_under_every_executor() {
+    // Target 0 a plain write, target 1 blended; one sample and four.
+    for samples in [SampleCount::X1, SampleCount::X4] {
+        let mut st = FragmentState::new();
+        st.targets = vec![
+            TargetState::new(Format::RGBA32F),
+            TargetState {
+                blend: Some(fragrace_emu::BlendState::equation(
+                    fragrace_emu::BlendEquation::Add,
+                )),
+                ..TargetState::new(Format::RGBA32F)
+            },
+        ];
+        let run = |e: &ExecConfig| {
+            let mut dev = Device::new();
+            let seen = dev.buffer::<u32>("seen", 13 * 9).unwrap();
+            let mut fb =
+                Framebuffer::new(13, 9, samples, 8, &[Format::RGBA32F, Format::RGBA32F]).unwrap();
+            fb.clear_color(1, [1f32.to_bits(), 0, 0, 0]);
+            let r = dev
+                .fullscreen(&mut fb, &st, &TwoTargets { seen }, e)
+                .unwrap();
+            let counts = dev.memory.read(seen).unwrap();
+            (fb.image(0).texels, fb.image(1).texels, counts, r)
+        };
+        let (t0, t1, counts, r) = run(&ExecConfig::ordered());
+        assert!(counts.iter().all(|&c| c == 1));
+        let discarded = (0..9u32)
+            .flat_map(|y| (0..13u32).map(move |x| (x, y)))
+            .filter(|(x, y)| (x + y).is_multiple_of(5))
+            .count() as u64;
+        assert_eq!(r.stats.discarded, discarded);
+        assert_eq!(
+            r.stats.samples_passed,
+            (13 * 9 - discarded) * samples.count() as u64
+        );
+        // The plain target holds each kept pixel's output on every sample.
+        assert_eq!(
+            t0[samples.count()],
+            [1.0f32 / 64.0, 0.5, 1.0, 1.0].map(f32::to_bits)
+        );
+        for e in all_execs().iter().chain(&direct_execs()) {
+            let (u0, u1, c, q) = run(e);
+            assert_eq!((&u0, &u1, &c), (&t0, &t1, &counts), "{samples:?} {e:?}");
+            assert_eq!(
+                (q.stats.shaded, q.stats.discarded, q.stats.samples_passed),
+                (r.stats.shaded, r.stats.discarded, r.stats.samples_passed),
+                "{samples:?} {e:?}"
+            );
+        }
+    }
 }
 
 #[test]

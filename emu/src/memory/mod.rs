@@ -8,11 +8,14 @@
 //!
 //! Files: this one (the device's buffers and their host-side access), `word` (word types,
 //! handles, addresses, per-pixel arrays), `ops` (the operations and their semantics),
-//! `values` (allocation, alignment and zeroing of buffer contents), `cache` (the fused
-//! path's word cache and per-pixel prefetches).
+//! `values` (allocation, alignment and zeroing of buffer contents), `recycle` (large
+//! buffers' allocations kept from device to device), `cache` (the fused path's word cache
+//! and per-pixel prefetches).
 
 mod cache;
 mod ops;
+#[cfg(not(loom))]
+mod recycle;
 mod values;
 mod word;
 
@@ -110,6 +113,20 @@ pub struct Memory {
     clear_threads: usize,
 }
 
+/// A device's large buffers leave their allocations for later devices (see `recycle`).
+#[cfg(not(loom))]
+impl Drop for Memory {
+    fn drop(&mut self) {
+        use recycle::Recyclable;
+        for b in self.buffers.drain(..) {
+            match b.words {
+                Words::W32(w) => AtomicU32::recycled().give(w.all),
+                Words::W64(w) => AtomicU64::recycled().give(w.all),
+            }
+        }
+    }
+}
+
 impl Memory {
     pub fn new() -> Memory {
         Memory::default()
@@ -120,8 +137,9 @@ impl Memory {
     /// 2048x2048 buffer of counts is 16 MiB).
     pub fn with_threads(threads: usize) -> Memory {
         Memory {
+            buffers: Vec::new(),
+            bytes: 0,
             clear_threads: threads,
-            ..Memory::default()
         }
     }
 

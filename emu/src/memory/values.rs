@@ -3,6 +3,8 @@
 
 // Under loom the buffers are not aligned by hand (loom's atomics are not plain words).
 #[cfg(not(loom))]
+use super::recycle::Recyclable;
+#[cfg(not(loom))]
 use super::BUFFER_ALIGN;
 use crate::sync::{AtomicU32, AtomicU64};
 
@@ -90,8 +92,15 @@ pub fn zeroed_u32(len: usize, threads: usize) -> impl std::ops::Deref<Target = [
 /// Large buffers with several threads: an uninitialized allocation zeroed in parts, one per
 /// thread, all at once. Either way through `Vec` (an allocation aligned by `Layout` would
 /// be mapped afresh at every frame, a page fault per 4 KiB).
+///
+/// A large buffer takes, when one fits, the allocation of a buffer of an earlier device
+/// ([`super::recycle`]), zeroed the same way (in parts when there are several threads): no
+/// page faults for memory the process already has.
 #[cfg(not(loom))]
-pub(super) fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) -> Values<A> {
+pub(super) fn zeroed_words<A: ZeroIsValid + Recyclable + Send>(
+    len: usize,
+    threads: usize,
+) -> Values<A> {
     /// Below this a thread costs more than it saves.
     const PER_THREAD_BYTES: usize = 1 << 20;
     let size = std::mem::size_of::<A>();
@@ -99,6 +108,19 @@ pub(super) fn zeroed_words<A: ZeroIsValid + Send>(len: usize, threads: usize) ->
     let total = len.saturating_add(BUFFER_ALIGN / size);
     let bytes = total.saturating_mul(size);
     let threads = threads.min(bytes / PER_THREAD_BYTES).max(1);
+    if let Some(mut all) = A::recycled().take(total) {
+        let spare = &mut all.spare_capacity_mut()[..total];
+        let parts: Vec<_> = spare.chunks_mut(total.div_ceil(threads)).collect();
+        crate::sync::pool::broadcast_each(parts, |part| {
+            // SAFETY: `part` is a slice of `MaybeUninit<A>`, valid for writes of its
+            // length; any bytes are a valid `MaybeUninit`.
+            unsafe { std::ptr::write_bytes(part.as_mut_ptr(), 0, part.len()) };
+        });
+        // SAFETY: the first `total` elements (within the capacity, `take` checked it) were
+        // zeroed just above, and all-zero bytes are a valid `A` (see below).
+        unsafe { all.set_len(total) };
+        return aligned(all, len);
+    }
     let all = if threads == 1 {
         // SAFETY: `A` is an atomic integer (`ZeroIsValid` is implemented for `AtomicU32`
         // and `AtomicU64` only), for which all-zero bytes are a valid value (zero).

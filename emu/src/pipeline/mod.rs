@@ -10,8 +10,9 @@
 //! hands fragments (or, on the fused path, set-up triangles and tiles) to [`crate::exec`].
 //!
 //! Files: this one (the [`Device`] and its passes), `report` (what a pass did), `vertex`
-//! (clip-space transform), `waves` (a pass wave of tiles by wave of tiles), `tiles` (the
-//! per-tile fixed-function stages before and after shading).
+//! (clip-space transform, and the last draw's vertices kept for the next), `waves` (a pass
+//! wave of tiles by wave of tiles), `tiles` (the per-tile fixed-function stages before and
+//! after shading).
 
 mod report;
 mod tiles;
@@ -19,7 +20,7 @@ mod vertex;
 mod waves;
 
 pub use report::{OcclusionQuery, PassError, PassReport, PassState, PassTime};
-use vertex::{transform, ClipPositions, CLIP};
+use vertex::{VertexCache, VertexKey};
 use waves::{absorb, explicit_inputs, mode_of, Geometry};
 
 use std::time::Instant;
@@ -31,7 +32,7 @@ use crate::interlock::Interlock;
 use crate::invocation::{Mode, PassEnv};
 use crate::kernel::{FragInput, FragmentKernel};
 use crate::memory::{Buf, Memory, MemoryError, Word};
-use crate::raster::{prepare, PlaneSetup, RasterState, Viewport};
+use crate::raster::{prepare, prepare_projected, PlaneSetup, RasterState, Viewport};
 use crate::state::FragmentState;
 
 pub use crate::exec::Fault;
@@ -40,6 +41,9 @@ pub use crate::exec::Fault;
 #[derive(Default)]
 pub struct Device {
     pub memory: Memory,
+    /// The last draw's vertices, for the next draw of the same mesh and matrix.
+    #[cfg(not(loom))]
+    vertices: VertexCache,
 }
 
 impl Device {
@@ -52,7 +56,19 @@ impl Device {
     pub fn with_threads(threads: usize) -> Device {
         Device {
             memory: Memory::with_threads(threads),
+            ..Device::default()
         }
+    }
+
+    /// The cache of the last draw's vertices (under loom, a fresh one each time: loom's
+    /// models build devices from their memory alone).
+    #[cfg(not(loom))]
+    fn vertex_cache(&self) -> &VertexCache {
+        &self.vertices
+    }
+    #[cfg(loom)]
+    fn vertex_cache(&self) -> VertexCache {
+        VertexCache::default()
     }
 
     /// Creates a zero-filled storage buffer.
@@ -127,9 +143,6 @@ impl Device {
         } else {
             PlaneSetup::Skip
         };
-        // Recycled with stale contents (`transform` overwrites every element): a fresh
-        // buffer cost a serial clear and a page fault per 4 KiB (7 MB on the 871K dragon).
-        let mut clip = ClipPositions(CLIP.take());
         let mut seq_base = 0u64;
         // Passes that need nothing of the framebuffer skip binning (see `Binning::Auto`).
         let try_unbinned = exec.mode == ExecMode::Parallel
@@ -138,11 +151,16 @@ impl Device {
             && info.interlock.is_none()
             && crate::exec::fused::unbinned(fixed, fixed.targets.len());
         for (instance, model) in draw.instances.iter().enumerate() {
-            transform(
+            let m = draw.view_proj * *model;
+            // The clip-space positions (recycled with stale contents, every element
+            // overwritten: a fresh buffer cost a serial clear and a page fault per 4 KiB, 7 MB
+            // on the 871K dragon), and their projection, both kept from the last draw when
+            // it drew the same positions through the same matrix.
+            let mut vertices = self.vertex_cache().vertices(
+                VertexKey::new(&draw.mesh.positions, m),
                 &draw.mesh.positions,
-                draw.view_proj * *model,
+                m,
                 threads,
-                &mut clip.0,
             );
             // Multisampling off: rasterize single-sampled, then a fragment covers every
             // sample of its pixel (see RasterState::multisample).
@@ -155,14 +173,25 @@ impl Device {
             } else {
                 raster
             };
-            let prepared = prepare(
-                &clip.0,
-                draw.indices(),
-                &bin_state,
-                viewport,
-                threads,
-                plane_setup,
-            );
+            let prepared = match vertices.projected.take() {
+                Some(projected) => prepare_projected(
+                    &vertices.clip,
+                    draw.indices(),
+                    &bin_state,
+                    viewport,
+                    threads,
+                    plane_setup,
+                    projected,
+                ),
+                None => prepare(
+                    &vertices.clip,
+                    draw.indices(),
+                    &bin_state,
+                    viewport,
+                    threads,
+                    plane_setup,
+                ),
+            };
             let instance = instance as u32;
             // A mesh with bad triangles is binned: binning counts and drops them, and the
             // draw then fails on validation before shading.
@@ -198,6 +227,8 @@ impl Device {
                 &mut seq_base,
                 &mut report,
             );
+            vertices.projected = Some(prepared.into_projected());
+            self.vertex_cache().keep(vertices);
         }
         report.wall = start.elapsed();
         report.passes.push(PassTime {

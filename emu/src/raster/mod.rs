@@ -37,8 +37,8 @@ pub(crate) mod pool;
 mod setup;
 
 pub use setup::{
-    bin_triangles, bin_triangles_with, effective_tile_size, prepare, Binned, FlatChunk, PlaneSetup,
-    Prepared, Segment, SetupTriangle, MAX_TILE, MIN_TILE,
+    bin_triangles, bin_triangles_with, effective_tile_size, prepare, prepare_projected, Binned,
+    FlatChunk, PlaneSetup, Prepared, Projected, Segment, SetupTriangle, MAX_TILE, MIN_TILE,
 };
 
 /// Sub-pixel precision of snapped vertex positions.

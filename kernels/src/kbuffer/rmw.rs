@@ -36,7 +36,8 @@ pub struct RmwStore {
 
 impl FragmentKernel for RmwStore {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("kb-rmw-store")
+        // Each fragment loads its pixel's k depths first: prefetched ahead of shading.
+        KernelInfo::new("kb-rmw-store").with_pixel_array(self.kb.depth, self.k)
     }
     async fn shade(&self, f: impl Fragment) {
         let base = f.pixel_index() * self.k;

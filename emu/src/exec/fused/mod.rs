@@ -304,6 +304,10 @@ pub(crate) fn run_fullscreen<K: FragmentKernel>(
                 .unwrap_or_else(|e| e.into_inner())
                 .take();
             let Some(tile) = taken else { continue };
+            if !pass.lockstep || pass.lanes <= 1 {
+                w.run_tile_fullscreen(tile, env, coverage);
+                continue;
+            }
             let src = FullScreenSpans {
                 x0: tile.x0,
                 y0: tile.y0,

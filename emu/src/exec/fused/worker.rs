@@ -8,8 +8,9 @@ use std::pin::Pin;
 use std::task::{Context, Poll, Waker};
 
 use crate::exec::{record_panic, Acc, Tally};
+use crate::framebuffer::TileMemory;
 use crate::invocation::{DirectFrag, DirectState, Frag, Invocation, Mode, PassEnv};
-use crate::kernel::FragmentKernel;
+use crate::kernel::{FragInput, FragmentKernel};
 use crate::memory::{PixelArray, PixelPrefetcher};
 use crate::raster::{SampleCount, Span};
 
@@ -243,6 +244,101 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 u64::from(samples) * (finished - (tally.discarded - discarded_before));
         }
         // Colour outputs are read only by the late stage, which these passes lack.
+        slot.clear_outputs();
+        state.drain_ops(slot);
+        acc.add_tally(tally);
+        counts.samples_passed += tally.samples_passed;
+    }
+
+    /// One tile of a full-screen pass without lockstep ([`super::run_fullscreen`]): every
+    /// pixel, row by row, shaded through [`DirectFrag`] and its outputs written to the tile
+    /// as soon as it retires. What [`Self::run_unit_direct`] does with such a tile (nothing
+    /// tests before or after shading: [`super::fullscreen_fuses`]), without the span list,
+    /// the per-pixel copy of the input into the slot and the general late stage: a
+    /// resolve's empty pixels (most of a frame) cost their kernel and one texel write.
+    /// Same invocations, ids, counts, faults and target writes, in the same order.
+    #[inline(never)]
+    pub(super) fn run_tile_fullscreen(
+        &mut self,
+        tile: &mut TileMemory,
+        env: &PassEnv<'_>,
+        coverage: u8,
+    ) {
+        let Worker {
+            kernel,
+            pass,
+            slots,
+            acc,
+            counts,
+            all_samples,
+            ..
+        } = self;
+        let (kernel, pass) = (*kernel, *pass);
+        debug_assert!(!pass.lockstep || slots.len() == 1);
+        debug_assert!(!pass.early_tests() && !pass.late_tests());
+        // Every pixel's coverage: the span's of `run_unit_direct` (`RowSetup::row`).
+        let cov = coverage & pass.state.sample_mask & *all_samples;
+        if cov == 0 {
+            return;
+        }
+        let samples = samples_of(cov);
+        let targets = pass.targets.min(8);
+        // One sample, every target written plainly (a resolve): the output's bits go
+        // straight to the texel ([`TileMemory::write_outputs`] computes the same).
+        let plain = tile.samples == 1
+            && cov == 1
+            && pass.state.targets[..targets]
+                .iter()
+                .all(|t| t.plain_write());
+        let slot = &slots[0];
+        let state = DirectState::new();
+        let mut tally = Tally::default();
+        let (x0, y0) = (tile.x0, tile.y0);
+        for ly in 0..tile.h {
+            let y = y0 + ly;
+            // Full-screen ids are by pixel, row-major (`Row::row_seq` with source 0).
+            let row_seq = pass.seq_base.wrapping_add(y as u64 * env.width as u64);
+            state.reset(FragInput {
+                seq: row_seq.wrapping_add(x0 as u64),
+                x: x0,
+                y,
+                tri: u32::MAX,
+                primitive_id: pass.first,
+                instance_id: pass.instance,
+                coverage: cov,
+                front_facing: true,
+                depth: pass.flat_depth,
+                ticket: 0,
+            });
+            for lx in 0..tile.w {
+                let x = x0 + lx;
+                state.next_pixel(row_seq.wrapping_add(x as u64), x);
+                slot.clear_outputs();
+                shade_direct(kernel, slot, &state, env);
+                if slot.faulted() {
+                    // Counted (and its fault kept) by the slot's path; nothing is written.
+                    state.spill(slot);
+                    acc.count(slot);
+                    continue;
+                }
+                tally.add_direct(&state, samples);
+                if state.discarded.get() || targets == 0 {
+                    continue;
+                }
+                if plain {
+                    let at = (ly * tile.tile_size + lx) as usize;
+                    for (plane, o) in tile.color.iter_mut().zip(&slot.outputs).take(targets) {
+                        plane[at] = o.get();
+                    }
+                    continue;
+                }
+                let mut colors = [[0u32; 4]; 8];
+                for (c, o) in colors.iter_mut().zip(&slot.outputs).take(targets) {
+                    *c = o.get();
+                }
+                tile.write_outputs(pass.state, lx, ly, cov, &colors[..targets]);
+            }
+        }
         slot.clear_outputs();
         state.drain_ops(slot);
         acc.add_tally(tally);

@@ -26,7 +26,7 @@ mod prepared;
 mod triangle;
 
 pub use bins::{Binned, PlaneSetup, Segment};
-pub use prepared::{prepare, FlatChunk, Prepared};
+pub use prepared::{prepare, prepare_projected, FlatChunk, Prepared, Projected};
 pub use triangle::SetupTriangle;
 
 use bins::*;

@@ -52,21 +52,7 @@ pub fn prepare<'a>(
     let mut zw = ZW.take();
     xy.resize(positions.len(), [0; 2]);
     zw.resize(positions.len(), [0.0; 2]);
-    let vthreads = threads.min(positions.len() / 8192).max(1);
-    let non_finite = if vthreads == 1 {
-        project_vertices(&planes, &xf, positions, &mut xy, &mut zw)
-    } else {
-        let per = positions.len().div_ceil(vthreads);
-        let parts: Vec<_> = xy
-            .chunks_mut(per)
-            .zip(zw.chunks_mut(per))
-            .zip(positions.chunks(per))
-            .collect();
-        crate::sync::pool::broadcast_each(parts, |((xy, zw), src)| {
-            project_vertices(&planes, &xf, src, xy, zw)
-        })
-        .contains(&true)
-    };
+    let non_finite = project_all(&planes, &xf, positions, threads, &mut xy, &mut zw);
     Prepared {
         positions,
         indices,
@@ -84,6 +70,94 @@ pub fn prepare<'a>(
     }
 }
 
+/// Projected vertices kept from a [`Prepared`] ([`Prepared::into_projected`]), to prepare
+/// another draw of the same clip-space positions into the same viewport without
+/// projecting them again ([`prepare_projected`]).
+pub struct Projected {
+    xy: Vec<[i32; 2]>,
+    zw: Vec<[f32; 2]>,
+    non_finite: bool,
+    viewport: Viewport,
+}
+
+impl Projected {
+    /// The viewport they were projected into.
+    pub fn viewport(&self) -> Viewport {
+        self.viewport
+    }
+}
+
+impl Drop for Projected {
+    fn drop(&mut self) {
+        XY.give_dirty(std::mem::take(&mut self.xy));
+        ZW.give_dirty(std::mem::take(&mut self.zw));
+    }
+}
+
+/// [`prepare`] with the vertices already projected: `projected` must come from a
+/// [`Prepared`] of the same `positions` (same values) into `viewport` (checked: a different
+/// viewport or vertex count projects again).
+pub fn prepare_projected<'a>(
+    positions: &'a [Vec4],
+    indices: &'a [[u32; 3]],
+    state: &RasterState,
+    viewport: Viewport,
+    threads: usize,
+    plane_setup: PlaneSetup,
+    mut projected: Projected,
+) -> Prepared<'a> {
+    if projected.viewport != viewport || projected.xy.len() != positions.len() {
+        return prepare(positions, indices, state, viewport, threads, plane_setup);
+    }
+    let w = viewport.width.min(MAX_VIEWPORT);
+    let h = viewport.height.min(MAX_VIEWPORT);
+    Prepared {
+        positions,
+        indices,
+        xy: std::mem::take(&mut projected.xy),
+        zw: std::mem::take(&mut projected.zw),
+        planes: Planes::new(w.max(1), h.max(1)),
+        xf: Xform {
+            sx: viewport.width as f64 * (ONE / 2) as f64,
+            sy: viewport.height as f64 * (ONE / 2) as f64,
+        },
+        samples: state.samples,
+        viewport,
+        tile_size: effective_tile_size(state.tile_size),
+        cull: state.cull,
+        ccw_front: state.front_face == FrontFace::Ccw,
+        plane_setup,
+        non_finite: projected.non_finite,
+    }
+}
+
+/// Projects and snaps every vertex into `xy` and `zw` (as long as `positions`), on up to
+/// `threads` threads; returns whether a vertex was NaN or infinite.
+fn project_all(
+    planes: &Planes,
+    xf: &Xform,
+    positions: &[Vec4],
+    threads: usize,
+    xy: &mut [[i32; 2]],
+    zw: &mut [[f32; 2]],
+) -> bool {
+    let vthreads = threads.max(1).min(positions.len() / 8192).max(1);
+    if vthreads == 1 {
+        project_vertices(planes, xf, positions, xy, zw)
+    } else {
+        let per = positions.len().div_ceil(vthreads);
+        let parts: Vec<_> = xy
+            .chunks_mut(per)
+            .zip(zw.chunks_mut(per))
+            .zip(positions.chunks(per))
+            .collect();
+        crate::sync::pool::broadcast_each(parts, |((xy, zw), src)| {
+            project_vertices(planes, xf, src, xy, zw)
+        })
+        .contains(&true)
+    }
+}
+
 impl Drop for Prepared<'_> {
     fn drop(&mut self) {
         XY.give_dirty(std::mem::take(&mut self.xy));
@@ -92,6 +166,17 @@ impl Drop for Prepared<'_> {
 }
 
 impl<'a> Prepared<'a> {
+    /// The projected vertices, kept for another draw of the same positions
+    /// ([`prepare_projected`]).
+    pub fn into_projected(mut self) -> Projected {
+        Projected {
+            xy: std::mem::take(&mut self.xy),
+            zw: std::mem::take(&mut self.zw),
+            non_finite: self.non_finite,
+            viewport: self.viewport,
+        }
+    }
+
     /// Input triangles.
     pub fn triangle_count(&self) -> usize {
         self.indices.len()
