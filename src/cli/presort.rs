@@ -33,6 +33,8 @@ pub(crate) struct PresortArgs {
 struct Bar {
     bar: indicatif::ProgressBar,
     parts: Mutex<Vec<u64>>,
+    /// When each partition last printed a line (seconds since start).
+    logged: Mutex<Vec<f64>>,
     start: Instant,
 }
 
@@ -47,13 +49,26 @@ impl Progress for Bar {
             "graph" => (frac * 500.0) as u64,
             _ => 500 + (frac * 500.0) as u64,
         };
-        if done == total {
-            // One line per finished phase, for logs (the bar is hidden off a terminal).
+        let now = self.start.elapsed().as_secs_f64();
+        // One line per finished phase and one a minute per partition, for logs (the bar is
+        // hidden off a terminal).
+        let due = self.logged.lock().is_ok_and(|mut l| {
+            let slot = l.get_mut(partition);
+            match slot {
+                Some(t) if done == total || now - *t >= 60.0 => {
+                    *t = now;
+                    true
+                }
+                _ => false,
+            }
+        });
+        if due {
             self.bar.suspend(|| {
-                eprintln!(
-                    "partition {partition}: {phase} done at {:.1} s",
-                    self.start.elapsed().as_secs_f64()
-                )
+                if done == total {
+                    eprintln!("partition {partition}: {phase} done at {now:.1} s");
+                } else {
+                    eprintln!("partition {partition}: {phase} {done} of {total} at {now:.1} s");
+                }
             });
         }
         if let Ok(mut p) = self.parts.lock() {
@@ -91,6 +106,7 @@ pub(crate) fn cmd_presort(a: &PresortArgs) -> Result<()> {
             &format!("presorting {} triangles", mesh.indices.len()),
         ),
         parts: Mutex::new(vec![0; a.partitions as usize]),
+        logged: Mutex::new(vec![0.0; a.partitions as usize]),
         start: Instant::now(),
     };
     let t = Instant::now();

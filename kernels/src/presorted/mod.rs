@@ -205,20 +205,15 @@ pub fn presort(
         .num_threads(cfg.threads)
         .build()
         .map_err(|e| PresortError::Config(format!("thread pool: {e}")))?;
-    let results: Vec<Result<(Segment, PartitionStats), PresortError>> = pool.install(|| {
+    // (Collecting into a `Result` stops starting partitions after the first error.)
+    let results: Vec<(Segment, PartitionStats)> = pool.install(|| {
         use rayon::prelude::*;
         (0..dirs.len())
             .into_par_iter()
             .map(|k| presort_partition(&tris, &dirs, k, &frame, progress))
-            .collect()
-    });
-    let mut segments = Vec::with_capacity(dirs.len());
-    let mut stats = Vec::with_capacity(dirs.len());
-    for r in results {
-        let (s, st) = r?;
-        segments.push(s);
-        stats.push(st);
-    }
+            .collect::<Result<Vec<_>, PresortError>>()
+    })?;
+    let (segments, stats): (Vec<Segment>, Vec<PartitionStats>) = results.into_iter().unzip();
     Ok(Presorted {
         mesh_hash: input::mesh_hash(mesh),
         triangles: mesh.indices.len() as u32,

@@ -69,6 +69,16 @@ pub fn facing_plane(mesh: &Mesh, tri: u32, back: bool) -> [f32; 4] {
 }
 
 impl Prepared {
+    /// Whether every copy, the last included, selects by its planes and the depth test is
+    /// off: when triangles were split. The LESS trick of section 4.1 needs depths that
+    /// strictly decrease along the draw order at every pixel; pieces of a split triangle
+    /// meet the triangle that cut them along a line inside it, where the two depths are
+    /// equal up to rounding, and LESS then drops fragments the truth keeps. The planes
+    /// alone select exactly one copy (every instance keeps its exact region's planes).
+    pub fn all_planes(&self) -> bool {
+        self.lists.is_split()
+    }
+
     pub fn new(mesh: &Mesh, lists: Presorted) -> Prepared {
         let mut positions = mesh.positions.clone();
         positions.extend(lists.extra_positions.iter().map(|v| Vec3::from_array(*v)));
@@ -192,6 +202,8 @@ struct SelectKernel<'a> {
     seg: &'a SegmentData,
     eye: Vec3,
     alpha: f32,
+    /// Every copy tests its planes (no LESS trick; see [`Prepared::all_planes`]).
+    all_planes: bool,
 }
 
 impl FragmentKernel for SelectKernel<'_> {
@@ -201,7 +213,10 @@ impl FragmentKernel for SelectKernel<'_> {
     async fn shade(&self, f: impl Fragment) {
         let i = f.primitive_id() as usize;
         // The last copy leaves its planes to the LESS depth test.
-        if !self.seg.passes(i, self.eye, !self.seg.last[i]) {
+        if !self
+            .seg
+            .passes(i, self.eye, self.all_planes || !self.seg.last[i])
+        {
             f.discard();
             return;
         }
@@ -382,7 +397,7 @@ impl Algorithm for PresortedAlgo {
                 fb.clear_depth(1.0);
                 let mut state = capture_state();
                 state.fragment.depth = DepthState {
-                    test: true,
+                    test: !prep.all_planes(),
                     func: CompareFunc::Less,
                     write: true,
                 };
@@ -394,10 +409,11 @@ impl Algorithm for PresortedAlgo {
                         seg,
                         eye: eye32,
                         alpha: params.alpha,
+                        all_planes: prep.all_planes(),
                     };
                     common::geometry_pass(&device, &mut fb, &sub, &state, &kernel, exec)?
                 } else {
-                    let moved = vertex_stage(seg, eye32);
+                    let moved = vertex_stage(seg, eye32, prep.all_planes());
                     let vs_frame = Frame {
                         mesh: &moved,
                         ..*frame
@@ -477,10 +493,10 @@ impl Algorithm for PresortedAlgo {
 
 /// The vertex stage of `presorted-vs`: three vertices per instance (no sharing); those of
 /// an instance failing its test moved to the viewpoint, where the near plane culls them.
-pub fn vertex_stage(seg: &SegmentData, eye: Vec3) -> Mesh {
+pub fn vertex_stage(seg: &SegmentData, eye: Vec3, all_planes: bool) -> Mesh {
     let mut positions = Vec::with_capacity(seg.mesh.indices.len() * 3);
     for (i, t) in seg.mesh.indices.iter().enumerate() {
-        let keep = seg.passes(i, eye, !seg.last[i]);
+        let keep = seg.passes(i, eye, all_planes || !seg.last[i]);
         for &v in t {
             positions.push(if keep {
                 seg.mesh.positions[v as usize]

@@ -7,19 +7,25 @@
 //! of their vertices, and the cutting plane separates the two hulls
 //! ([`super::separate::separate`]: the plane halfway between them).
 //!
-//! Fallbacks, in order, when no forward-edge region separates from all of `R_b`:
+//! When no forward-edge region separates from all of `R_b` (`R_f` stays empty), `x` moves
+//! whole after the last `b`, as the paper's `R_f^(0)` (the plane of `x` separates); the
+//! `f -> x` edges become back-edges of the `f*`, handled when the scan reaches them. An
+//! instance that has already been moved whole [`FREE_WHOLE_MOVES`] times (moves that may go
+//! round a cycle) tries the progress steps first, in order:
 //! 1. the paper's pairwise progress step (section 4.1, "at least one of the edges between
 //!    `f*` and `x` from at least one of edges between `x` and `b*`"): a plane separating one
 //!    `O_{f->x}` from one `O_{x->b}` splits `x`; the original keeps fewer back-edges and is
 //!    scanned again;
 //! 2. the `b` and `f` duplications of section 4.1 (the edge `b -> f` separated from
 //!    `x -> b`, or from `f -> x`);
-//! 3. moving `x` whole after the last `b` (the `f -> x` edges become back-edges of the
-//!    `f*`, handled when the scan reaches them).
+//! 3. moving `x` whole again.
+//!
+//! Separations allow touching regions ([`separate::separate_touching`]): the occlusion
+//! regions of triangles that share an edge or a vertex meet along the shared feature's line,
+//! and only a plane through it separates them.
 //!
 //! The scan gives up with an error when it cannot progress, so a cycle that the input's
-//! assumptions exclude (intersecting triangles: a cycle visible from one viewpoint), or one
-//! whose regions only touch (no cutting plane with a margin), ends in an error, never a
+//! assumptions exclude (a cycle visible from one viewpoint) ends in an error, never a
 //! hang: past a step budget proportional to the graph, when one instance has been moved
 //! whole [`MAX_WHOLE_MOVES`] times (the moves ping-pong), or when the instances outnumber
 //! [`MAX_COPIES`] per initial instance.
@@ -47,13 +53,15 @@ pub struct ScanStats {
 /// The scan could not progress.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "the back-edge scan made no progress after {steps} steps ({nodes} instances, {edges} \
-     occlusion edges left): the mesh has intersecting triangles or a cycle visible from one \
-     viewpoint, which the method assumes away (split them first), or a cycle whose occlusion \
-     regions only touch, which this implementation cannot cut yet (no cutting plane with a \
-     margin)"
+    "the back-edge scan made no progress ({limit}) after {steps} steps ({nodes} instances, {edges} \
+     occlusion edges left): the mesh has a cycle of triangles visible from one viewpoint \
+     (crossing triangles are split first; three or more that overlap cyclically are not), \
+     which the method assumes away, or cycles whose regions the progress steps cut into too \
+     many copies"
 )]
 pub struct ScanError {
+    /// Which limit was reached.
+    pub limit: &'static str,
     pub steps: u64,
     pub nodes: usize,
     pub edges: usize,
@@ -115,6 +123,9 @@ fn shares_point(a: &[DVec3], b: &[DVec3]) -> bool {
 /// Whole moves of one instance after which the scan gives up (fallback 3 moved it back and
 /// forth with the instances it is in a cycle with).
 pub const MAX_WHOLE_MOVES: u32 = 256;
+/// Whole moves of one instance before the progress steps (pairwise split, `b`/`f`
+/// duplication) are tried ahead of moving it again.
+pub const FREE_WHOLE_MOVES: u32 = 2;
 /// Instances per initial instance after which the scan gives up.
 pub const MAX_COPIES: usize = 64;
 
@@ -147,6 +158,11 @@ pub fn scan(
         steps += 1;
         if steps > budget || g.nodes.len() > max_nodes {
             return Err(ScanError {
+                limit: if steps > budget {
+                    "step budget"
+                } else {
+                    "copies per instance"
+                },
                 steps,
                 nodes: g.nodes.len(),
                 edges: g.edge_count(),
@@ -234,6 +250,20 @@ pub fn scan(
             stats.splits += 1;
             continue;
         }
+        // No forward edge separates from all of R_b: R_f stays empty, and the plane of x
+        // itself separates, i.e. x moves whole after the last b (the paper's R_f^(0)); the
+        // f -> x edges become back-edges of the f*, handled when the scan reaches them.
+        // Only an instance moved whole before (the moves may go round a cycle) tries the
+        // progress steps below first: each of them cuts x into more copies.
+        whole.resize(g.nodes.len(), 0);
+        if whole[x] < FREE_WHOLE_MOVES {
+            whole[x] += 1;
+            order.remove(idx);
+            order.insert(b_last, x);
+            reindex(&order, &mut pos, g.nodes.len());
+            stats.whole_moves += 1;
+            continue;
+        }
         // Fallback 1: one forward edge against one back edge.
         let mut pair: Option<Plane> = None;
         // At most PAIRS x PAIRS attempts (the nearest f and b first): a bound on the LPs.
@@ -261,11 +291,11 @@ pub fn scan(
             stats.bf_dups += 1;
             continue;
         }
-        // Fallback 3: move x whole.
-        whole.resize(g.nodes.len(), 0);
+        // Fallback 3: move x whole anyway.
         whole[x] += 1;
         if whole[x] > MAX_WHOLE_MOVES {
             return Err(ScanError {
+                limit: "one instance moved whole too often",
                 steps,
                 nodes: g.nodes.len(),
                 edges: g.edge_count(),

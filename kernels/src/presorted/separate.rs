@@ -220,14 +220,15 @@ pub struct Shape {
 }
 
 impl Shape {
-    /// The union of shapes, as far as the test below can use it: all vertices and face
-    /// normals (the hull of a union has other faces too, so the test is then incomplete).
+    /// The union of shapes, as far as the test below can use it cheaply: all vertices and
+    /// face normals, no edges (the hull of a union has other faces too, so the test is
+    /// then incomplete; the edge pairs of unions of many regions cost more than the rest
+    /// of the scan).
     pub fn union<'a>(parts: impl IntoIterator<Item = &'a Shape>) -> Shape {
         let mut s = Shape::default();
         for p in parts {
             s.verts.extend_from_slice(&p.verts);
             s.normals.extend_from_slice(&p.normals);
-            s.edges.extend_from_slice(&p.edges);
         }
         s
     }
