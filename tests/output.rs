@@ -354,9 +354,11 @@ fn fuzz_findings_are_deduplicated_by_signature_with_one_case_each() {
         v["expected_findings"].as_u64().unwrap() + v["violations"].as_u64().unwrap()
     );
     // Many runs, whatever their policies, come down to a few signatures: the principal
-    // hazard and its buffer (or, without hazards, the kind of anomaly).
-    assert!(runs >= 10, "{v}");
-    assert!(sigs.len() <= 5, "{:#?}", sigs.keys().collect::<Vec<_>>());
+    // hazard and its buffer (or, without hazards, the kind of anomaly). kb-rmw has two
+    // buffers (kb-depth, kb-prim) and three hazard classes (lost update, race, torn), plus
+    // error pixels without a hazard: at most 7, for hundreds of runs.
+    assert!(runs >= 100, "{v}");
+    assert!(sigs.len() <= 7, "{:#?}", sigs.keys().collect::<Vec<_>>());
     for sig in sigs.keys() {
         assert!(sig.starts_with("kb-rmw (hazard-prone): "), "{sig}");
         let case = v["case_of"][sig]
