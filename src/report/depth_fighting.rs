@@ -263,6 +263,9 @@ pub fn measure(size: u32, k: u32, progress: &dyn Progress) -> Result<Vec<Row>, R
     spec.width = size;
     spec.height = size;
     spec.params.k = k;
+    // Ordered, as the doc says: under `parallel` the hazard-prone counters (count-plain)
+    // race on the coplanar stack, and R_h would depend on the threads' timing.
+    spec.exec.mode = fragrace_emu::ExecMode::Ordered;
     let loaded = ctx(run::load(&spec), || scene.clone())?;
     let truth = ctx(run::truth(&spec, &loaded), || format!("{scene}: the truth"))?;
     let mut rows = Vec::new();
