@@ -19,30 +19,14 @@ use fragrace_kernels::presorted::{self, file, PresortConfig, Silent};
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
 
-/// A torus (non-convex: occlusion cycles across viewpoints), `n` x `m` quads.
+/// A torus (non-convex: occlusion cycles across viewpoints), `n` x `m` quads: the library's
+/// ([`fragrace::scene::builtin::torus`]), as positions and indices.
 fn torus(n: u32, m: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let (big, small) = (1.0f32, 0.4f32);
-    let mut pos = Vec::new();
-    for i in 0..n {
-        let u = i as f32 / n as f32 * std::f32::consts::TAU;
-        for j in 0..m {
-            let v = j as f32 / m as f32 * std::f32::consts::TAU;
-            let r = big + small * v.cos();
-            pos.push([r * u.cos(), small * v.sin(), r * u.sin()]);
-        }
-    }
-    let mut idx = Vec::new();
-    for i in 0..n {
-        for j in 0..m {
-            let a = i * m + j;
-            let b = ((i + 1) % n) * m + j;
-            let c = ((i + 1) % n) * m + (j + 1) % m;
-            let d = i * m + (j + 1) % m;
-            idx.push([a, b, c]);
-            idx.push([a, c, d]);
-        }
-    }
-    (pos, idx)
+    let mesh = fragrace::scene::builtin::torus(n, m);
+    (
+        mesh.positions.iter().map(|p| p.to_array()).collect(),
+        mesh.indices,
+    )
 }
 
 fn scene_of(pos: &[[f32; 3]], idx: &[[u32; 3]]) -> SceneSpec {
