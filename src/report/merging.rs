@@ -122,7 +122,7 @@ pub fn section(cfg: &PaperConfig, progress: &dyn Progress) -> Result<Section, Re
 /// planes and two spheres of one radius tessellated differently), the exact composite next
 /// to the merging k-buffer without merging and with two thicknesses, as one image strip.
 fn figure3(cfg: &PaperConfig, progress: &dyn Progress, s: &mut Section) -> Result<(), ReportError> {
-    use crate::render::{picture, run as pictures, Look, Overrides, Shade};
+    use crate::render::{image, picture, run as pictures, Look, Overrides, Shade};
     progress.step("merging: Figure 3, the z-fighting strip");
     let (size, scene) = (if cfg.quick { 128 } else { 256 }, "interpenetrating");
     let mut base = RunSpec::new(SceneSpec::Builtin(scene.into()), ALGO);
@@ -139,11 +139,13 @@ fn figure3(cfg: &PaperConfig, progress: &dyn Progress, s: &mut Section) -> Resul
         shade: Shade::Id,
         ..Look::default()
     };
-    let exact = crate::render::image(&base.algo, &truth, &view, &look)
+    let exact = image(&base.algo, &truth, &view, &look)
         .map_err(render_err)?
         .0;
-    let (t, _) = pictures::picture(&base, &view, &truth, &look).map_err(render_err)?;
-    let mut panels = vec![("the exact composite".to_string(), t)];
+    let mut panels = vec![(
+        "the exact composite".to_string(),
+        picture::Canvas::from_rgba(size, size, &exact),
+    )];
     // Under each image, where it differs from the exact composite by more than 1/255.
     let mut diffs = vec![(
         "below: pixels off the exact composite by more than 1/255".to_string(),
@@ -166,9 +168,7 @@ fn figure3(cfg: &PaperConfig, progress: &dyn Progress, s: &mut Section) -> Resul
         let c = ctx(run::check_with(&sp, &loaded, &truth), || {
             format!("{ALGO}, {title}")
         })?;
-        let (img, _) =
-            pictures::picture(&sp, &view, &c.rendered.result, &look).map_err(render_err)?;
-        let rgba = crate::render::image(&sp.algo, &c.rendered.result, &view, &look)
+        let rgba = image(&sp.algo, &c.rendered.result, &view, &look)
             .map_err(render_err)?
             .0;
         let off: Vec<bool> = exact
@@ -181,7 +181,10 @@ fn figure3(cfg: &PaperConfig, progress: &dyn Progress, s: &mut Section) -> Resul
             .image
             .as_ref()
             .map_or(c.metrics.epr, |i| i.image_epr);
-        panels.push((format!("{ALGO}, {title}: image EPR {epr:.3}"), img));
+        panels.push((
+            format!("{ALGO}, {title}: image EPR {epr:.3}"),
+            picture::Canvas::from_rgba(size, size, &rgba),
+        ));
         diffs.push((
             format!("{} pixels off", off.iter().filter(|&&o| o).count()),
             picture::difference(size, size, &exact, &rgba, &off),
