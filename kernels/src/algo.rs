@@ -349,28 +349,31 @@ pub trait Algorithm: Send + Sync {
         false
     }
 
-    /// Runs every pass of the algorithm on a fresh device, shading with `exec`, resolves,
-    /// and checks the algorithm's invariants ([`AlgoResult::checks`]). The same as
-    /// [`Algorithm::run_frame`] followed by [`Algorithm::self_check`].
-    fn run(
+    /// The frame: every pass of the algorithm on a fresh device, shaded with `exec`, and the
+    /// resolve, without the self-checks that read a whole buffer back only to check it (the
+    /// frame as the llvmpipe peer times it: clears, passes, resolve; its own checks run
+    /// untimed). An algorithm whose checks are cheap next to its passes runs them here; one
+    /// whose checks read a buffer back leaves them as [`AlgoResult::deferred`] work for
+    /// [`Algorithm::self_check`]. `fragrace bench` times this and the checks apart.
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError>;
 
-    /// The frame alone: [`Algorithm::run`] without the self-checks that read a whole
-    /// buffer back only to check it (the frame as the llvmpipe peer times it: clears,
-    /// passes, resolve; its own checks run untimed). `fragrace bench` times this and then
-    /// [`Algorithm::self_check`] apart. By default the whole of `run` (its checks are cheap
-    /// next to its passes).
-    fn run_frame(
+    /// The frame ([`Algorithm::run_frame`]) and then every check of the algorithm's
+    /// invariants ([`Algorithm::self_check`], [`AlgoResult::checks`]): what `render`,
+    /// `check` and the oracle run.
+    fn run(
         &self,
         frame: &Frame<'_>,
         params: &Params,
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
-        self.run(frame, params, exec)
+        let mut r = self.run_frame(frame, params, exec)?;
+        self.self_check(&mut r, exec);
+        Ok(r)
     }
 
     /// Completes a result of [`Algorithm::run_frame`] with the checks it left out (and what
@@ -382,19 +385,6 @@ pub trait Algorithm: Send + Sync {
             work.run(result);
         }
     }
-}
-
-/// [`Algorithm::run`] of an algorithm that splits it ([`Algorithm::run_frame`] and
-/// [`Algorithm::self_check`] overridden): the frame, then its checks.
-pub fn frame_then_check<A: Algorithm + ?Sized>(
-    algo: &A,
-    frame: &Frame<'_>,
-    params: &Params,
-    exec: &ExecConfig,
-) -> Result<AlgoResult, AlgoError> {
-    let mut r = algo.run_frame(frame, params, exec)?;
-    algo.self_check(&mut r, exec);
-    Ok(r)
 }
 
 /// Runs with a fresh device (helper for implementations).

@@ -8,8 +8,8 @@ use fragrace_emu::{
 };
 
 use crate::algo::{
-    frame_then_check, AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag,
-    Check, Frame, HazardClass, Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
+    HazardClass, Params,
 };
 use crate::common::{self, capture_state, framebuffer, geometry_pass, pixels, sort_fragments};
 
@@ -127,14 +127,6 @@ impl Algorithm for Count {
             capacity: Capacity::Count,
         }
     }
-    fn run(
-        &self,
-        frame: &Frame<'_>,
-        params: &Params,
-        exec: &ExecConfig,
-    ) -> Result<AlgoResult, AlgoError> {
-        frame_then_check(self, frame, params, exec)
-    }
     fn run_frame(
         &self,
         frame: &Frame<'_>,
@@ -165,14 +157,6 @@ impl Algorithm for CountPlain {
             hazard: HazardClass::HazardProne,
             capacity: Capacity::Count,
         }
-    }
-    fn run(
-        &self,
-        frame: &Frame<'_>,
-        params: &Params,
-        exec: &ExecConfig,
-    ) -> Result<AlgoResult, AlgoError> {
-        frame_then_check(self, frame, params, exec)
     }
     fn run_frame(
         &self,
@@ -231,7 +215,7 @@ impl Algorithm for Opaque {
             capacity: Capacity::Nearest,
         }
     }
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,
@@ -404,7 +388,7 @@ impl Algorithm for Truth {
             capacity: Capacity::All,
         }
     }
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -139,7 +139,7 @@ impl Algorithm for BunLl {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -170,7 +170,7 @@ impl Algorithm for Dfb {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

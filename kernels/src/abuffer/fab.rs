@@ -71,7 +71,7 @@ impl Algorithm for Fab {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -32,7 +32,7 @@ use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo, PassRe
 
 use super::run::{AbRun, Readback};
 use crate::algo::{
-    frame_then_check, AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture,
     CapturedFrag, Check, Frame, HazardClass, Params,
 };
 use crate::basic::CountKernel;
@@ -452,14 +452,6 @@ impl Algorithm for LinkedList {
         }
     }
 
-    fn run(
-        &self,
-        frame: &Frame<'_>,
-        params: &Params,
-        exec: &ExecConfig,
-    ) -> Result<AlgoResult, AlgoError> {
-        frame_then_check(self, frame, params, exec)
-    }
 
     /// The count pass (when the pool is sized exactly), the capture pass and the resolve;
     /// the lists are walked and checked afterwards ([`AlgoResult::deferred`]).

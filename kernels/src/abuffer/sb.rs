@@ -140,7 +140,7 @@ impl Algorithm for SBuffer {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -187,7 +187,7 @@ impl Algorithm for Adp {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

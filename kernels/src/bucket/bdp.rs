@@ -226,7 +226,7 @@ impl Algorithm for Bdp {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,
@@ -260,7 +260,7 @@ impl Algorithm for Bdp2 {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -27,7 +27,7 @@ use super::checks::Shape;
 use super::run::KbRun;
 use super::slots::{depth_key, pack64, Slots};
 use crate::algo::{
-    frame_then_check, AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, CapturedFrag, Check,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, CapturedFrag, Check,
     Frame, HazardClass, Params,
 };
 use crate::common::EMPTY;
@@ -224,14 +224,6 @@ impl Algorithm for KbAtomic32 {
         }
     }
 
-    fn run(
-        &self,
-        frame: &Frame<'_>,
-        params: &Params,
-        exec: &ExecConfig,
-    ) -> Result<AlgoResult, AlgoError> {
-        frame_then_check(self, frame, params, exec)
-    }
 
     /// The capture passes and the resolve; the slots are read back and checked afterwards
     /// ([`AlgoResult::deferred`]).
@@ -307,14 +299,6 @@ impl Algorithm for KbAtomic64 {
         }
     }
 
-    fn run(
-        &self,
-        frame: &Frame<'_>,
-        params: &Params,
-        exec: &ExecConfig,
-    ) -> Result<AlgoResult, AlgoError> {
-        frame_then_check(self, frame, params, exec)
-    }
 
     /// The capture passes and the resolve; the slots are read back and checked afterwards
     /// ([`AlgoResult::deferred`]).

@@ -118,7 +118,7 @@ impl Algorithm for KbInterlock {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

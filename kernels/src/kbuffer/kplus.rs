@@ -301,7 +301,7 @@ impl Algorithm for KPlus {
     fn takes_occupancy(&self) -> bool {
         true
     }
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,
@@ -318,7 +318,7 @@ impl Algorithm for KPlusHeap {
     fn takes_occupancy(&self) -> bool {
         true
     }
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

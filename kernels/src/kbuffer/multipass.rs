@@ -260,7 +260,7 @@ impl Algorithm for KbMultipass {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -19,7 +19,7 @@ use super::checks::Shape;
 use super::run::KbRun;
 use super::slots::{rmw_insert, Slots, SplitSlots};
 use crate::algo::{
-    frame_then_check, AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame,
     HazardClass, Params,
 };
 
@@ -78,14 +78,6 @@ impl Algorithm for KbRmw {
         }
     }
 
-    fn run(
-        &self,
-        frame: &Frame<'_>,
-        params: &Params,
-        exec: &ExecConfig,
-    ) -> Result<AlgoResult, AlgoError> {
-        frame_then_check(self, frame, params, exec)
-    }
 
     /// The capture pass and the resolve; the slots are read back and checked afterwards
     /// ([`AlgoResult::deferred`]).

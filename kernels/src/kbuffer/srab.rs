@@ -246,7 +246,7 @@ impl Algorithm for Srab {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

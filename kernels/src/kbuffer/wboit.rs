@@ -128,7 +128,7 @@ impl Algorithm for Wboit {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -102,7 +102,7 @@ impl Algorithm for DfbSfm {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -254,7 +254,7 @@ impl Algorithm for SkbOfm {
         }
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -130,7 +130,7 @@ impl Algorithm for Dual {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -223,7 +223,7 @@ impl Algorithm for Dual2p {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -137,7 +137,7 @@ impl Algorithm for DualB {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -132,7 +132,7 @@ impl Algorithm for DualLl {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

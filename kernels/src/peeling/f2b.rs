@@ -105,7 +105,7 @@ impl Algorithm for F2b {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

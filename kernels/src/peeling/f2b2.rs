@@ -169,7 +169,7 @@ impl Algorithm for F2b2 {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -147,7 +147,7 @@ impl Algorithm for F2b2p {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -179,7 +179,7 @@ impl Algorithm for F2b3p {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -304,7 +304,7 @@ impl Algorithm for F2bB {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

@@ -321,7 +321,7 @@ impl Algorithm for F2bLl {
         true
     }
 
-    fn run(
+    fn run_frame(
         &self,
         frame: &Frame<'_>,
         params: &Params,

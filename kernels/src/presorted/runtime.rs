@@ -33,8 +33,7 @@ use glam::{DMat4, DVec3, DVec4, Vec3};
 
 use super::{file, graph, input, PresortConfig, Presorted, Silent};
 use crate::algo::{
-    frame_then_check, AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame,
-    HazardClass, Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
 };
 use crate::common::{self, capture_state, framebuffer, pixels};
 
@@ -359,15 +358,6 @@ impl Algorithm for PresortedAlgo {
             hazard,
             capacity: Capacity::Image,
         }
-    }
-
-    fn run(
-        &self,
-        frame: &Frame<'_>,
-        params: &Params,
-        exec: &ExecConfig,
-    ) -> Result<AlgoResult, AlgoError> {
-        frame_then_check(self, frame, params, exec)
     }
 
     fn run_frame(
