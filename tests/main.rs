@@ -10,6 +10,7 @@
 
 mod acceptance;
 mod bucket;
+mod camera;
 mod cli;
 mod differential;
 mod fuzz_smoke;
@@ -18,6 +19,7 @@ mod geometry_passes;
 mod limits;
 mod memory;
 mod merging;
+mod obj;
 mod occupancy;
 mod output;
 mod params;
