@@ -244,3 +244,32 @@ fn print_summary(a: &FuzzOptions, state: &CampaignState) -> Result<(), CliError>
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_take_a_unit_and_refuse_others_by_value() {
+        assert_eq!(
+            parse_duration("90s").expect("seconds"),
+            std::time::Duration::from_secs(90)
+        );
+        assert_eq!(
+            parse_duration("2m").expect("minutes"),
+            std::time::Duration::from_secs(120)
+        );
+        assert_eq!(
+            parse_duration("1.5h").expect("hours"),
+            std::time::Duration::from_secs(5400)
+        );
+        let e = parse_duration("3d").expect_err("days are not a unit");
+        assert_eq!(e.to_string(), "bad duration unit in `3d` (use s, m or h)");
+        let e = parse_duration("x").expect_err("not a number");
+        assert_eq!(e.to_string(), "bad duration `x`");
+        assert!(
+            std::error::Error::source(&e).is_some(),
+            "the parse error is its source"
+        );
+    }
+}
