@@ -9,7 +9,6 @@ use anyhow::Result;
 use clap::parser::ValueSource;
 use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use fragrace::cli;
-use fragrace_kernels::Params;
 
 #[derive(Parser)]
 #[command(
@@ -227,7 +226,7 @@ struct ReportArgs {
 #[derive(Args, Clone)]
 struct RunArgs {
     /// A built-in scene (see `fragrace list`).
-    #[arg(long, default_value = "cubes", conflicts_with_all = ["obj", "scene_file"])]
+    #[arg(long, default_value_t = cli::RunOptions::default().scene, conflicts_with_all = ["obj", "scene_file"])]
     scene: String,
     /// A scene file (JSON: OBJ objects with placements, colours and opacities, and a
     /// camera; README "Scene files").
@@ -250,19 +249,19 @@ struct RunArgs {
     /// objects (completely peeled ones are culled; depth-fighting paper, section 3.3).
     #[arg(long)]
     geometry_culling: bool,
-    #[arg(long, default_value = "truth")]
+    #[arg(long, default_value_t = cli::RunOptions::default().algo)]
     algo: String,
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = cli::RunOptions::default().width)]
     width: u32,
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = cli::RunOptions::default().height)]
     height: u32,
     /// Degrees about +Y (0: eye on +Z, 90: on +X).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = cli::RunOptions::default().azimuth, allow_negative_numbers = true)]
     azimuth: f32,
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = cli::RunOptions::default().elevation, allow_negative_numbers = true)]
     elevation: f32,
     /// Vertical field of view, degrees.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = cli::RunOptions::default().fov)]
     fov: f32,
     /// Distance from the eye to the point looked at (default: the bounding sphere fills
     /// 80 % of the view), in units of the normalised scene (largest extent 1).
@@ -283,7 +282,7 @@ struct RunArgs {
     shade: Option<fragrace::render::Shade>,
     /// Translucent and fresnel shading: absorption per unit of the normalised scene; a
     /// channel absorbs sigma (1 - its colour).
-    #[arg(long, default_value_t = fragrace::render::Look::default().sigma)]
+    #[arg(long, default_value_t = cli::RunOptions::default().sigma)]
     sigma: f32,
     /// Colour R,G,B (each in [0, 1]) of every object, or repeated: of each object in order.
     #[arg(long, value_name = "R,G,B", value_parser = parse_step)]
@@ -296,30 +295,30 @@ struct RunArgs {
     #[arg(long, value_name = "N", requires = "out")]
     turntable: Option<u32>,
     /// ordered | parallel | scheduled
-    #[arg(long, default_value = "parallel")]
+    #[arg(long, default_value_t = cli::RunOptions::default().exec)]
     exec: String,
     /// Scheduling policy: random, pct:D, warp:N, reverse, fifo, far-first, bytes:HEX.
-    #[arg(long, default_value = "random")]
+    #[arg(long, default_value_t = cli::RunOptions::default().policy)]
     policy: String,
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = cli::RunOptions::default().seed)]
     seed: u64,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
     /// Invocations in flight under the scheduled executor.
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = cli::RunOptions::default().window)]
     window: usize,
     /// Scheduled: pixels per side of the blocks fragments are admitted by.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = cli::RunOptions::default().block)]
     block: u32,
     /// Scheduled: interleave only invocations about to touch the same address or pixel.
     #[arg(long)]
     reduce: bool,
     /// Per-mille probability that a weak compare-exchange fails spuriously.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = cli::RunOptions::default().spurious_cas)]
     spurious_cas: u32,
     /// Parallel: lanes per warp (fragments shaded together by one thread).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = cli::RunOptions::default().lanes)]
     lanes: usize,
     /// Parallel: lanes run one after the other instead of in SIMT lockstep (one memory
     /// access each per turn). Faster; races then come only from other threads.
@@ -327,7 +326,7 @@ struct RunArgs {
     no_lockstep: bool,
     /// Parallel: most triangles of one tile per unit of work; smaller units put more
     /// threads on one tile at once (when the pass's fixed-function results commute).
-    #[arg(long, default_value_t = 128)]
+    #[arg(long, default_value_t = cli::RunOptions::default().segment)]
     segment: u32,
     /// Parallel: `auto` runs passes that need nothing of the framebuffer (no depth or
     /// stencil test, no colour target: counting, captures) unbinned, chunks of triangles
@@ -339,16 +338,16 @@ struct RunArgs {
     /// scheduling, as on pre-Volta GPUs): lanes spinning in a loop hold back their
     /// warp-mates past it, so a spinlock whose holder shares their warp deadlocks.
     /// 0: lanes progress independently.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = cli::RunOptions::default().simt)]
     simt: u32,
     /// kb-spinlock: lock attempts before a fragment gives up (4294967295: never).
-    #[arg(long, default_value_t = Params::default().spin_cap)]
+    #[arg(long, default_value_t = cli::RunOptions::default().spin_cap)]
     spin_cap: u32,
     /// k of the k-buffers.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = cli::RunOptions::default().k)]
     k: u32,
     /// Opacity of every fragment in the OIT composite.
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, default_value_t = cli::RunOptions::default().alpha)]
     alpha: f32,
     #[command(flatten)]
     occupancy: OccupancyArgs,
@@ -358,7 +357,7 @@ struct RunArgs {
     #[arg(long, default_value = "2xP", value_parser = parse_thickness)]
     thickness: fragrace_kernels::merging::Thickness,
     /// Merging algorithms: beta of equation 4 (SFM: 0 exact optics, 1 linear), in [0, 1].
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = cli::RunOptions::default().beta)]
     beta: f32,
     /// The presorted algorithms: lists written by `fragrace presort` for this mesh (without
     /// it, the mesh is preprocessed first, with 6 partitions).

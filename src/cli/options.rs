@@ -62,6 +62,62 @@ pub struct RunOptions {
     pub memory_limit: Option<String>,
 }
 
+/// The command line's defaults: `fragrace render` with no option. The binary's options
+/// take their defaults from here (`--binning auto` and `--thickness 2xP`, parsed by the
+/// binary, are `Binning::default()` and `Thickness::default()`).
+impl Default for RunOptions {
+    fn default() -> RunOptions {
+        let params = Params::default();
+        RunOptions {
+            scene: "cubes".to_string(),
+            scene_file: None,
+            obj: Vec::new(),
+            obj_step: None,
+            place: Vec::new(),
+            geometry_culling: false,
+            algo: "truth".to_string(),
+            width: 512,
+            height: 512,
+            azimuth: 0.0,
+            elevation: 0.0,
+            fov: 60.0,
+            distance: None,
+            look_at: None,
+            orthographic: false,
+            shade: None,
+            sigma: crate::render::Look::default().sigma,
+            color: Vec::new(),
+            opacity: Vec::new(),
+            turntable: None,
+            exec: "parallel".to_string(),
+            policy: "random".to_string(),
+            seed: 0,
+            threads: None,
+            window: 64,
+            block: 4,
+            reduce: false,
+            spurious_cas: 0,
+            lanes: 64,
+            no_lockstep: false,
+            segment: 128,
+            binning: fragrace_emu::Binning::default(),
+            simt: 0,
+            spin_cap: params.spin_cap,
+            k: 8,
+            alpha: 0.3,
+            occupancy: OccupancyOptions::default(),
+            thickness: fragrace_kernels::merging::Thickness::default(),
+            beta: 0.0,
+            presorted: None,
+            out: None,
+            raw_out: None,
+            heatmap: None,
+            json: false,
+            memory_limit: None,
+        }
+    }
+}
+
 /// The occupancy-culling options of `render`, `check`, `bench`, `fuzz` and `report`:
 /// `--occupancy D`, `--range`, `--occupancy-fill`.
 #[derive(Clone, Copy, Debug, Default)]
@@ -283,5 +339,60 @@ mod tests {
             .name;
         assert!(takes_range(&format!("count,{bucket}@scheduled")));
         assert!(!takes_range("count,truth"));
+    }
+
+    #[test]
+    fn the_defaults_describe_a_valid_run() {
+        let spec = RunOptions::default().spec(&[]).expect("the defaults run");
+        assert_eq!(spec.algo, "truth");
+        assert_eq!((spec.width, spec.height), (512, 512));
+        assert_eq!(
+            fragrace_kernels::merging::Thickness::default(),
+            "2xP"
+                .parse()
+                .expect("the binary's default thickness parses")
+        );
+        assert_eq!(
+            Some(fragrace_emu::Binning::default()),
+            fragrace_emu::Binning::from_name("auto")
+        );
+    }
+
+    #[test]
+    fn spec_refuses_a_bad_option_by_name_before_loading() {
+        let unknown = RunOptions {
+            algo: "no-such-algorithm".into(),
+            ..RunOptions::default()
+        };
+        let e = unknown.spec(&[]).expect_err("an unknown algorithm");
+        assert!(
+            e.to_string()
+                .starts_with("unknown algorithm `no-such-algorithm`; known: count, "),
+            "{e}"
+        );
+        let zero_k = RunOptions {
+            algo: "kb-rmw".into(),
+            k: 0,
+            ..RunOptions::default()
+        };
+        let e = zero_k.spec(&["k".into()]).expect_err("k = 0");
+        assert!(matches!(e, CliError::Spec(_)), "{e:?}");
+        assert!(e.to_string().contains("(--k) = 0 is out of range"), "{e}");
+        let lanes = RunOptions {
+            exec: "scheduled".into(),
+            ..RunOptions::default()
+        };
+        let e = lanes
+            .spec(&["lanes".into()])
+            .expect_err("--lanes under scheduled");
+        assert!(matches!(e, CliError::NoEffect(_)), "{e:?}");
+        let step = RunOptions {
+            obj_step: Some([1.0, 0.0, 0.0]),
+            ..RunOptions::default()
+        };
+        assert!(matches!(
+            step.spec(&[]),
+            Err(CliError::Option(OptionError::ObjStepWithoutTwo))
+        ));
     }
 }
