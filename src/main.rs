@@ -714,14 +714,14 @@ fn main() {
 
 fn real_main() -> Result<()> {
     let matches = Cli::command().get_matches();
-    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    let parsed = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     let given = matches
         .subcommand()
         .map(|(_, m)| given(m))
         .unwrap_or_default();
     // A kernel panic is a reported fault, not a crash: keep the default hook's noise out.
     std::panic::set_hook(Box::new(|_| {}));
-    match cli.command {
+    match parsed.command {
         Command::Render(a) => cli::run::cmd_render(&a.into(), &given)?,
         Command::Check(a) => cli::run::cmd_check(&a.into(), &given)?,
         Command::List { json } => cli::list::cmd_list(json),
