@@ -2,13 +2,15 @@
 //!
 //! A software GPU that makes the race hazards of multi-fragment rendering visible,
 //! reproducible and measurable. This crate is the product: scenes ([`scene`]), runs and
-//! checks ([`run`]), images and heatmaps ([`output`]), case files, fuzzing and the CLI.
+//! checks ([`run`]), images and heatmaps ([`output`]), case files, fuzzing and the commands
+//! of the command line ([`cli`]; the binary only parses).
 //! The GPU itself is [`fragrace_emu`]; the algorithms are [`fragrace_kernels`].
 
 #![forbid(unsafe_code)]
 
 pub mod budget;
 pub mod case;
+pub mod cli;
 pub mod culling;
 pub mod floor;
 pub mod fuzz;

@@ -1,19 +1,14 @@
-//! The `fragrace` command line.
+//! The `fragrace` command line: it only parses. Its options (clap's derive structs, with
+//! their help text and defaults) convert into the library's plain options, and the commands
+//! themselves are [`fragrace::cli`]'s; an error is printed as `error: ...` with exit
+//! status 2.
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::Result;
 use clap::parser::ValueSource;
 use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
-use fragrace::run::{self, RunSpec, SceneSpec};
-use fragrace::scene::Camera;
-use fragrace_kernels::Params;
-
-mod cli;
-use cli::bench::cmd_bench;
-use cli::fuzz::cmd_fuzz;
-use cli::report::cmd_report;
-use cli::run::{cmd_check, cmd_render, cmd_replay};
+use fragrace::cli;
 
 #[derive(Parser)]
 #[command(
@@ -54,9 +49,51 @@ enum Command {
     /// Tables of measured EPR, R_h, bytes per pixel and time (markdown), and EPR over views.
     Report(ReportArgs),
     /// The hazard detector measured on labelled racy and race-free kernels, per policy.
-    Racebench(cli::racebench::RacebenchArgs),
+    Racebench(RacebenchArgs),
     /// Preprocess a static mesh into depth-presorted triangle lists (`--algo presorted`).
-    Presort(cli::presort::PresortArgs),
+    Presort(PresortArgs),
+}
+
+#[derive(Args)]
+struct RacebenchArgs {
+    /// Schedules per kernel and policy (runs, for `parallel`).
+    #[arg(long, default_value_t = 200)]
+    schedules: u64,
+    /// Comma-separated policies (scheduled policy names, or `parallel`).
+    #[arg(long, default_value = "random,pct:2,pct:3,warp:32,far-first,parallel")]
+    policies: String,
+    /// Comma-separated kernel names (default: all).
+    #[arg(long)]
+    kernels: Option<String>,
+    /// Worker threads of the sweep (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Run every schedule even after a racy kernel's race was found (a precision run: every
+    /// report is seen). By default a racy kernel stops at its first true report.
+    #[arg(long)]
+    all_schedules: bool,
+    /// The full result as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Options of `presort`.
+#[derive(Args)]
+struct PresortArgs {
+    /// The mesh: an OBJ file (plain or .gz), or a built-in scene's name.
+    mesh: String,
+    /// Faces of the bounding polyhedron (= viewpoint partitions = segments): 4, 6, 16 or 64.
+    #[arg(long, default_value_t = 6)]
+    partitions: u32,
+    /// Where to write the lists (written to a temporary file and renamed when complete).
+    #[arg(long)]
+    out: PathBuf,
+    /// Worker threads (partitions run one per task; default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Print one JSON object on stdout.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args)]
@@ -189,7 +226,7 @@ struct ReportArgs {
 #[derive(Args, Clone)]
 struct RunArgs {
     /// A built-in scene (see `fragrace list`).
-    #[arg(long, default_value = "cubes", conflicts_with_all = ["obj", "scene_file"])]
+    #[arg(long, default_value_t = cli::RunOptions::default().scene, conflicts_with_all = ["obj", "scene_file"])]
     scene: String,
     /// A scene file (JSON: OBJ objects with placements, colours and opacities, and a
     /// camera; README "Scene files").
@@ -212,19 +249,19 @@ struct RunArgs {
     /// objects (completely peeled ones are culled; depth-fighting paper, section 3.3).
     #[arg(long)]
     geometry_culling: bool,
-    #[arg(long, default_value = "truth")]
+    #[arg(long, default_value_t = cli::RunOptions::default().algo)]
     algo: String,
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = cli::RunOptions::default().width)]
     width: u32,
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = cli::RunOptions::default().height)]
     height: u32,
     /// Degrees about +Y (0: eye on +Z, 90: on +X).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = cli::RunOptions::default().azimuth, allow_negative_numbers = true)]
     azimuth: f32,
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = cli::RunOptions::default().elevation, allow_negative_numbers = true)]
     elevation: f32,
     /// Vertical field of view, degrees.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = cli::RunOptions::default().fov)]
     fov: f32,
     /// Distance from the eye to the point looked at (default: the bounding sphere fills
     /// 80 % of the view), in units of the normalised scene (largest extent 1).
@@ -245,7 +282,7 @@ struct RunArgs {
     shade: Option<fragrace::render::Shade>,
     /// Translucent and fresnel shading: absorption per unit of the normalised scene; a
     /// channel absorbs sigma (1 - its colour).
-    #[arg(long, default_value_t = fragrace::render::Look::default().sigma)]
+    #[arg(long, default_value_t = cli::RunOptions::default().sigma)]
     sigma: f32,
     /// Colour R,G,B (each in [0, 1]) of every object, or repeated: of each object in order.
     #[arg(long, value_name = "R,G,B", value_parser = parse_step)]
@@ -258,30 +295,30 @@ struct RunArgs {
     #[arg(long, value_name = "N", requires = "out")]
     turntable: Option<u32>,
     /// ordered | parallel | scheduled
-    #[arg(long, default_value = "parallel")]
+    #[arg(long, default_value_t = cli::RunOptions::default().exec)]
     exec: String,
     /// Scheduling policy: random, pct:D, warp:N, reverse, fifo, far-first, bytes:HEX.
-    #[arg(long, default_value = "random")]
+    #[arg(long, default_value_t = cli::RunOptions::default().policy)]
     policy: String,
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = cli::RunOptions::default().seed)]
     seed: u64,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
     /// Invocations in flight under the scheduled executor.
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = cli::RunOptions::default().window)]
     window: usize,
     /// Scheduled: pixels per side of the blocks fragments are admitted by.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = cli::RunOptions::default().block)]
     block: u32,
     /// Scheduled: interleave only invocations about to touch the same address or pixel.
     #[arg(long)]
     reduce: bool,
     /// Per-mille probability that a weak compare-exchange fails spuriously.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = cli::RunOptions::default().spurious_cas)]
     spurious_cas: u32,
     /// Parallel: lanes per warp (fragments shaded together by one thread).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = cli::RunOptions::default().lanes)]
     lanes: usize,
     /// Parallel: lanes run one after the other instead of in SIMT lockstep (one memory
     /// access each per turn). Faster; races then come only from other threads.
@@ -289,7 +326,7 @@ struct RunArgs {
     no_lockstep: bool,
     /// Parallel: most triangles of one tile per unit of work; smaller units put more
     /// threads on one tile at once (when the pass's fixed-function results commute).
-    #[arg(long, default_value_t = 128)]
+    #[arg(long, default_value_t = cli::RunOptions::default().segment)]
     segment: u32,
     /// Parallel: `auto` runs passes that need nothing of the framebuffer (no depth or
     /// stencil test, no colour target: counting, captures) unbinned, chunks of triangles
@@ -301,16 +338,16 @@ struct RunArgs {
     /// scheduling, as on pre-Volta GPUs): lanes spinning in a loop hold back their
     /// warp-mates past it, so a spinlock whose holder shares their warp deadlocks.
     /// 0: lanes progress independently.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = cli::RunOptions::default().simt)]
     simt: u32,
     /// kb-spinlock: lock attempts before a fragment gives up (4294967295: never).
-    #[arg(long, default_value_t = Params::default().spin_cap)]
+    #[arg(long, default_value_t = cli::RunOptions::default().spin_cap)]
     spin_cap: u32,
     /// k of the k-buffers.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = cli::RunOptions::default().k)]
     k: u32,
     /// Opacity of every fragment in the OIT composite.
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, default_value_t = cli::RunOptions::default().alpha)]
     alpha: f32,
     #[command(flatten)]
     occupancy: OccupancyArgs,
@@ -320,7 +357,7 @@ struct RunArgs {
     #[arg(long, default_value = "2xP", value_parser = parse_thickness)]
     thickness: fragrace_kernels::merging::Thickness,
     /// Merging algorithms: beta of equation 4 (SFM: 0 exact optics, 1 linear), in [0, 1].
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = cli::RunOptions::default().beta)]
     beta: f32,
     /// The presorted algorithms: lists written by `fragrace presort` for this mesh (without
     /// it, the mesh is preprocessed first, with 6 partitions).
@@ -377,153 +414,6 @@ fn given(m: &ArgMatches) -> Vec<String> {
         .collect()
 }
 
-/// The run the options describe, every value checked ([`RunSpec::validate`]) and every
-/// option that the executor would ignore refused, before anything is loaded.
-fn spec_of(a: &RunArgs, given: &[String]) -> Result<RunSpec> {
-    fragrace::validate::options_for_exec(&a.exec, given.iter().map(String::as_str))?;
-    let mut files = Vec::with_capacity(a.obj.len());
-    for p in &a.obj {
-        if !p.exists() {
-            bail!("{}: file not found", p.display());
-        }
-        let bytes = std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))?;
-        files.push(run::ObjFile {
-            path: p.clone(),
-            sha256: Some(fragrace::scene::obj::content_hash(&bytes)),
-        });
-    }
-    if !a.place.is_empty() && a.place.len() != files.len() {
-        bail!(
-            "--place given {} times for {} --obj files: give it once per file, in order",
-            a.place.len(),
-            files.len()
-        );
-    }
-    if a.obj_step.is_some() && files.len() < 2 {
-        bail!("--obj-step moves the second and later --obj files: give at least two");
-    }
-    let mut camera = Camera {
-        fovy: a.fov,
-        distance: a.distance,
-        look_at: a.look_at,
-        projection: if a.orthographic {
-            fragrace::scene::Projection::Orthographic
-        } else {
-            fragrace::scene::Projection::Perspective
-        },
-        ..Camera::new(a.azimuth, a.elevation)
-    };
-    if let Some(path) = &a.scene_file {
-        // The file's camera, where the command line says nothing.
-        let bytes =
-            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-        let file = fragrace::scene::file::SceneFile::parse(&bytes, path)?;
-        let from_file = file.camera(camera);
-        let set = |name: &str| given.iter().any(|g| g == name);
-        camera = Camera {
-            azimuth: if set("azimuth") {
-                camera.azimuth
-            } else {
-                from_file.azimuth
-            },
-            elevation: if set("elevation") {
-                camera.elevation
-            } else {
-                from_file.elevation
-            },
-            fovy: if set("fov") {
-                camera.fovy
-            } else {
-                from_file.fovy
-            },
-            distance: camera.distance.or(from_file.distance),
-            look_at: camera.look_at.or(from_file.look_at),
-            ..from_file
-        };
-    }
-    let scene = match files.len() {
-        0 if a.scene_file.is_some() => {
-            let path = a.scene_file.clone().expect("checked");
-            let bytes = std::fs::read(&path)?;
-            SceneSpec::File {
-                sha256: Some(fragrace::scene::obj::content_hash(&bytes)),
-                path,
-            }
-        }
-        0 => SceneSpec::Builtin(a.scene.clone()),
-        1 if a.place.is_empty() => {
-            let f = files.remove(0);
-            SceneSpec::Obj {
-                path: f.path,
-                sha256: f.sha256,
-            }
-        }
-        _ => SceneSpec::Objs {
-            files,
-            step: a.obj_step.unwrap_or_default(),
-            places: a.place.clone(),
-        },
-    };
-    let mut exec = run::exec_config(&a.exec, &a.policy, a.seed, a.threads, a.window)?;
-    // The scheduled executor's own settings (refused above under the other executors).
-    if let fragrace::emu::ExecMode::Scheduled(s) = &mut exec.mode {
-        s.block = a.block;
-        s.reduce = a.reduce;
-        s.simt = a.simt;
-    }
-    exec.spurious_cas_per_mille = a.spurious_cas;
-    exec.batch = a.lanes;
-    exec.lockstep = !a.no_lockstep;
-    exec.segment = a.segment;
-    exec.binning = a.binning;
-    if fragrace_kernels::algorithm(&a.algo).is_none() {
-        bail!(
-            "unknown algorithm `{}`; known: {}, and after `fragrace presort`: {}",
-            a.algo,
-            fragrace_kernels::names().join(", "),
-            fragrace_kernels::registry::preprocessed()
-                .iter()
-                .map(|x| x.info().name)
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-    }
-    let spec = RunSpec {
-        scene,
-        camera,
-        width: a.width,
-        height: a.height,
-        algo: a.algo.clone(),
-        params: Params {
-            k: a.k,
-            alpha: a.alpha,
-            spin_cap: a.spin_cap,
-            occupancy: a.occupancy.get(takes_range(&a.algo))?,
-            range: a.occupancy.range.unwrap_or_default(),
-            geometry_culling: if a.geometry_culling {
-                fragrace_kernels::peeling::GeometryCulling::Queries
-            } else {
-                fragrace_kernels::peeling::GeometryCulling::Off
-            },
-            merge: {
-                let merge = fragrace_kernels::merging::MergeParams {
-                    thickness: a.thickness,
-                    beta: a.beta,
-                };
-                merge.validate()?;
-                merge
-            },
-            presorted: a.presorted.clone(),
-            ..Params::default()
-        },
-        exec,
-    };
-    spec.validate()?;
-    // After the ranges: `--k 0` is out of range whatever the algorithm.
-    fragrace::validate::options_for_algo(&a.algo, given.iter().map(String::as_str))?;
-    Ok(spec)
-}
-
 /// The occupancy-culling options of `render`, `check`, `bench`, `fuzz` and `report`.
 #[derive(Args, Clone)]
 struct OccupancyArgs {
@@ -543,33 +433,276 @@ struct OccupancyArgs {
     occupancy_fill: Option<fragrace_kernels::occupancy::FillMode>,
 }
 
-impl OccupancyArgs {
-    /// The stage's parameters; `--range` and `--occupancy-fill` mean nothing without
-    /// `--occupancy` and are refused alone (`--range` alone is the depth range of the
-    /// algorithms that take one, the bucket schemes: `takes_range`).
-    fn get(&self, takes_range: bool) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
-        match self.occupancy {
-            Some(d) => Ok(Some(fragrace_kernels::occupancy::Occupancy {
-                d,
-                range: self.range.unwrap_or_default(),
-                fill: self.occupancy_fill.unwrap_or_default(),
-            })),
-            None if (self.range.is_some() && !takes_range) || self.occupancy_fill.is_some() => {
-                bail!("--range and --occupancy-fill configure occupancy culling: add --occupancy D (1 to 64)")
-            }
-            None => Ok(None),
+// The options, parsed, into the library's (`fragrace::cli`): every field named on both
+// sides, so an option added to one side only does not compile.
+
+impl From<RunArgs> for cli::RunOptions {
+    fn from(a: RunArgs) -> cli::RunOptions {
+        let RunArgs {
+            scene,
+            scene_file,
+            obj,
+            obj_step,
+            place,
+            geometry_culling,
+            algo,
+            width,
+            height,
+            azimuth,
+            elevation,
+            fov,
+            distance,
+            look_at,
+            orthographic,
+            shade,
+            sigma,
+            color,
+            opacity,
+            turntable,
+            exec,
+            policy,
+            seed,
+            threads,
+            window,
+            block,
+            reduce,
+            spurious_cas,
+            lanes,
+            no_lockstep,
+            segment,
+            binning,
+            simt,
+            spin_cap,
+            k,
+            alpha,
+            occupancy,
+            thickness,
+            beta,
+            presorted,
+            out,
+            raw_out,
+            heatmap,
+            json,
+            memory_limit,
+        } = a;
+        cli::RunOptions {
+            scene,
+            scene_file,
+            obj,
+            obj_step,
+            place,
+            geometry_culling,
+            algo,
+            width,
+            height,
+            azimuth,
+            elevation,
+            fov,
+            distance,
+            look_at,
+            orthographic,
+            shade,
+            sigma,
+            color,
+            opacity,
+            turntable,
+            exec,
+            policy,
+            seed,
+            threads,
+            window,
+            block,
+            reduce,
+            spurious_cas,
+            lanes,
+            no_lockstep,
+            segment,
+            binning,
+            simt,
+            spin_cap,
+            k,
+            alpha,
+            occupancy: occupancy.into(),
+            thickness,
+            beta,
+            presorted,
+            out,
+            raw_out,
+            heatmap,
+            json,
+            memory_limit,
         }
     }
 }
 
-/// Whether any of `algos` (comma-separated) takes a depth range of its own (`--range`
-/// without `--occupancy`).
-fn takes_range(algos: &str) -> bool {
-    algos
-        .split(',')
-        // `NAME@EXEC` (report's view sweeps) names the algorithm before the `@`.
-        .map(|n| n.split('@').next().unwrap_or(n))
-        .any(|n| fragrace_kernels::algorithm(n).is_some_and(|x| x.takes_range()))
+impl From<CheckArgs> for cli::run::CheckOptions {
+    fn from(a: CheckArgs) -> cli::run::CheckOptions {
+        let CheckArgs { run, schedules } = a;
+        cli::run::CheckOptions {
+            run: run.into(),
+            schedules,
+        }
+    }
+}
+
+impl From<BenchArgs> for cli::bench::BenchOptions {
+    fn from(a: BenchArgs) -> cli::bench::BenchOptions {
+        let BenchArgs {
+            run,
+            frames,
+            warmup,
+            floor,
+        } = a;
+        cli::bench::BenchOptions {
+            run: run.into(),
+            frames,
+            warmup,
+            floor,
+        }
+    }
+}
+
+impl From<FuzzArgs> for cli::fuzz::FuzzOptions {
+    fn from(a: FuzzArgs) -> cli::fuzz::FuzzOptions {
+        let FuzzArgs {
+            time,
+            iterations,
+            algo,
+            jobs,
+            out,
+            seed,
+            resume,
+            meshes,
+            shrink_secs,
+            max_size,
+            schedules,
+            scene,
+            occupancy,
+            json,
+            memory_limit,
+            shard,
+            merge,
+        } = a;
+        cli::fuzz::FuzzOptions {
+            time,
+            iterations,
+            algo,
+            jobs,
+            out,
+            seed,
+            resume,
+            meshes,
+            shrink_secs,
+            max_size,
+            schedules,
+            scene,
+            occupancy: occupancy.into(),
+            json,
+            memory_limit,
+            shard,
+            merge,
+        }
+    }
+}
+
+impl From<ReportArgs> for cli::report::ReportOptions {
+    fn from(a: ReportArgs) -> cli::report::ReportOptions {
+        let ReportArgs {
+            algo,
+            scenes,
+            size,
+            exec,
+            policy,
+            seed,
+            threads,
+            k,
+            views,
+            jobs,
+            shard,
+            out,
+            occupancy,
+            memory_limit,
+            paper,
+            quick,
+            models,
+            peer,
+        } = a;
+        cli::report::ReportOptions {
+            algo,
+            scenes,
+            size,
+            exec,
+            policy,
+            seed,
+            threads,
+            k,
+            views,
+            jobs,
+            shard,
+            out,
+            occupancy: occupancy.into(),
+            memory_limit,
+            paper,
+            quick,
+            models,
+            peer,
+        }
+    }
+}
+
+impl From<RacebenchArgs> for cli::racebench::RacebenchOptions {
+    fn from(a: RacebenchArgs) -> cli::racebench::RacebenchOptions {
+        let RacebenchArgs {
+            schedules,
+            policies,
+            kernels,
+            threads,
+            all_schedules,
+            json,
+        } = a;
+        cli::racebench::RacebenchOptions {
+            schedules,
+            policies,
+            kernels,
+            threads,
+            all_schedules,
+            json,
+        }
+    }
+}
+
+impl From<PresortArgs> for cli::presort::PresortOptions {
+    fn from(a: PresortArgs) -> cli::presort::PresortOptions {
+        let PresortArgs {
+            mesh,
+            partitions,
+            out,
+            threads,
+            json,
+        } = a;
+        cli::presort::PresortOptions {
+            mesh,
+            partitions,
+            out,
+            threads,
+            json,
+        }
+    }
+}
+
+impl From<OccupancyArgs> for cli::OccupancyOptions {
+    fn from(a: OccupancyArgs) -> cli::OccupancyOptions {
+        let OccupancyArgs {
+            occupancy,
+            range,
+            occupancy_fill,
+        } = a;
+        cli::OccupancyOptions {
+            occupancy,
+            range,
+            occupancy_fill,
+        }
+    }
 }
 
 fn main() {
@@ -581,123 +714,37 @@ fn main() {
 
 fn real_main() -> Result<()> {
     let matches = Cli::command().get_matches();
-    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    let parsed = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     let given = matches
         .subcommand()
         .map(|(_, m)| given(m))
         .unwrap_or_default();
     // A kernel panic is a reported fault, not a crash: keep the default hook's noise out.
     std::panic::set_hook(Box::new(|_| {}));
-    match cli.command {
-        Command::Render(a) => cmd_render(&a, &given),
-        Command::Check(a) => cmd_check(&a, &given),
-        Command::List { json } => cmd_list(json),
-        Command::Bench(a) => cmd_bench(&a, &given),
-        Command::Fuzz(a) => cmd_fuzz(&a),
+    match parsed.command {
+        Command::Render(a) => cli::run::cmd_render(&a.into(), &given)?,
+        Command::Check(a) => cli::run::cmd_check(&a.into(), &given)?,
+        Command::List { json } => cli::list::cmd_list(json),
+        Command::Bench(a) => cli::bench::cmd_bench(&a.into(), &given)?,
+        Command::Fuzz(a) => cli::fuzz::cmd_fuzz(&a.into())?,
         Command::Replay {
             case,
             json,
             memory_limit,
-        } => cmd_replay(&case, json, memory_limit.as_deref()),
-        Command::Report(a) => cmd_report(&a, &given),
-        Command::Racebench(a) => cli::racebench::cmd_racebench(&a),
-        Command::Presort(a) => cli::presort::cmd_presort(&a),
+        } => {
+            let holds = cli::run::cmd_replay(&cli::run::ReplayOptions {
+                case,
+                json,
+                memory_limit,
+            })?;
+            if !holds {
+                std::process::exit(1);
+            }
+        }
+        Command::Report(a) => cli::report::cmd_report(&a.into(), &given)?,
+        Command::Racebench(a) => cli::racebench::cmd_racebench(&a.into())?,
+        Command::Presort(a) => cli::presort::cmd_presort(&a.into())?,
     }
-}
-
-/// The estimated peak memory of a run, refused when above the budget (`--memory-limit`);
-/// as JSON fields for the summary.
-fn within_budget(
-    spec: &RunSpec,
-    loaded: &run::Loaded,
-    with_truth: bool,
-    limit: Option<&str>,
-) -> Result<serde_json::Value> {
-    let (limit, source) = fragrace::budget::limit(limit)?;
-    let est = fragrace::budget::estimate(spec, loaded, with_truth);
-    fragrace::budget::check(&est, limit, &source)?;
-    Ok(serde_json::json!({
-        "memory_estimate_bytes": est.bytes,
-        "memory_estimate_parts": est.parts,
-        "memory_limit_bytes": limit,
-        "fragments_estimate": est.fragments,
-    }))
-}
-
-/// A progress bar of `len` steps (a spinner when 0) with the elapsed time, on stderr when it
-/// is a terminal; nothing otherwise, so that piped output stays clean.
-pub(crate) fn progress(len: u64, msg: &str) -> indicatif::ProgressBar {
-    let (bar, template) = if len == 0 {
-        (
-            indicatif::ProgressBar::new_spinner(),
-            "{spinner} {elapsed} {msg}",
-        )
-    } else {
-        (
-            indicatif::ProgressBar::new(len),
-            "{spinner} {elapsed} [{bar:30}] {pos}/{len} {msg}",
-        )
-    };
-    bar.set_style(indicatif::ProgressStyle::with_template(template).expect("valid template"));
-    bar.set_message(msg.to_string());
-    bar.enable_steady_tick(std::time::Duration::from_millis(100));
-    bar
-}
-
-/// Adds the fields of `extra` (an object) to `v`.
-fn merge(v: &mut serde_json::Value, extra: &serde_json::Value) {
-    if let (Some(v), Some(e)) = (v.as_object_mut(), extra.as_object()) {
-        v.extend(e.iter().map(|(k, x)| (k.clone(), x.clone())));
-    }
-}
-
-fn cmd_list(json: bool) -> Result<()> {
-    let mut algos = fragrace_kernels::algorithms();
-    algos.extend(fragrace_kernels::registry::preprocessed());
-    let infos: Vec<_> = algos
-        .iter()
-        .map(|a| {
-            let mut v = serde_json::to_value(a.info()).expect("AlgoInfo serializes");
-            v["occupancy"] = serde_json::json!(a.takes_occupancy());
-            // The shared options it reads (`--k`, `--spin-cap`); the others are refused.
-            v["reads"] = [fragrace_kernels::Param::K, fragrace_kernels::Param::SpinCap]
-                .into_iter()
-                .filter(|&p| a.reads(p))
-                .map(|p| p.option())
-                .collect();
-            v
-        })
-        .collect();
-    if json {
-        println!(
-            "{}",
-            serde_json::json!({"algorithms": infos, "scenes": fragrace::scene::builtin_names(), "policies": ["random", "pct:D", "warp:N", "reverse", "fifo", "far-first", "bytes:HEX"]})
-        );
-        return Ok(());
-    }
-    println!(
-        "{:<24} {:<12} {:<16} {:<26} memory per pixel",
-        "algorithm", "family", "hazard class", "passes"
-    );
-    for a in &algos {
-        let i = a.info();
-        println!(
-            "{:<24} {:<12} {:<16} {:<26} {}",
-            i.name,
-            i.family,
-            i.hazard.name(),
-            i.passes,
-            i.memory
-        );
-    }
-    let takers: Vec<_> = algos
-        .iter()
-        .filter(|a| a.takes_occupancy())
-        .map(|a| a.info().name)
-        .collect();
-    println!("\noccupancy culling (--occupancy D): {}", takers.join(", "));
-    println!("\nscenes: {}", fragrace::scene::builtin_names().join(", "));
-    println!("policies: random, pct:D, warp:N, reverse, fifo, far-first, bytes:HEX");
     Ok(())
 }
 

@@ -1,26 +1,40 @@
 //! `fragrace bench`: frames timed as the llvmpipe peer times them.
 
-use anyhow::{bail, Context, Result};
-use fragrace::run;
+use super::error::{CliError, OptionError};
+use super::memory::{merge, within_budget};
+use super::options::RunOptions;
+use super::progress::progress;
+use crate::run;
 
-use crate::{merge, spec_of, within_budget, BenchArgs};
+/// The options of `bench`: a run, timed over frames.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub run: RunOptions,
+    /// Frames to time (the median is reported).
+    pub frames: usize,
+    /// Frames run before the timed ones.
+    pub warmup: usize,
+    /// Also measure the machine's floor under the frame (`--algo count` only).
+    pub floor: bool,
+}
 
-pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
-    let spec = spec_of(&a.run, given)?;
-    fragrace::validate::at_least_one("frames", a.frames as u64)?;
+/// `bench`: the frames' median time, where it goes and the storage per fragment and pixel.
+pub fn cmd_bench(a: &BenchOptions, given: &[String]) -> Result<(), CliError> {
+    let spec = a.run.spec(given)?;
+    crate::validate::at_least_one("frames", a.frames as u64)?;
     // The floor replays `count`'s operation (one atomic add per fragment); other
     // algorithms do other things per fragment.
     if a.floor && spec.algo != "count" {
-        bail!(
-            "--floor measures the floor of `count` (its atomic adds alone), not of `{}`",
-            spec.algo
-        );
+        return Err(OptionError::FloorNotCount {
+            algo: spec.algo.clone(),
+        }
+        .into());
     }
     let loaded = run::load(&spec)?;
     let memory = within_budget(&spec, &loaded, false, a.run.memory_limit.as_deref())?;
     // Progress on a terminal (nothing when piped), drawn between frames only: no ticking
     // thread drawing while a frame is timed.
-    let bar = crate::progress((a.warmup + a.frames) as u64, "warm-up frames");
+    let bar = progress((a.warmup + a.frames) as u64, "warm-up frames");
     bar.disable_steady_tick();
     for _ in 0..a.warmup {
         run::render(&spec, &loaded)?;
@@ -65,15 +79,15 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
     }
     bar.finish_and_clear();
     let r = last.expect("one frame");
-    let ms = fragrace::floor::median(&mut times);
-    let check_ms = fragrace::floor::median(&mut check_times);
-    let checked_ms = fragrace::floor::median(&mut checked_times);
+    let ms = crate::floor::median(&mut times);
+    let check_ms = crate::floor::median(&mut check_times);
+    let checked_ms = crate::floor::median(&mut checked_times);
     // The passes alone (transform, binning, shading, fixed function), without buffer
     // allocation and clears.
-    let pass_ms = fragrace::floor::median(&mut pass_times);
+    let pass_ms = crate::floor::median(&mut pass_times);
     // Threads waiting for the last one at the end of shading, summed over threads.
-    let imbalance_ms = fragrace::floor::median(&mut imbalance_times);
-    let outside_ms = fragrace::floor::median(&mut outside_times);
+    let imbalance_ms = crate::floor::median(&mut imbalance_times);
+    let outside_ms = crate::floor::median(&mut outside_times);
     let phases: Vec<(String, f64)> = r
         .result
         .report
@@ -88,7 +102,7 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
             };
             (
                 format!("{} ({kind})", p.kernel),
-                fragrace::floor::median(times),
+                crate::floor::median(times),
             )
         })
         .collect();
@@ -101,23 +115,24 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
     let bytes_per_pixel = storage / pixels.max(1.0);
     let tris = loaded.scene.mesh.triangle_count() as f64 * stats.geometry_passes.max(1) as f64;
     let floor = if a.floor {
-        let counts = r.result.counts.as_deref().with_context(|| {
-            format!(
-                "--floor replays the per-pixel counts of `count`; `{}` has none",
-                spec.algo
-            )
-        })?;
-        let cfg = fragrace::floor::FloorConfig {
+        let counts = r
+            .result
+            .counts
+            .as_deref()
+            .ok_or_else(|| OptionError::FloorWithoutCounts {
+                algo: spec.algo.clone(),
+            })?;
+        let cfg = crate::floor::FloorConfig {
             counts,
             width: spec.width,
             height: spec.height,
-            tile: fragrace::emu::raster::effective_tile_size(
-                fragrace::emu::raster::RasterState::default().tile_size,
+            tile: crate::emu::raster::effective_tile_size(
+                crate::emu::raster::RasterState::default().tile_size,
             ),
             threads: spec.exec.threads,
             frames: a.frames,
         };
-        Some(fragrace::floor::count_floor(&cfg).context("the floor's replay did not add up")?)
+        Some(crate::floor::count_floor(&cfg).ok_or(CliError::Floor)?)
     } else {
         None
     };
@@ -152,7 +167,7 @@ pub(crate) fn cmd_bench(a: &BenchArgs, given: &[String]) -> Result<()> {
             .collect::<Vec<_>>(),
     });
     merge(&mut v, &memory);
-    v["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
+    v["peak_rss_bytes"] = serde_json::json!(crate::budget::peak_rss());
     if let Some(f) = floor {
         v["floor_atomics_ms"] = f.atomics_ms.into();
         v["floor_frame_ms"] = f.frame_ms.into();

@@ -1,33 +1,66 @@
 //! `fragrace fuzz`: a campaign (or one shard of it) with a progress line, or `--merge`.
 
+use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
-use fragrace::fuzz::{CampaignState, Shard};
-use fragrace::run;
+use super::error::{CliError, OptionError};
+use super::options::{takes_range, OccupancyOptions};
+use crate::fuzz::{CampaignState, Shard};
+use crate::run;
 
-use crate::FuzzArgs;
+/// The options of `fuzz`. Each field is the command line's option of the same name
+/// (`fragrace fuzz --help` says what each means), parsed but not yet checked.
+#[derive(Clone, Debug)]
+pub struct FuzzOptions {
+    pub time: Option<String>,
+    pub iterations: Option<u64>,
+    pub algo: Vec<String>,
+    pub jobs: usize,
+    pub out: PathBuf,
+    pub seed: u64,
+    pub resume: bool,
+    pub meshes: Option<PathBuf>,
+    pub shrink_secs: u64,
+    pub max_size: u32,
+    pub schedules: u64,
+    pub scene: Vec<String>,
+    pub occupancy: OccupancyOptions,
+    pub json: bool,
+    pub memory_limit: Option<String>,
+    pub shard: Option<String>,
+    pub merge: Vec<PathBuf>,
+}
 
-fn parse_duration(s: &str) -> Result<std::time::Duration> {
+/// `--time`: a number and a unit (s, ms, m or min, h; seconds without one).
+pub fn parse_duration(s: &str) -> Result<std::time::Duration, OptionError> {
     let (num, unit) = s.split_at(
         s.find(|c: char| !c.is_ascii_digit() && c != '.')
             .unwrap_or(s.len()),
     );
-    let v: f64 = num.parse().with_context(|| format!("bad duration `{s}`"))?;
+    let v: f64 = num.parse().map_err(|source| OptionError::Duration {
+        value: s.to_string(),
+        source,
+    })?;
     let secs = match unit {
         "" | "s" => v,
         "ms" => v / 1e3,
         "m" | "min" => v * 60.0,
         "h" => v * 3600.0,
-        _ => bail!("bad duration unit in `{s}` (use s, m or h)"),
+        _ => {
+            return Err(OptionError::DurationUnit {
+                value: s.to_string(),
+            })
+        }
     };
     Ok(std::time::Duration::from_secs_f64(secs))
 }
 
 /// The occupancy culling a fuzz campaign forces, checked against its algorithms: at
 /// least one of them must take it, and `d` must hold the largest k the campaign draws (16).
-fn fuzz_occupancy(a: &FuzzArgs) -> Result<Option<fragrace_kernels::occupancy::Occupancy>> {
-    let Some(occ) = a.occupancy.get(crate::takes_range(&a.algo.join(",")))? else {
+fn fuzz_occupancy(
+    a: &FuzzOptions,
+) -> Result<Option<fragrace_kernels::occupancy::Occupancy>, CliError> {
+    let Some(occ) = a.occupancy.get(takes_range(&a.algo.join(",")))? else {
         return Ok(None);
     };
     occ.validate(16)?;
@@ -38,27 +71,30 @@ fn fuzz_occupancy(a: &FuzzArgs) -> Result<Option<fragrace_kernels::occupancy::Oc
         .map(|x| x.info().name)
         .collect();
     if !a.algo.is_empty() && !a.algo.iter().any(|n| takers.contains(&n.as_str())) {
-        bail!(
-            "--occupancy: none of {} runs behind occupancy culling; the algorithms that do: {}",
-            a.algo.join(", "),
-            takers.join(", ")
-        );
+        return Err(OptionError::OccupancyWithoutTaker {
+            algos: a.algo.clone(),
+            takers,
+        }
+        .into());
     }
     Ok(Some(occ))
 }
 
-pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
+/// `fuzz`: a campaign (or one shard of it) with a progress line, or with `merge` the
+/// shards' directories combined; then the summary. Ctrl-C stops the campaign cleanly (the
+/// runs in flight finish, the state is saved).
+pub fn cmd_fuzz(a: &FuzzOptions) -> Result<(), CliError> {
     use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
     use std::sync::Arc;
     if !a.merge.is_empty() {
-        let state = fragrace::fuzz::merge(&a.merge, &a.out)?;
+        let state = crate::fuzz::merge(&a.merge, &a.out)?;
         return print_summary(a, &state);
     }
     let shard = match &a.shard {
         Some(s) => s.parse::<Shard>()?,
         None => Shard::WHOLE,
     };
-    let cfg = fragrace::fuzz::FuzzConfig {
+    let cfg = crate::fuzz::FuzzConfig {
         out: a.out.clone(),
         time: a.time.as_deref().map(parse_duration).transpose()?,
         iterations: a.iterations,
@@ -75,27 +111,27 @@ pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
         schedules: a.schedules,
     };
     if cfg.time.is_none() && cfg.iterations.is_none() {
-        bail!("give --time or --iterations (a campaign needs a budget)");
+        return Err(OptionError::CampaignWithoutBudget.into());
     }
     if let Some(n) = cfg.iterations {
-        fragrace::validate::at_least_one("iterations", n)?;
+        crate::validate::at_least_one("iterations", n)?;
     }
     if cfg.time.is_some_and(|t| t.is_zero()) {
-        bail!(
-            "--time {}: a campaign needs a positive time",
-            a.time.as_deref().unwrap_or("")
-        );
+        return Err(OptionError::ZeroTime {
+            value: a.time.clone().unwrap_or_default(),
+        }
+        .into());
     }
     cfg.validate()?;
-    let (limit, source) = fragrace::budget::limit(a.memory_limit.as_deref())?;
-    fragrace::budget::check_campaign(&cfg.memory_estimate(), limit, &source)?;
+    let (limit, source) = crate::budget::limit(a.memory_limit.as_deref())?;
+    crate::budget::check_campaign(&cfg.memory_estimate(), limit, &source)?;
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();
         // Ctrl-C: finish the runs in flight, save the state, exit cleanly.
         let _ = ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed));
     }
-    let progress = fragrace::fuzz::Progress {
+    let progress = crate::fuzz::Progress {
         executions: AtomicU64::new(0),
         cases: AtomicU64::new(0),
         violations: AtomicU64::new(0),
@@ -107,7 +143,7 @@ pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
     );
     let start = Instant::now();
     let state = std::thread::scope(|s| {
-        let h = s.spawn(|| fragrace::fuzz::campaign(&cfg, &stop, &progress));
+        let h = s.spawn(|| crate::fuzz::campaign(&cfg, &stop, &progress));
         while !h.is_finished() {
             let e = progress.executions.load(Ordering::Relaxed);
             bar.set_message(format!(
@@ -126,7 +162,7 @@ pub(crate) fn cmd_fuzz(a: &FuzzArgs) -> Result<()> {
 }
 
 /// The campaign's summary: counts, then one line per finding signature with its case.
-fn print_summary(a: &FuzzArgs, state: &CampaignState) -> Result<()> {
+fn print_summary(a: &FuzzOptions, state: &CampaignState) -> Result<(), CliError> {
     if a.json {
         println!("{}", serde_json::to_string(&state)?);
         return Ok(());
@@ -207,4 +243,33 @@ fn print_summary(a: &FuzzArgs, state: &CampaignState) -> Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations_take_a_unit_and_refuse_others_by_value() {
+        assert_eq!(
+            parse_duration("90s").expect("seconds"),
+            std::time::Duration::from_secs(90)
+        );
+        assert_eq!(
+            parse_duration("2m").expect("minutes"),
+            std::time::Duration::from_secs(120)
+        );
+        assert_eq!(
+            parse_duration("1.5h").expect("hours"),
+            std::time::Duration::from_secs(5400)
+        );
+        let e = parse_duration("3d").expect_err("days are not a unit");
+        assert_eq!(e.to_string(), "bad duration unit in `3d` (use s, m or h)");
+        let e = parse_duration("x").expect_err("not a number");
+        assert_eq!(e.to_string(), "bad duration `x`");
+        assert!(
+            std::error::Error::source(&e).is_some(),
+            "the parse error is its source"
+        );
+    }
 }

@@ -1,9 +1,50 @@
-//! The commands of the binary, by file (`main.rs` keeps the options, their parsing into a run and `list`).
+//! The commands of the `fragrace` binary, one file per command: what `fragrace render`,
+//! `check`, `bench`, ... do once their options are parsed.
+//!
+//! # What a command is
+//!
+//! A command is a function `cmd_NAME(&Options, ...) -> Result<_, CliError>` that checks its
+//! options, runs, prints its summary on stdout (text, or one JSON object with `json`),
+//! writes its files and returns. Its input is a plain struct of this library
+//! ([`RunOptions`], [`run::CheckOptions`], [`bench::BenchOptions`], [`fuzz::FuzzOptions`],
+//! [`report::ReportOptions`], [`racebench::RacebenchOptions`],
+//! [`presort::PresortOptions`], [`run::ReplayOptions`]): one field per option of the command
+//! line, with the option's name, parsed (a number is a number) but not yet checked. The
+//! command checks the values and refuses what does not go together before any computation,
+//! with a typed error ([`CliError`]; the command line's own mistakes are [`OptionError`]s)
+//! whose message names the value and its valid range.
+//!
+//! Commands that build one run (`render`, `check`, `bench`) also take `given`: the options
+//! written on the command line rather than defaulted, named as typed without `--`. An
+//! option that the chosen executor or algorithm would ignore is refused only when given
+//! ([`RunOptions::spec`]), and a scene file's camera yields to the options given.
+//!
+//! # How the binary calls it
+//!
+//! `main.rs` only parses: clap's derive structs (the help text, defaults, value parsers)
+//! convert field by field into these options, and `main` calls the command, printing an
+//! error as `error: ...` (the error and its sources, joined by `: `) on stderr with exit
+//! status 2. `replay` returns whether the case's observation still holds; the binary exits
+//! with status 1 when it does not.
+//!
+//! The options are plain structs here, and clap's derive stays in the binary, so that the
+//! library has no parser in its types: a test, a benchmark or another front end builds the
+//! options as values and calls the command. The cost is the conversion in `main.rs`, written
+//! as a destructuring of every field, so the compiler refuses an option added on one side
+//! only.
 
-pub(crate) mod bench;
-pub(crate) mod fuzz;
-pub(crate) mod outputs;
-pub(crate) mod presort;
-pub(crate) mod racebench;
-pub(crate) mod report;
-pub(crate) mod run;
+pub mod bench;
+pub mod error;
+pub mod fuzz;
+pub mod list;
+pub mod memory;
+pub mod options;
+pub mod outputs;
+pub mod presort;
+pub mod progress;
+pub mod racebench;
+pub mod report;
+pub mod run;
+
+pub use error::{CliError, OptionError};
+pub use options::{OccupancyOptions, RunOptions};

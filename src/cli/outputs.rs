@@ -2,15 +2,15 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
-use fragrace::render::{self, Look, Overrides, Shade};
-use fragrace::run::{self, RunSpec};
 use fragrace_kernels::AlgoResult;
 
-use crate::RunArgs;
+use super::error::{CliError, OptionError};
+use super::options::RunOptions;
+use crate::render::{self, Look, Overrides, RenderError, Shade};
+use crate::run::{self, RunSpec};
 
 /// The renderer's settings of the command line; `default` when `--shade` is not given.
-pub(crate) fn look_of(a: &RunArgs, default: Shade) -> Result<Look> {
+pub fn look_of(a: &RunOptions, default: Shade) -> Result<Look, RenderError> {
     let look = Look {
         shade: a.shade.unwrap_or(default),
         sigma: a.sigma,
@@ -21,7 +21,7 @@ pub(crate) fn look_of(a: &RunArgs, default: Shade) -> Result<Look> {
 }
 
 /// `--color` and `--opacity`.
-pub(crate) fn overrides_of(a: &RunArgs) -> Overrides {
+pub fn overrides_of(a: &RunOptions) -> Overrides {
     Overrides {
         colors: a.color.clone(),
         opacities: a.opacity.clone(),
@@ -29,7 +29,7 @@ pub(crate) fn overrides_of(a: &RunArgs) -> Overrides {
 }
 
 /// Prints what loading the scene left out (unusable normals, missing or malformed MTL files).
-pub(crate) fn warn_scene(loaded: &run::Loaded) {
+pub fn warn_scene(loaded: &run::Loaded) {
     if let Some(s) = &loaded.scene.surface {
         for w in &s.warnings {
             eprintln!("warning: {w}");
@@ -40,7 +40,7 @@ pub(crate) fn warn_scene(loaded: &run::Loaded) {
 /// What `--out` wrote, for the summary: the shading and the time it took to make the
 /// picture (shading, compositing, legends; not writing the file) in milliseconds.
 #[derive(Clone, Debug, Default)]
-pub(crate) struct Written {
+pub struct Written {
     pub files: Vec<PathBuf>,
     pub shade: Option<&'static str>,
     pub picture_ms: Option<f64>,
@@ -49,14 +49,14 @@ pub(crate) struct Written {
 /// `--out` of `render` (`truth: None`) or of `check` (the three panels): the picture of this
 /// run, or with `--turntable N` of N views around the scene (each view run again).
 fn write_picture(
-    a: &RunArgs,
+    a: &RunOptions,
     spec: &RunSpec,
     loaded: &run::Loaded,
     r: &run::Rendered,
     checked: Option<(&run::Checked, &AlgoResult)>,
     path: &Path,
     out: &mut Written,
-) -> Result<()> {
+) -> Result<(), CliError> {
     let default = match checked {
         Some(_) => Shade::Id,
         None => render::run::default_shade(r.info.capacity),
@@ -68,7 +68,7 @@ fn write_picture(
                    loaded: &run::Loaded,
                    r: &AlgoResult,
                    checked: Option<(&run::Checked, &AlgoResult)>|
-     -> Result<render::picture::Canvas> {
+     -> Result<render::picture::Canvas, CliError> {
         let view = render::run::view(spec, loaded, &surface);
         Ok(match checked {
             Some((c, truth)) => render::run::compare(spec, &view, c, truth, &look)?,
@@ -88,9 +88,7 @@ fn write_picture(
         let t = std::time::Instant::now();
         let canvas = picture(spec, loaded, &r.result, checked)?;
         out.picture_ms = Some(t.elapsed().as_secs_f64() * 1e3);
-        canvas
-            .write_png(path)
-            .with_context(|| format!("{}: cannot write", path.display()))?;
+        canvas.write_png(path).map_err(CliError::write(path))?;
         out.files.push(path.to_path_buf());
         return Ok(());
     };
@@ -122,24 +120,27 @@ fn write_picture(
 }
 
 /// Checks that the outputs asked for can be written, before any computation.
-pub(crate) fn check_outputs(a: &RunArgs, algo: &str) -> Result<()> {
-    use fragrace::output::{check_dir, check_writable};
+pub fn check_outputs(a: &RunOptions, algo: &str) -> Result<(), CliError> {
+    use crate::output::{check_dir, check_writable};
     if let Some(p) = &a.out {
         check_writable(p, "the image (--out)")?;
     }
     if a.out.is_none() && (a.shade.is_some() || !a.color.is_empty() || !a.opacity.is_empty()) {
-        bail!("--shade, --color and --opacity change only the picture: add --out PATH");
+        return Err(OptionError::PictureWithoutOut.into());
     }
     // The renderer's settings, before any computation (the shading mode's default does not
     // matter here).
     look_of(a, Shade::Lit)?;
     overrides_of(a).validate()?;
     if a.turntable == Some(0) {
-        bail!("--turntable 0: the number of views must be at least 1");
+        return Err(OptionError::TurntableZero.into());
     }
     if let Some(p) = &a.raw_out {
         if !matches!(algo, "count" | "count-plain") {
-            bail!("--raw-out needs a counting algorithm (count, count-plain), not `{algo}`");
+            return Err(OptionError::RawOutNotCounting {
+                algo: algo.to_string(),
+            }
+            .into());
         }
         check_writable(p, "the counts (--raw-out)")?;
     }
@@ -150,16 +151,15 @@ pub(crate) fn check_outputs(a: &RunArgs, algo: &str) -> Result<()> {
 }
 
 /// Writes the outputs asked for; returns the files written.
-pub(crate) fn write_outputs(
-    a: &RunArgs,
+pub fn write_outputs(
+    a: &RunOptions,
     spec: &RunSpec,
     loaded: &run::Loaded,
     r: &run::Rendered,
     checked: Option<(&run::Checked, &AlgoResult)>,
-) -> Result<Written> {
+) -> Result<Written, CliError> {
     let res = &r.result;
     let mut out = Written::default();
-    let named = |p: &Path| format!("{}: cannot write", p.display());
     if let Some(path) = &a.out {
         write_picture(a, spec, loaded, r, checked, path, &mut out)?;
     }
@@ -167,18 +167,18 @@ pub(crate) fn write_outputs(
     let checked = checked.map(|(c, _)| c);
     if let Some(path) = &a.raw_out {
         let Some(c) = &res.counts else {
-            bail!("--raw-out needs a counting algorithm (count, count-plain)")
+            return Err(OptionError::RawOutWithoutCounts.into());
         };
         let bytes: Vec<u8> = c.iter().flat_map(|v| v.to_le_bytes()).collect();
-        fragrace::output::write_atomic(path, &bytes).with_context(|| named(path))?;
+        crate::output::write_atomic(path, &bytes).map_err(CliError::write(path))?;
         written.push(path.clone());
     }
     if let Some(dir) = &a.heatmap {
-        std::fs::create_dir_all(dir).with_context(|| named(dir))?;
-        let mut heat = |name: &str, values: &[u32]| -> Result<()> {
+        std::fs::create_dir_all(dir).map_err(CliError::write(dir))?;
+        let mut heat = |name: &str, values: &[u32]| -> Result<(), CliError> {
             let p = dir.join(name);
-            fragrace::output::write_heatmap(&p, spec.width, spec.height, values)
-                .with_context(|| named(&p))?;
+            crate::output::write_heatmap(&p, spec.width, spec.height, values)
+                .map_err(CliError::write(&p))?;
             written.push(p);
             Ok(())
         };
@@ -224,7 +224,7 @@ pub(crate) fn write_outputs(
 }
 
 /// Lists the files written (on stderr under --json, to keep stdout one JSON object).
-pub(crate) fn list_written(written: &[PathBuf], json: bool) {
+pub fn list_written(written: &[PathBuf], json: bool) {
     for p in written {
         if json {
             eprintln!("wrote {}", p.display());

@@ -5,26 +5,23 @@ use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
-use clap::Args;
 use fragrace_kernels::presorted::{self, file, PresortConfig, Progress};
 
-/// Options of `presort`.
-#[derive(Args)]
-pub(crate) struct PresortArgs {
+use super::error::{CliError, OptionError};
+use super::progress::progress;
+
+/// The options of `presort`.
+#[derive(Clone, Debug)]
+pub struct PresortOptions {
     /// The mesh: an OBJ file (plain or .gz), or a built-in scene's name.
     pub mesh: String,
     /// Faces of the bounding polyhedron (= viewpoint partitions = segments): 4, 6, 16 or 64.
-    #[arg(long, default_value_t = 6)]
     pub partitions: u32,
     /// Where to write the lists (written to a temporary file and renamed when complete).
-    #[arg(long)]
     pub out: PathBuf,
     /// Worker threads (partitions run one per task; default: all cores).
-    #[arg(long)]
     pub threads: Option<usize>,
     /// Print one JSON object on stdout.
-    #[arg(long)]
     pub json: bool,
 }
 
@@ -80,28 +77,32 @@ impl Progress for Bar {
     }
 }
 
-pub(crate) fn cmd_presort(a: &PresortArgs) -> Result<()> {
+/// `presort`: the lists preprocessed, saved to `out`, and their statistics printed.
+pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
     if a.threads == Some(0) {
-        bail!("--threads 0: at least 1 thread");
+        return Err(OptionError::ZeroThreads.into());
     }
     let threads = a
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    presorted::partition::directions(a.partitions).map_err(anyhow::Error::msg)?;
+    presorted::partition::directions(a.partitions).map_err(CliError::Partitions)?;
     let scene = if a.mesh.contains(".obj") {
-        fragrace::run::SceneSpec::Obj {
+        crate::run::SceneSpec::Obj {
             path: a.mesh.clone().into(),
             sha256: None,
         }
     } else {
-        fragrace::run::SceneSpec::Builtin(a.mesh.clone())
+        crate::run::SceneSpec::Builtin(a.mesh.clone())
     };
     let mesh = scene
         .load()
-        .with_context(|| format!("loading {}", a.mesh))?
+        .map_err(|source| CliError::Mesh {
+            mesh: a.mesh.clone(),
+            source,
+        })?
         .mesh;
     let bar = Bar {
-        bar: crate::progress(
+        bar: progress(
             u64::from(a.partitions) * 1000,
             &format!("presorting {} triangles", mesh.indices.len()),
         ),

@@ -1,33 +1,27 @@
 //! `fragrace racebench`: the detector measured on the labelled race benchmark.
 
-use anyhow::Result;
-use clap::Args;
-use fragrace::racebench::{self, BenchConfig, BenchPolicy, BenchResult};
+use super::error::CliError;
+use crate::racebench::{self, BenchConfig, BenchPolicy, BenchResult};
 
-#[derive(Args)]
-pub(crate) struct RacebenchArgs {
+/// The options of `racebench`.
+#[derive(Clone, Debug)]
+pub struct RacebenchOptions {
     /// Schedules per kernel and policy (runs, for `parallel`).
-    #[arg(long, default_value_t = 200)]
-    schedules: u64,
+    pub schedules: u64,
     /// Comma-separated policies (scheduled policy names, or `parallel`).
-    #[arg(long, default_value = "random,pct:2,pct:3,warp:32,far-first,parallel")]
-    policies: String,
+    pub policies: String,
     /// Comma-separated kernel names (default: all).
-    #[arg(long)]
-    kernels: Option<String>,
+    pub kernels: Option<String>,
     /// Worker threads of the sweep (default: all cores).
-    #[arg(long)]
-    threads: Option<usize>,
-    /// Run every schedule even after a racy kernel's race was found (a precision run: every
-    /// report is seen). By default a racy kernel stops at its first true report.
-    #[arg(long)]
-    all_schedules: bool,
+    pub threads: Option<usize>,
+    /// Run every schedule even after a racy kernel's race was found (a precision run).
+    pub all_schedules: bool,
     /// The full result as JSON.
-    #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
-pub(crate) fn cmd_racebench(a: &RacebenchArgs) -> Result<()> {
+/// `racebench`: the sweep, its table (or JSON) printed.
+pub fn cmd_racebench(a: &RacebenchOptions) -> Result<(), CliError> {
     let policies = a
         .policies
         .split(',')

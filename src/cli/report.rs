@@ -1,15 +1,45 @@
 //! `fragrace report`: tables of measured EPR, R_h, bytes per pixel and time, and EPR over
 //! views (in parallel with `--jobs`, one slice of them with `--shard I/N`).
 
-use anyhow::{bail, Context, Result};
-use fragrace::fuzz::Shard;
-use fragrace::run::{self, RunSpec, SceneSpec};
-use fragrace::scene::Camera;
+use std::path::PathBuf;
+
 use rayon::prelude::*;
 
-use crate::{within_budget, ReportArgs};
+use super::error::{CliError, OptionError};
+use super::memory::within_budget;
+use super::options::{takes_range, OccupancyOptions};
+use super::progress::progress;
+use crate::fuzz::Shard;
+use crate::run::{self, RunSpec, SceneSpec};
+use crate::scene::Camera;
 
-pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
+/// The options of `report`. Each field is the command line's option of the same name
+/// (`fragrace report --help` says what each means), parsed but not yet checked.
+#[derive(Clone, Debug)]
+pub struct ReportOptions {
+    pub algo: Vec<String>,
+    pub scenes: Vec<String>,
+    pub size: u32,
+    pub exec: String,
+    pub policy: String,
+    pub seed: u64,
+    pub threads: Option<usize>,
+    pub k: u32,
+    pub views: Option<u32>,
+    pub jobs: usize,
+    pub shard: Option<String>,
+    pub out: Option<PathBuf>,
+    pub occupancy: OccupancyOptions,
+    pub memory_limit: Option<String>,
+    pub paper: Option<String>,
+    pub quick: bool,
+    pub models: Option<PathBuf>,
+    pub peer: Option<PathBuf>,
+}
+
+/// `report`: the table of every algorithm on every scene, or with `views` a sweep of EPR
+/// over azimuths, or with `paper` the seeds' tables and figures.
+pub fn cmd_report(a: &ReportOptions, given: &[String]) -> Result<(), CliError> {
     if let Some(papers) = &a.paper {
         return cmd_paper(a, papers);
     }
@@ -21,7 +51,10 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         .filter_map(|n| n.split_once('@').map(|(_, e)| e));
     let execs: Vec<&str> = std::iter::once(a.exec.as_str()).chain(overridden).collect();
     if a.views.is_none() && execs.len() > 1 {
-        bail!("NAME@EXEC in --algo is for --views sweeps only; the table runs every algorithm under --exec {}", a.exec);
+        return Err(OptionError::ExecOverrideWithoutViews {
+            exec: a.exec.clone(),
+        }
+        .into());
     }
     let scheduled = execs.contains(&"scheduled");
     let checked = if scheduled {
@@ -29,7 +62,7 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
     } else {
         a.exec.as_str()
     };
-    fragrace::validate::options_for_exec(checked, given.iter().map(String::as_str))?;
+    crate::validate::options_for_exec(checked, given.iter().map(String::as_str))?;
     let algos: Vec<String> = if a.algo.is_empty() {
         fragrace_kernels::names()
             .into_iter()
@@ -45,13 +78,17 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         .map(|spec| match spec.split_once('@') {
             Some((name, e)) => Ok((
                 name.to_string(),
-                run::exec_config(e, &a.policy, a.seed, a.threads, 64)
-                    .with_context(|| format!("--algo {spec}"))?,
+                run::exec_config(e, &a.policy, a.seed, a.threads, 64).map_err(|source| {
+                    CliError::AlgoExec {
+                        algo: spec.clone(),
+                        source,
+                    }
+                })?,
             )),
             None => Ok((spec.clone(), exec.clone())),
         })
-        .collect::<Result<_>>()?;
-    let occupancy = a.occupancy.get(crate::takes_range(&a.algo.join(",")))?;
+        .collect::<Result<_, CliError>>()?;
+    let occupancy = a.occupancy.get(takes_range(&a.algo.join(",")))?;
     if let Some(o) = occupancy {
         o.validate(a.k)?;
     }
@@ -74,21 +111,22 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
         }
     };
     if let Some(out) = &a.out {
-        fragrace::output::check_writable(out, "the plot (--out)")?;
+        crate::output::check_writable(out, "the plot (--out)")?;
     }
     if let Some(views) = a.views {
-        let scene = a.scenes.first().context("one scene for --views")?;
-        fragrace::validate::at_least_one("views", views.into())?;
+        let scene = a.scenes.first().ok_or(OptionError::ViewsWithoutScene)?;
+        crate::validate::at_least_one("views", views.into())?;
         let shard = match &a.shard {
             Some(s) => s.parse::<Shard>()?,
             None => Shard::WHOLE,
         };
         let max_jobs = fragrace_emu::exec::max_threads();
         if !(1..=max_jobs).contains(&a.jobs) {
-            bail!(
-                "--jobs {} is out of range: it must be from 1 to {max_jobs}",
-                a.jobs
-            );
+            return Err(OptionError::Jobs {
+                jobs: a.jobs,
+                max: max_jobs,
+            }
+            .into());
         }
         let mine: Vec<u32> = (0..views).filter(|&v| shard.contains(v.into())).collect();
         let azimuth = |v: u32| 360.0 * v as f32 / views as f32;
@@ -107,15 +145,15 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
             let loaded = run::load(&spec)?;
             report_budget(&spec, &loaded, &runs, a.memory_limit.as_deref(), a.jobs)?;
         }
-        let bar = crate::progress(mine.len() as u64 * (algos.len() as u64 + 1), "views");
+        let bar = progress(mine.len() as u64 * (algos.len() as u64 + 1), "views");
         // The views are independent runs: a work-stealing pool (rayon) shares them out.
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(a.jobs)
             .build()
-            .context("starting the pool of --jobs threads")?;
+            .map_err(CliError::Pool)?;
         let rows: Vec<Vec<f64>> = pool.install(|| {
             mine.par_iter()
-                .map(|&v| -> Result<Vec<f64>> {
+                .map(|&v| -> Result<Vec<f64>, CliError> {
                     let spec = view_spec(v);
                     let loaded = run::load(&spec)?;
                     bar.set_message(format!("view {} of {views}: the truth", v + 1));
@@ -134,7 +172,7 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
                         })
                         .collect()
                 })
-                .collect::<Result<Vec<_>>>()
+                .collect::<Result<Vec<_>, CliError>>()
         })?;
         bar.finish_and_clear();
         println!("azimuth,{}", algos.join(","));
@@ -146,7 +184,7 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
             let series = algos
                 .iter()
                 .enumerate()
-                .map(|(i, n)| fragrace::plot::Series {
+                .map(|(i, n)| crate::plot::Series {
                     name: n.clone(),
                     points: mine
                         .iter()
@@ -160,7 +198,7 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
             let name = std::path::Path::new(scene)
                 .file_name()
                 .map_or(scene.to_string(), |n| n.to_string_lossy().into_owned());
-            let mut plot = fragrace::plot::LinePlot::new(
+            let mut plot = crate::plot::LinePlot::new(
                 &format!(
                     "Error pixel rate over {views} views of {name} ({0}x{0}, k = {1})",
                     a.size, a.k
@@ -176,7 +214,7 @@ pub(crate) fn cmd_report(a: &ReportArgs, given: &[String]) -> Result<()> {
     }
     println!("| algorithm | scene | EPR | R_h | bytes/pixel | dropped | hazards (lost/race/torn) | time ms |");
     println!("|---|---|---|---|---|---|---|---|");
-    let bar = crate::progress(a.scenes.len() as u64 * (algos.len() as u64 + 1), "");
+    let bar = progress(a.scenes.len() as u64 * (algos.len() as u64 + 1), "");
     for scene in &a.scenes {
         let mut spec = RunSpec::new(scene_spec(scene), "truth");
         spec.width = a.size;
@@ -229,44 +267,48 @@ fn report_budget(
     runs: &[(String, fragrace_emu::ExecConfig)],
     limit: Option<&str>,
     jobs: usize,
-) -> Result<()> {
-    let (limit_bytes, source) = fragrace::budget::limit(limit)?;
+) -> Result<(), CliError> {
+    let (limit_bytes, source) = crate::budget::limit(limit)?;
     for (name, exec) in runs {
         let mut s = spec.clone();
         s.algo = name.clone();
         s.exec = exec.clone();
         s.validate()?;
         if jobs == 1 {
-            within_budget(&s, loaded, true, limit).with_context(|| format!("algorithm {name}"))?;
+            within_budget(&s, loaded, true, limit).map_err(|source| CliError::AlgoBudget {
+                algo: name.clone(),
+                source,
+            })?;
             continue;
         }
-        let one = fragrace::budget::estimate(&s, loaded, true);
-        let all = fragrace::budget::MemoryEstimate {
+        let one = crate::budget::estimate(&s, loaded, true);
+        let all = crate::budget::MemoryEstimate {
             bytes: one.bytes.saturating_mul(jobs as u64),
             fragments: one.fragments,
             parts: vec![(
                 format!(
                     "--jobs {jobs} x {} for one view",
-                    fragrace::budget::human(one.bytes)
+                    crate::budget::human(one.bytes)
                 ),
                 one.bytes.saturating_mul(jobs as u64),
             )],
         };
-        fragrace::budget::check(&all, limit_bytes, &source)
-            .with_context(|| format!("algorithm {name}"))?;
+        crate::budget::check(&all, limit_bytes, &source).map_err(|source| {
+            CliError::AlgoBudget {
+                algo: name.clone(),
+                source,
+            }
+        })?;
     }
     Ok(())
 }
 
-/// `report --paper SECTIONS --out DIR`: the library's report ([`fragrace::report`]), with a
+/// `report --paper SECTIONS --out DIR`: the library's report ([`crate::report`]), with a
 /// progress bar naming the figure or table being made.
-fn cmd_paper(a: &ReportArgs, papers: &str) -> Result<()> {
-    let out = a
-        .out
-        .clone()
-        .context("--paper writes a directory: give it with --out DIR")?;
-    let cfg = fragrace::report::PaperConfig {
-        papers: fragrace::report::Paper::parse_list(papers)?,
+fn cmd_paper(a: &ReportOptions, papers: &str) -> Result<(), CliError> {
+    let out = a.out.clone().ok_or(OptionError::PaperWithoutOut)?;
+    let cfg = crate::report::PaperConfig {
+        papers: crate::report::Paper::parse_list(papers)?,
         out,
         quick: a.quick,
         models: a.models.clone(),
@@ -275,9 +317,9 @@ fn cmd_paper(a: &ReportArgs, papers: &str) -> Result<()> {
             .threads
             .unwrap_or_else(fragrace_emu::exec::default_threads),
     };
-    let bar = crate::progress(0, "report");
+    let bar = progress(0, "report");
     let step = |m: &str| bar.set_message(m.to_string());
-    let written = fragrace::report::generate(&cfg, &step)?;
+    let written = crate::report::generate(&cfg, &step)?;
     bar.finish_and_clear();
     println!(
         "{} ({} files, {:.1} s)",

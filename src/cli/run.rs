@@ -1,17 +1,38 @@
 //! `fragrace render`, `check` and `replay`: one run (or a few schedules of it) against the
 //! truth, its summary printed and its pictures written.
 
-use std::path::Path;
+use std::path::PathBuf;
 
-use anyhow::{Context, Result};
-use fragrace::run::{self, RunSpec, SceneSpec};
 use fragrace_emu::HazardKind;
 
+use super::error::CliError;
+use super::memory::{merge, within_budget};
+use super::options::RunOptions;
 use super::outputs::{check_outputs, list_written, write_outputs};
-use crate::{merge, progress, spec_of, within_budget, CheckArgs, RunArgs};
+use super::progress::progress;
+use crate::run::{self, RunSpec, SceneSpec};
 
-pub(crate) fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
-    let spec = spec_of(a, given)?;
+/// The options of `check`: a run, over `schedules` seeds.
+#[derive(Clone, Debug)]
+pub struct CheckOptions {
+    pub run: RunOptions,
+    /// Schedules (seeds seed, seed+1, ...) to run under the scheduled executor.
+    pub schedules: u64,
+}
+
+/// The options of `replay`.
+#[derive(Clone, Debug)]
+pub struct ReplayOptions {
+    /// The case file.
+    pub case: PathBuf,
+    pub json: bool,
+    /// `--memory-limit`.
+    pub memory_limit: Option<String>,
+}
+
+/// `render`: one run, its summary printed and its pictures written.
+pub fn cmd_render(a: &RunOptions, given: &[String]) -> Result<(), CliError> {
+    let spec = a.spec(given)?;
     check_outputs(a, &spec.algo)?;
     let loaded = run::load(&spec)?;
     super::outputs::warn_scene(&loaded);
@@ -24,11 +45,11 @@ pub(crate) fn cmd_render(a: &RunArgs, given: &[String]) -> Result<()> {
     summary["shade"] = serde_json::json!(written.shade);
     summary["picture_ms"] = serde_json::json!(written.picture_ms);
     let written = written.files;
-    if let Some(base) = fragrace::culling::baseline(&spec, &loaded)? {
-        summary["occupancy"] = fragrace::culling::summary(&rendered, None, Some(&base));
+    if let Some(base) = crate::culling::baseline(&spec, &loaded)? {
+        summary["occupancy"] = crate::culling::summary(&rendered, None, Some(&base));
     }
     merge(&mut summary, &memory);
-    summary["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
+    summary["peak_rss_bytes"] = serde_json::json!(crate::budget::peak_rss());
     if a.json {
         println!("{summary}");
     } else {
@@ -127,9 +148,11 @@ fn print_summary(v: &serde_json::Value) {
     }
 }
 
-pub(crate) fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
-    let spec = spec_of(&a.run, given)?;
-    fragrace::validate::at_least_one("schedules", a.schedules)?;
+/// `check`: the run over `schedules` seeds against the truth; the worst one's summary
+/// printed and its pictures written.
+pub fn cmd_check(a: &CheckOptions, given: &[String]) -> Result<(), CliError> {
+    let spec = a.run.spec(given)?;
+    crate::validate::at_least_one("schedules", a.schedules)?;
     check_outputs(&a.run, &spec.algo)?;
     let loaded = run::load(&spec)?;
     super::outputs::warn_scene(&loaded);
@@ -169,13 +192,12 @@ pub(crate) fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     let written = write_outputs(&a.run, &wspec, &loaded, &w.rendered, Some((&w, &truth)))?;
     let mut summary = run::summary_json(&wspec, &loaded, Some(&w), &w.rendered);
     summary["shade"] = serde_json::json!(written.shade);
-    if let Some(base) = fragrace::culling::baseline(&wspec, &loaded)? {
-        summary["occupancy"] =
-            fragrace::culling::summary(&w.rendered, Some(&w.metrics), Some(&base));
+    if let Some(base) = crate::culling::baseline(&wspec, &loaded)? {
+        summary["occupancy"] = crate::culling::summary(&w.rendered, Some(&w.metrics), Some(&base));
     }
     merge(&mut summary, &memory);
-    summary["peak_rss_bytes"] = serde_json::json!(fragrace::budget::peak_rss());
-    let verdict = fragrace::verdict::verdict(&w, &totals);
+    summary["peak_rss_bytes"] = serde_json::json!(crate::budget::peak_rss());
+    let verdict = crate::verdict::verdict(&w, &totals);
     summary["verdict"] = serde_json::json!(verdict);
     summary["schedules"] = serde_json::json!(n);
     summary["anomalous_runs"] = serde_json::json!(anomalous_runs);
@@ -217,7 +239,7 @@ pub(crate) fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
         (Some(p), Some(shade)) => format!("{replay} --shade {shade} --out {}", p.display()),
         _ => replay.clone(),
     };
-    let plain = fragrace::verdict::plain_words(&w, &verdict, &replay_picture, picture);
+    let plain = crate::verdict::plain_words(&w, &verdict, &replay_picture, picture);
     summary["plain_words"] = serde_json::json!(plain);
     if a.run.json {
         println!("{summary}");
@@ -272,12 +294,18 @@ pub(crate) fn cmd_check(a: &CheckArgs, given: &[String]) -> Result<()> {
     Ok(())
 }
 
-pub(crate) fn cmd_replay(path: &Path, json: bool, memory_limit: Option<&str>) -> Result<()> {
-    let case = fragrace::case::read(path)?;
-    let loaded = run::load(&case.spec).with_context(|| format!("{}", path.display()))?;
-    within_budget(&case.spec, &loaded, true, memory_limit)?;
+/// `replay`: reruns a case file and says whether its observation still holds. `Ok(false)`
+/// when it no longer does (the binary then exits with status 1).
+pub fn cmd_replay(a: &ReplayOptions) -> Result<bool, CliError> {
+    let (path, json) = (a.case.as_path(), a.json);
+    let case = crate::case::read(path)?;
+    let loaded = run::load(&case.spec).map_err(|source| CliError::CaseScene {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    within_budget(&case.spec, &loaded, true, a.memory_limit.as_deref())?;
     drop(loaded);
-    let r = fragrace::case::replay(&case)?;
+    let r = crate::case::replay(&case)?;
     if json {
         println!(
             "{}",
@@ -315,8 +343,5 @@ pub(crate) fn cmd_replay(path: &Path, json: bool, memory_limit: Option<&str>) ->
             }
         );
     }
-    if !r.holds {
-        std::process::exit(1);
-    }
-    Ok(())
+    Ok(r.holds)
 }
