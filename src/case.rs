@@ -115,11 +115,10 @@ pub struct Case {
 /// Why a case file cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum CaseError {
-    #[error("{path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    /// The file could not be read or written. The cause is part of the message, not a
+    /// `source`: a chain printer (`{:#}`) would print it twice.
+    #[error("{path}: {error}")]
+    Io { path: String, error: std::io::Error },
     #[error("{path}: not a fragrace case file: {source}")]
     Parse {
         path: String,
@@ -148,9 +147,9 @@ pub fn parse(bytes: &[u8], path: &str) -> Result<Case, CaseError> {
 
 pub fn read(path: &Path) -> Result<Case, CaseError> {
     let p = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| CaseError::Io {
+    let bytes = std::fs::read(path).map_err(|error| CaseError::Io {
         path: p.clone(),
-        source,
+        error,
     })?;
     parse(&bytes, &p)
 }
@@ -158,9 +157,9 @@ pub fn read(path: &Path) -> Result<Case, CaseError> {
 /// Writes a case atomically.
 pub fn write(path: &Path, case: &Case) -> Result<(), CaseError> {
     let json = serde_json::to_vec_pretty(case).expect("a case always serialises");
-    crate::output::write_atomic(path, &json).map_err(|source| CaseError::Io {
+    crate::output::write_atomic(path, &json).map_err(|error| CaseError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })
 }
 

@@ -285,6 +285,13 @@ fn bad_input_gets_a_clear_error() {
         &["replay", &obj("case.json", b"{\"version\": 1}")],
         "not a fragrace case file",
     );
+    // A missing file: its path and the cause, said once.
+    let missing = d.join("no-such-case.json");
+    let o = fragrace(&["replay", missing.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("no-such-case.json: "), "{err}");
+    assert_eq!(err.matches("(os error 2)").count(), 1, "{err}");
 }
 
 #[test]
