@@ -3,6 +3,8 @@
 //! themselves are [`fragrace::cli`]'s; an error is printed as `error: ...` with exit
 //! status 2.
 
+#![forbid(unsafe_code)]
+
 use std::path::PathBuf;
 
 use anyhow::Result;
