@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 export RUSTFLAGS="--cfg loom"
 export LOOM_MAX_PREEMPTIONS=${LOOM_MAX_PREEMPTIONS:-2}
 for suite in "-p fragrace-emu --test loom" "-p fragrace-kernels --test loom" "-p fragrace-kernels --test loom_racebench"; do
-    if [ "$suite" = "-p fragrace-kernels --test loom" ] && [ ! -f kernels/tests/loom.rs ]; then continue; fi
+    if [ "$suite" = "-p fragrace-kernels --test loom" ] && [ ! -f kernels/tests/loom/main.rs ]; then continue; fi
     t0=$SECONDS
     # shellcheck disable=SC2086
     cargo test --release --target-dir target/loom $suite

@@ -1,6 +1,6 @@
 //! The capture kernels of the synchronisation protocols, public for model checking only.
 //!
-//! `kernels/tests/loom.rs` runs these exact kernels (not copies) under loom, one loom thread
+//! `kernels/tests/loom/` runs these exact kernels (not copies) under loom, one loom thread
 //! per invocation (`fragrace_emu::exec::run_on_threads`), and checks each protocol's
 //! invariant under every interleaving loom explores. They are re-exported here rather than
 //! from their families so that nothing else depends on them: an algorithm is built from the

@@ -27,7 +27,7 @@ use fragrace_kernels::racebench::{cases, scene, Case, Fragments, Label};
 /// Invocations per model.
 const INVOCATIONS: usize = 3;
 /// Invocations of the models whose waits (interlock, spinlocks) multiply the interleavings
-/// (as in `kernels/tests/loom.rs`, whose interlock models take two fragments).
+/// (as in `kernels/tests/loom/rmw.rs`, whose interlock models take two fragments).
 const WAITING: usize = 2;
 const WAITING_FAMILIES: [&str; 1] = ["locks"];
 /// Preemption bound of every model.
