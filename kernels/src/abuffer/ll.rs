@@ -24,7 +24,8 @@
 //!   2048x2048 took 74 ms on one thread and 164 ms on two. A block's nodes are also near
 //!   each other for the resolve. Each block's counter follows the rule above for its own
 //!   range (`dropped` is the sum over blocks); with `pool_per_pixel` there is no count, and
-//!   the single counter of the paper is used.
+//!   the single counter of the paper is used. The blocks and the count of a draw are kept
+//!   for the next frame of the same draw (`sizing`).
 //!
 //! **Publication order.** A node's payload (depth, primitive) is written *before* the head
 //! exchange publishes it; its `next` link is the exchange's result, so it is written after
@@ -41,11 +42,11 @@ use std::cell::Cell;
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo, PassReport};
 
 use super::run::{AbRun, Readback};
+use super::sizing::{sized_by_count, Blocks, COUNTER_STRIDE};
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture,
     CapturedFrag, Check, Frame, HazardClass, Params,
 };
-use crate::basic::CountKernel;
 use crate::common::{sort_fragments, EMPTY};
 use crate::resolve::Composite;
 
@@ -60,96 +61,7 @@ const PAYLOAD_WORDS: u32 = 2;
 const NEXT: u32 = 2;
 
 /// Most nodes a pool may hold (the node buffer must stay addressable by `u32` word indices).
-const MAX_POOL_NODES: u64 = fragrace_emu::memory::MAX_BUFFER_WORDS / NODE_WORDS as u64;
-
-/// Words between two blocks' counters: one 64-byte cache line each, so that threads in
-/// neighbouring blocks do not share one.
-pub const COUNTER_STRIDE: u32 = 16;
-
-/// log2 of a [`Blocks`] block's side in pixels (32).
-const BLOCK_SHIFT: u32 = 5;
-
-/// The pool cut into screen blocks of `2^BLOCK_SHIFT` pixels a side, row-major: block `b`
-/// allocates nodes `[first[b], first[b + 1])` with counter `b * COUNTER_STRIDE` (the sizes
-/// are what a count pass counted in the block).
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Blocks {
-    /// Blocks per row of blocks.
-    across: u32,
-    /// Prefix sums of the blocks' sizes (one more than the blocks).
-    first: Vec<u32>,
-}
-
-impl Blocks {
-    /// Blocks of a `width` x `height` frame sized by its per-pixel `counts` (row-major),
-    /// summed on `threads` threads. Fails when the pool would not fit a buffer.
-    pub fn from_counts(
-        counts: &[u32],
-        width: u32,
-        height: u32,
-        threads: usize,
-    ) -> Result<Blocks, AlgoError> {
-        let side = 1u32 << BLOCK_SHIFT;
-        let across = width.div_ceil(side);
-        let bands: Vec<u32> = (0..height.div_ceil(side)).collect();
-        let w = width as usize;
-        // Each thread sums whole bands of block rows (4 bands: at least 128 rows apiece).
-        let sums = fragrace_emu::sync::pool::map_parts(&bands, threads, 4, |part| {
-            let mut out = vec![0u64; part.len() * across as usize];
-            for (k, &band) in part.iter().enumerate() {
-                let row = &mut out[k * across as usize..(k + 1) * across as usize];
-                let y0 = (band << BLOCK_SHIFT) as usize;
-                let y1 = (y0 + side as usize).min(height as usize);
-                for line in counts[y0 * w..y1 * w].chunks_exact(w) {
-                    for (b, run) in line.chunks(side as usize).enumerate() {
-                        row[b] += run.iter().map(|&c| u64::from(c)).sum::<u64>();
-                    }
-                }
-            }
-            out
-        });
-        let mut first = Vec::with_capacity(bands.len() * across as usize + 1);
-        let mut total = 0u64;
-        first.push(0);
-        for size in sums.into_iter().flatten() {
-            total += size;
-            if total > MAX_POOL_NODES {
-                return Err(AlgoError::Invalid(format!(
-                    "ll: a pool of {total} or more nodes is larger than a buffer can hold"
-                )));
-            }
-            // MAX_POOL_NODES < 2^32: the cast keeps the value.
-            first.push(total as u32);
-        }
-        Ok(Blocks { across, first })
-    }
-
-    /// Number of blocks.
-    pub fn len(&self) -> usize {
-        self.first.len() - 1
-    }
-
-    /// Whether there is no block (an empty frame).
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// Nodes of every block together.
-    pub fn total(&self) -> u64 {
-        u64::from(*self.first.last().unwrap_or(&0))
-    }
-
-    /// The nodes of block `b`: `(first, count)`.
-    pub fn range(&self, b: usize) -> (u32, u32) {
-        (self.first[b], self.first[b + 1] - self.first[b])
-    }
-
-    /// The block of pixel `(x, y)`.
-    #[inline]
-    pub fn of(&self, x: u32, y: u32) -> usize {
-        ((y >> BLOCK_SHIFT) * self.across + (x >> BLOCK_SHIFT)) as usize
-    }
-}
+pub(super) const MAX_POOL_NODES: u64 = fragrace_emu::memory::MAX_BUFFER_WORDS / NODE_WORDS as u64;
 
 /// The buffers of a node pool split into `regions` (1 for `ll`, one per bucket for `bun-ll`),
 /// each with its own allocation counter and dropped counter.
@@ -563,8 +475,9 @@ impl Algorithm for LinkedList {
     }
 
 
-    /// The count pass (when the pool is sized exactly), the capture pass and the resolve;
-    /// the lists are walked and checked afterwards ([`AlgoResult::deferred`]).
+    /// The count pass (when the pool is sized exactly; on a direct executor, the last
+    /// frame's count when it drew the same: `sizing::sized_by_count`), the capture pass and
+    /// the resolve; the lists are walked and checked afterwards ([`AlgoResult::deferred`]).
     fn run_frame(
         &self,
         frame: &Frame<'_>,
@@ -584,13 +497,10 @@ impl Algorithm for LinkedList {
         let capacity = match params.pool_per_pixel {
             Some(per_pixel) => pool_from_params(per_pixel, n),
             None => {
-                let counts = run.device.buffer::<u32>("ll-counts", n as u64)?;
-                report.merge(&run.capture(&CountKernel { counts })?);
-                let c = run.device.memory.take(counts)?;
-                let b = Blocks::from_counts(&c, frame.width, frame.height, exec.threads)?;
-                let total = b.total();
-                counted = Some(c);
-                blocks = Some(b);
+                let sized = sized_by_count(&mut run, &mut report)?;
+                let total = sized.blocks.total();
+                blocks = Some(sized.blocks.clone());
+                counted = Some(sized);
                 total
             }
         };
@@ -684,7 +594,7 @@ impl Algorithm for LinkedList {
             let mut later = Vec::new();
             if let Some(c) = &counted {
                 let bad = (0..n)
-                    .filter(|&p| walk.lists[p].len() as u32 != c[p])
+                    .filter(|&p| walk.lists[p].len() as u32 != c.counts[p])
                     .count();
                 later.push(Check::new(
                     "list lengths equal the count pass (per pixel)",
@@ -873,32 +783,6 @@ mod tests {
                 .collect::<Vec<_>>(),
             ["ll"]
         );
-    }
-
-    #[test]
-    fn blocks_hold_exactly_their_pixels_counts() {
-        // 70 x 40 pixels: blocks of 32 cut both sides unevenly (3 x 2 blocks).
-        let (w, h) = (70u32, 40u32);
-        let counts: Vec<u32> = (0..w * h).map(|p| (p * 7 + p / 13) % 5).collect();
-        for threads in [1, 3] {
-            let b = Blocks::from_counts(&counts, w, h, threads).unwrap();
-            assert_eq!(b.len(), 6);
-            let mut want = [0u32; 6];
-            for y in 0..h {
-                for x in 0..w {
-                    let k = b.of(x, y);
-                    assert_eq!(k as u32, (y / 32) * 3 + x / 32);
-                    want[k] += counts[(y * w + x) as usize];
-                }
-            }
-            let mut next = 0;
-            for (k, &n) in want.iter().enumerate() {
-                assert_eq!(b.range(k), (next, n), "block {k}, {threads} threads");
-                next += n;
-            }
-            assert_eq!(b.total(), u64::from(next));
-            assert_eq!(b.total(), counts.iter().map(|&c| u64::from(c)).sum::<u64>());
-        }
     }
 
     #[test]
