@@ -68,9 +68,6 @@ impl Composite {
     }
 
     /// Writes the composite of `frags` (already in front-to-back order) to target 0.
-    /// Inlined: a resolve's empty pixels (most of a frame) call it with no fragment, and
-    /// the background's composite then folds to a constant.
-    #[inline]
     pub fn output(&self, f: &impl Fragment, frags: &[CapturedFrag]) {
         f.output(0, composite_frags(frags, self.alpha, self.background));
     }

@@ -310,53 +310,33 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 depth: pass.flat_depth,
                 ticket: 0,
             });
-            // One `catch_unwind` per row, not per pixel (about 25 instructions a pixel, most
-            // of a resolve's empty pixels' cost): a panic ends the invocation that raised it
-            // (pixel `lx`, counted and its fault kept as `shade_direct` does), and the row
-            // goes on after it, as `shade_lockstep`'s rounds do.
-            let mut lx = 0;
-            while lx < tile.w {
-                let row = catch_unwind(AssertUnwindSafe(|| {
-                    while lx < tile.w {
-                        let x = x0 + lx;
-                        state.next_pixel(row_seq.wrapping_add(x as u64), x);
-                        slot.clear_outputs();
-                        shade_direct_unguarded(kernel, slot, &state, env);
-                        if slot.faulted() {
-                            // Counted (and its fault kept) by the slot's path; nothing is
-                            // written.
-                            state.spill(slot);
-                            acc.count(slot);
-                        } else {
-                            tally.add_direct(&state, samples);
-                            if !state.discarded.get() && targets > 0 {
-                                if plain {
-                                    let at = (ly * tile.tile_size + lx) as usize;
-                                    for (plane, o) in
-                                        tile.color.iter_mut().zip(&slot.outputs).take(targets)
-                                    {
-                                        plane[at] = o.get();
-                                    }
-                                } else {
-                                    let mut colors = [[0u32; 4]; 8];
-                                    for (c, o) in colors.iter_mut().zip(&slot.outputs).take(targets)
-                                    {
-                                        *c = o.get();
-                                    }
-                                    tile.write_outputs(pass.state, lx, ly, cov, &colors[..targets]);
-                                }
-                            }
-                        }
-                        lx += 1;
-                    }
-                }));
-                if let Err(payload) = row {
-                    // Pixel `lx` panicked inside its kernel.
-                    record_panic(slot, payload.as_ref());
+            for lx in 0..tile.w {
+                let x = x0 + lx;
+                state.next_pixel(row_seq.wrapping_add(x as u64), x);
+                slot.clear_outputs();
+                shade_direct(kernel, slot, &state, env);
+                if slot.faulted() {
+                    // Counted (and its fault kept) by the slot's path; nothing is written.
                     state.spill(slot);
                     acc.count(slot);
-                    lx += 1;
+                    continue;
                 }
+                tally.add_direct(&state, samples);
+                if state.discarded.get() || targets == 0 {
+                    continue;
+                }
+                if plain {
+                    let at = (ly * tile.tile_size + lx) as usize;
+                    for (plane, o) in tile.color.iter_mut().zip(&slot.outputs).take(targets) {
+                        plane[at] = o.get();
+                    }
+                    continue;
+                }
+                let mut colors = [[0u32; 4]; 8];
+                for (c, o) in colors.iter_mut().zip(&slot.outputs).take(targets) {
+                    *c = o.get();
+                }
+                tile.write_outputs(pass.state, lx, ly, cov, &colors[..targets]);
             }
         }
         slot.clear_outputs();
@@ -515,27 +495,6 @@ fn shade_direct<'a, K: FragmentKernel>(
     }));
     if let Err(payload) = r {
         record_panic(inv, payload.as_ref());
-    }
-}
-
-/// [`shade_direct`] without its `catch_unwind`: the caller catches a panic (raised by the
-/// kernel) and records it on `inv`.
-#[inline(always)]
-fn shade_direct_unguarded<'a, K: FragmentKernel>(
-    kernel: &K,
-    inv: &'a Invocation,
-    state: &'a DirectState<'a>,
-    env: &'a PassEnv<'a>,
-) {
-    debug_assert!(matches!(env.mode, Mode::Direct { .. }));
-    debug_assert!(env.contention.is_none());
-    let mut cx = Context::from_waker(Waker::noop());
-    let frag = DirectFrag::new(Frag { inv, env }, state);
-    let pending = std::pin::pin!(kernel.shade(frag))
-        .poll(&mut cx)
-        .is_pending();
-    if pending && !inv.faulted() {
-        pending_without_fault(inv);
     }
 }
 
