@@ -9,6 +9,7 @@
 mod array;
 mod checks;
 mod run;
+mod sizing;
 
 // `pub(crate)`: modules whose protocol kernels `crate::protocols` re-exports.
 crate::registry::family! {

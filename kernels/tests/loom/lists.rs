@@ -30,6 +30,7 @@ fn ll_push(frags: &[FragInput], publish_before_write: bool, reader: bool) -> LlO
     let kernel = LlInsert {
         pool,
         cap: n,
+        blocks: None,
         publish_before_write,
         reader: reader.then_some(seen),
     };
