@@ -200,12 +200,16 @@ pub fn scan(
             .map(|&e| pos[g.edges[e].to])
             .max()
             .expect("non-empty");
+        // The forward edges a move of x after the last b would turn: those from the
+        // instances in between, and from the last b itself (x and b may occlude each other
+        // from different viewpoints of the partition; leaving b -> x out made the two swap
+        // places forever).
         let mut fs: Vec<usize> = g.inn[x]
             .iter()
             .copied()
             .filter(|&e| {
                 let p = pos[g.edges[e].from];
-                g.edges[e].alive && p > idx && p < b_last
+                g.edges[e].alive && p > idx && p <= b_last
             })
             .collect();
         fs.sort_by_key(|&e| pos[g.edges[e].from]);
