@@ -367,8 +367,6 @@ fn non_manifold_fins_are_accepted_and_exact() {
 }
 
 #[test]
-#[ignore = "fails: the pieces of split triangles rasterize 786 fragments where the input makes \
-            788 in one view (cut corners rounded to f32); see docs/algorithms.md, What is left"]
 fn crossing_triangles_are_split_and_exact() {
     // A square through the torus's tube: it crosses the tube's triangles, which are seen
     // both in front of and behind it from one viewpoint until split.

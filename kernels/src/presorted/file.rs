@@ -2,8 +2,8 @@
 //! preprocessing happens once per mesh.
 //!
 //! Little-endian binary: magic `FRPRESRT`, version, mesh hash, triangle count, the
-//! normalized frame, the face normals, the pieces (input triangle and corner vertex ids;
-//! the input triangles themselves unless some crossed) and the new corners, then per
+//! normalized frame, the face normals, the pieces (input triangle and clip planes; the
+//! input triangles themselves unless some crossed), then per
 //! segment its instances (piece, flags, test planes), and last an FNV-1a checksum of everything before it. Written to a
 //! temporary file in the same directory, flushed to disk, then renamed over the target:
 //! an interrupted run leaves at most a temporary file, never a truncated file under the
@@ -17,10 +17,10 @@ use fragrace_emu::Mesh;
 use glam::DVec3;
 
 use super::input::mesh_hash;
-use super::{Frame3, Instance, Piece, Presorted, Segment};
+use super::{Frame3, Instance, Piece, Presorted, Segment, WorldClip};
 
 const MAGIC: &[u8; 8] = b"FRPRESRT";
-const VERSION: u32 = 2;
+const VERSION: u32 = 3;
 
 /// Why a stored result cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -75,17 +75,15 @@ pub fn encode(p: &Presorted) -> Vec<u8> {
             b.extend_from_slice(&c.to_le_bytes());
         }
     }
-    b.extend_from_slice(&(p.extra_positions.len() as u32).to_le_bytes());
-    for v in &p.extra_positions {
-        for c in v {
-            b.extend_from_slice(&c.to_le_bytes());
-        }
-    }
     b.extend_from_slice(&(p.pieces.len() as u32).to_le_bytes());
     for pc in &p.pieces {
         b.extend_from_slice(&pc.tri.to_le_bytes());
-        for v in pc.verts {
-            b.extend_from_slice(&v.to_le_bytes());
+        b.extend_from_slice(&(pc.clips.len() as u32).to_le_bytes());
+        for c in &pc.clips {
+            for x in c.plane {
+                b.extend_from_slice(&x.to_le_bytes());
+            }
+            b.extend_from_slice(&u32::from(c.nonneg).to_le_bytes());
         }
     }
     for s in &p.segments {
@@ -208,22 +206,25 @@ pub fn decode(bytes: &[u8], path: &Path) -> Result<Presorted, FileError> {
     for _ in 0..nd {
         dirs.push(DVec3::new(r.f64()?, r.f64()?, r.f64()?));
     }
-    let ne = r.u32()? as usize;
-    let mut extra_positions = Vec::with_capacity(ne.min(body.len() / 12));
-    for _ in 0..ne {
-        extra_positions.push([r.f32()?, r.f32()?, r.f32()?]);
-    }
     let npieces = r.u32()?;
-    let mut pieces = Vec::with_capacity((npieces as usize).min(body.len() / 16));
+    let mut pieces = Vec::with_capacity((npieces as usize).min(body.len() / 8));
     for _ in 0..npieces {
         let tri = r.u32()?;
         if tri >= triangles {
             return Err(corrupt(format!("piece of triangle {tri} of {triangles}")));
         }
-        pieces.push(Piece {
-            tri,
-            verts: [r.u32()?, r.u32()?, r.u32()?],
-        });
+        let nc = r.u32()? as usize;
+        let mut clips = Vec::with_capacity(nc.min(64));
+        for _ in 0..nc {
+            let plane = [r.f32()?, r.f32()?, r.f32()?, r.f32()?];
+            let nonneg = match r.u32()? {
+                0 => false,
+                1 => true,
+                v => return Err(corrupt(format!("clip side {v} (0 or 1)"))),
+            };
+            clips.push(WorldClip { plane, nonneg });
+        }
+        pieces.push(Piece { tri, clips });
     }
     let mut segments = Vec::with_capacity(nd);
     for _ in 0..nd {
@@ -256,7 +257,6 @@ pub fn decode(bytes: &[u8], path: &Path) -> Result<Presorted, FileError> {
         mesh_hash,
         triangles,
         pieces,
-        extra_positions,
         frame: Frame3 { center, radius },
         dirs,
         segments,
@@ -280,13 +280,6 @@ pub fn load(path: &Path, mesh: &Mesh) -> Result<Presorted, FileError> {
             actual,
             stored_tris: p.triangles,
             actual_tris: mesh.indices.len() as u32,
-        });
-    }
-    let nv = (mesh.positions.len() + p.extra_positions.len()) as u32;
-    if let Some(pc) = p.pieces.iter().find(|pc| pc.verts.iter().any(|&v| v >= nv)) {
-        return Err(FileError::Corrupt {
-            path: path.to_path_buf(),
-            what: format!("piece corner {:?} past the {nv} vertices", pc.verts),
         });
     }
     Ok(p)

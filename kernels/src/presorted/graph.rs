@@ -245,6 +245,11 @@ impl Graph {
         });
         let outs: Vec<usize> = std::mem::take(&mut self.out[x]);
         let ins: Vec<usize> = std::mem::take(&mut self.inn[x]);
+        let mut touched: Vec<usize> = outs
+            .iter()
+            .map(|&e| self.edges[e].to)
+            .chain(ins.iter().map(|&e| self.edges[e].from))
+            .collect();
         for e in outs {
             if !self.edges[e].alive {
                 continue;
@@ -271,7 +276,14 @@ impl Graph {
                 self.try_edge(from, n, occl);
             }
         }
-        // Drop dead edge ids from the other endpoints' lists now and then.
+        // Drop the dead edge ids from the other endpoints' lists (the scan walks them).
+        touched.sort_unstable();
+        touched.dedup();
+        for y in touched {
+            let edges = &self.edges;
+            self.out[y].retain(|&e| edges[e].alive);
+            self.inn[y].retain(|&e| edges[e].alive);
+        }
         (new, keep_alive)
     }
 }

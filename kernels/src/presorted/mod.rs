@@ -95,14 +95,21 @@ pub struct PartitionStats {
 }
 
 /// A piece of an input triangle: the whole triangle, or a part of one that crossed another
-/// ([`split`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// ([`split`]). It is drawn as its input triangle, keeping the fragments inside its clips.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Piece {
     /// The input triangle.
     pub tri: u32,
-    /// Corners: vertex ids of the mesh, or past its last vertex, ids into
-    /// [`Presorted::extra_positions`] (the points where a cut crossed an edge).
-    pub verts: [u32; 3],
+    /// Half-spaces (world space, `[n, w]`): a fragment at `p` on the input triangle is the
+    /// piece's iff `(dot(n, p) - w >= 0) == nonneg` for each.
+    pub clips: Vec<WorldClip>,
+}
+
+/// One clip of a [`Piece`] in world space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WorldClip {
+    pub plane: [f32; 4],
+    pub nonneg: bool,
 }
 
 /// The preprocessing's result: one segment per partition.
@@ -112,8 +119,6 @@ pub struct Presorted {
     pub triangles: u32,
     /// What is drawn: the input triangles, or pieces of them where triangles crossed.
     pub pieces: Vec<Piece>,
-    /// New corners of the pieces (world space), numbered after the mesh's vertices.
-    pub extra_positions: Vec<[f32; 3]>,
     pub frame: Frame3,
     pub dirs: Vec<DVec3>,
     pub segments: Vec<Segment>,
@@ -200,7 +205,7 @@ pub fn presort(
         .collect();
     let (split_pieces, split_stats) = split::split_crossing(&input)?;
     let tris: Arc<[[DVec3; 3]]> = split_pieces.iter().map(|p| p.pos).collect();
-    let (pieces, extra_positions) = world_pieces(mesh, &frame, &split_pieces);
+    let pieces = world_pieces(&frame, &split_pieces);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(cfg.threads)
         .build()
@@ -218,7 +223,6 @@ pub fn presort(
         mesh_hash: input::mesh_hash(mesh),
         triangles: mesh.indices.len() as u32,
         pieces,
-        extra_positions,
         frame,
         dirs,
         segments,
@@ -227,35 +231,22 @@ pub fn presort(
     })
 }
 
-/// The pieces with world-space corners: an input corner is the mesh's vertex (bit for
-/// bit), a new one the cut point rounded to `f32` (one new vertex per distinct point).
-fn world_pieces(
-    mesh: &Mesh,
-    frame: &Frame3,
-    pieces: &[split::Piece],
-) -> (Vec<Piece>, Vec<[f32; 3]>) {
-    let base = mesh.positions.len() as u32;
-    let mut extra: Vec<[f32; 3]> = Vec::new();
-    let mut ids: std::collections::HashMap<[u64; 3], u32> = std::collections::HashMap::new();
-    let out = pieces
+/// The pieces with their clips in world space.
+fn world_pieces(frame: &Frame3, pieces: &[split::Piece]) -> Vec<Piece> {
+    pieces
         .iter()
-        .map(|p| {
-            let t = mesh.indices[p.tri as usize];
-            let verts = p.corners.map(|c| match c {
-                split::Corner::Input(k) => t[k as usize],
-                split::Corner::New(v) => {
-                    let key = v.to_array().map(f64::to_bits);
-                    *ids.entry(key).or_insert_with(|| {
-                        let w = frame.to_world(v).as_vec3().to_array();
-                        extra.push(w);
-                        base + extra.len() as u32 - 1
-                    })
-                }
-            });
-            Piece { tri: p.tri, verts }
+        .map(|p| Piece {
+            tri: p.tri,
+            clips: p
+                .clips
+                .iter()
+                .map(|c| WorldClip {
+                    plane: frame.world_plane(&c.plane).map(|x| x as f32),
+                    nonneg: c.nonneg,
+                })
+                .collect(),
         })
-        .collect();
-    (out, extra)
+        .collect()
 }
 
 /// One partition: graph, preliminary order, scan, and the segment.

@@ -31,7 +31,7 @@ use fragrace_emu::{
 };
 use glam::{DMat4, DVec3, DVec4, Vec3};
 
-use super::{file, graph, input, PresortConfig, Presorted, Silent};
+use super::{file, graph, input, PresortConfig, Presorted, Silent, WorldClip};
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
 };
@@ -51,6 +51,10 @@ pub struct SegmentData {
     /// Instance i's planes are `planes[offsets[i]..offsets[i + 1]]`.
     pub offsets: Vec<u32>,
     pub planes: Vec<[f32; 4]>,
+    /// Instance i's piece clips are `clips[clip_offsets[i]..clip_offsets[i + 1]]` (none
+    /// for a whole triangle).
+    pub clip_offsets: Vec<u32>,
+    pub clips: Vec<WorldClip>,
 }
 
 /// Preprocessed lists of one mesh, ready to draw.
@@ -79,17 +83,20 @@ impl Prepared {
     }
 
     pub fn new(mesh: &Mesh, lists: Presorted) -> Prepared {
-        let mut positions = mesh.positions.clone();
-        positions.extend(lists.extra_positions.iter().map(|v| Vec3::from_array(*v)));
+        let positions = mesh.positions.clone();
         let segments = lists
             .segments
             .iter()
             .map(|s| {
                 let mut offsets = vec![0u32];
                 let mut planes = Vec::new();
+                let mut clip_offsets = vec![0u32];
+                let mut clips = Vec::new();
                 for i in &s.instances {
                     planes.extend_from_slice(&i.planes);
                     offsets.push(planes.len() as u32);
+                    clips.extend_from_slice(&lists.pieces[i.piece as usize].clips);
+                    clip_offsets.push(clips.len() as u32);
                 }
                 let tri: Vec<u32> = s
                     .instances
@@ -103,7 +110,7 @@ impl Prepared {
                         indices: s
                             .instances
                             .iter()
-                            .map(|i| lists.pieces[i.piece as usize].verts)
+                            .map(|i| mesh.indices[lists.pieces[i.piece as usize].tri as usize])
                             .collect(),
                     },
                     facing: s
@@ -117,6 +124,8 @@ impl Prepared {
                     last: s.instances.iter().map(|i| i.last).collect(),
                     offsets,
                     planes,
+                    clip_offsets,
+                    clips,
                 }
             })
             .collect();
@@ -132,6 +141,35 @@ impl SegmentData {
                 || self.planes[self.offsets[i] as usize..self.offsets[i + 1] as usize]
                     .iter()
                     .all(|p| test(*p, eye)))
+    }
+}
+
+impl SegmentData {
+    /// Whether the fragment with barycentrics `b` on instance `i`'s input triangle is in
+    /// its piece (always, for a whole triangle). The position is computed from the input
+    /// triangle's corners the same way for every piece of it, and the two pieces of a cut
+    /// test one plane with complementary comparisons: each fragment is in exactly one.
+    pub fn in_piece(&self, i: usize, b: [f32; 3]) -> bool {
+        let (lo, hi) = (
+            self.clip_offsets[i] as usize,
+            self.clip_offsets[i + 1] as usize,
+        );
+        if lo == hi {
+            return true;
+        }
+        let t = self.mesh.indices[i];
+        let p = self.mesh.positions[t[0] as usize] * b[0]
+            + self.mesh.positions[t[1] as usize] * b[1]
+            + self.mesh.positions[t[2] as usize] * b[2];
+        self.clips[lo..hi].iter().all(|c| {
+            let q = c.plane;
+            (q[0] * p.x + q[1] * p.y + q[2] * p.z - q[3] >= 0.0) == c.nonneg
+        })
+    }
+
+    /// Whether some instance is a piece (then the kernels test clips and may discard).
+    pub fn has_clips(&self) -> bool {
+        !self.clips.is_empty()
     }
 }
 
@@ -215,6 +253,7 @@ impl FragmentKernel for SelectKernel<'_> {
         if !self
             .seg
             .passes(i, self.eye, self.all_planes || !self.seg.last[i])
+            || !self.seg.in_piece(i, f.barycentrics())
         {
             f.discard();
             return;
@@ -232,12 +271,21 @@ struct ColorKernel<'a> {
 
 impl FragmentKernel for ColorKernel<'_> {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("presorted-vs-color")
+        let k = KernelInfo::new("presorted-vs-color");
+        if self.seg.has_clips() {
+            k.with_discard()
+        } else {
+            k
+        }
     }
     async fn shade(&self, f: impl Fragment) {
-        let c = common::unpack_color(common::prim_color_packed(
-            self.seg.tri[f.primitive_id() as usize],
-        ));
+        let i = f.primitive_id() as usize;
+        // A piece of a split triangle keeps its part of the input triangle.
+        if !self.seg.in_piece(i, f.barycentrics()) {
+            f.discard();
+            return;
+        }
+        let c = common::unpack_color(common::prim_color_packed(self.seg.tri[i]));
         f.output(0, [c[0], c[1], c[2], self.alpha]);
     }
 }
@@ -267,7 +315,7 @@ impl FragmentKernel for SsboKernel<'_> {
     }
     async fn shade(&self, f: impl Fragment) {
         let i = f.primitive_id() as usize;
-        if !self.seg.passes(i, self.eye, true) {
+        if !self.seg.passes(i, self.eye, true) || !self.seg.in_piece(i, f.barycentrics()) {
             f.discard();
             return;
         }

@@ -129,6 +129,10 @@ pub const FREE_WHOLE_MOVES: u32 = 2;
 /// Instances per initial instance after which the scan gives up.
 pub const MAX_COPIES: usize = 64;
 
+/// Most separability tests the pairwise progress step runs for one instance (over all its
+/// `f` and `b` pairs, the nearest first).
+const PAIR_LPS: u64 = 256;
+
 /// Most LPs the greedy growth of `R_f` runs for one instance before it stops adding
 /// forward edges (the rest go with the copy, as the paper's unaccounted edges do).
 const GREEDY_LPS: u64 = 12;
@@ -146,13 +150,23 @@ pub fn scan(
     let mut whole = vec![0u32; g.nodes.len()];
     let mut steps = 0u64;
     let mut pos = vec![0usize; g.nodes.len()];
-    let reindex = |order: &[usize], pos: &mut Vec<usize>, n: usize| {
+    // Positions of the instances from `from` on (every change of the order is at or after
+    // the current instance: the ones before keep their positions).
+    let reindex = |order: &[usize], pos: &mut Vec<usize>, n: usize, from: usize| {
         pos.resize(n, usize::MAX);
-        for (i, &x) in order.iter().enumerate() {
+        for (i, &x) in order.iter().enumerate().skip(from) {
             pos[x] = i;
         }
     };
-    reindex(&order, &mut pos, g.nodes.len());
+    // Moves x whole from `idx` to `b_last`: only the positions in between change.
+    let move_whole = |order: &mut Vec<usize>, pos: &mut Vec<usize>, idx: usize, b_last: usize| {
+        let x = order.remove(idx);
+        order.insert(b_last, x);
+        for (i, &y) in order.iter().enumerate().take(b_last + 1).skip(idx) {
+            pos[y] = i;
+        }
+    };
+    reindex(&order, &mut pos, g.nodes.len(), 0);
     let mut idx = 0usize;
     while idx < order.len() {
         steps += 1;
@@ -186,20 +200,22 @@ pub fn scan(
             .map(|&e| pos[g.edges[e].to])
             .max()
             .expect("non-empty");
+        // The forward edges a move of x after the last b would turn: those from the
+        // instances in between, and from the last b itself (x and b may occlude each other
+        // from different viewpoints of the partition; leaving b -> x out made the two swap
+        // places forever).
         let mut fs: Vec<usize> = g.inn[x]
             .iter()
             .copied()
             .filter(|&e| {
                 let p = pos[g.edges[e].from];
-                g.edges[e].alive && p > idx && p < b_last
+                g.edges[e].alive && p > idx && p <= b_last
             })
             .collect();
         fs.sort_by_key(|&e| pos[g.edges[e].from]);
         if fs.is_empty() {
             // Moving x after the last b breaks no forward edge.
-            order.remove(idx);
-            order.insert(b_last, x);
-            reindex(&order, &mut pos, g.nodes.len());
+            move_whole(&mut order, &mut pos, idx, b_last);
             stats.moves += 1;
             continue;
         }
@@ -246,7 +262,8 @@ pub fn scan(
         }
         if let Some(p) = plane {
             split_and_place(g, &mut order, &mut pos, idx, b_last, x, p);
-            reindex(&order, &mut pos, g.nodes.len());
+            reindex(&order, &mut pos, g.nodes.len(), idx);
+            whole.resize(g.nodes.len(), whole[x]);
             stats.splits += 1;
             continue;
         }
@@ -255,21 +272,23 @@ pub fn scan(
         // f -> x edges become back-edges of the f*, handled when the scan reaches them.
         // Only an instance moved whole before (the moves may go round a cycle) tries the
         // progress steps below first: each of them cuts x into more copies.
-        whole.resize(g.nodes.len(), 0);
         if whole[x] < FREE_WHOLE_MOVES {
             whole[x] += 1;
-            order.remove(idx);
-            order.insert(b_last, x);
-            reindex(&order, &mut pos, g.nodes.len());
+            move_whole(&mut order, &mut pos, idx, b_last);
             stats.whole_moves += 1;
             continue;
         }
-        // Fallback 1: one forward edge against one back edge.
+        // Fallback 1: one forward edge against one back edge, the nearest f and b first,
+        // every pair up to a bound on the separability tests.
         let mut pair: Option<Plane> = None;
-        // At most PAIRS x PAIRS attempts (the nearest f and b first): a bound on the LPs.
-        const PAIRS: usize = 8;
-        'pairs: for &f in fs.iter().rev().take(PAIRS) {
-            for &b in backs.iter().take(PAIRS) {
+        let mut near_backs = backs.clone();
+        near_backs.sort_by_key(|&e| pos[g.edges[e].to]);
+        let lps_before = stats.lp_calls;
+        'pairs: for &f in fs.iter().rev() {
+            for &b in &near_backs {
+                if stats.lp_calls - lps_before >= PAIR_LPS {
+                    break 'pairs;
+                }
                 let shapes = || (g.edge_shape(f), g.edge_shape(b));
                 if let Some(p) =
                     cutting_plane(&g.edges[f].verts, &g.edges[b].verts, None, shapes, stats)
@@ -281,13 +300,15 @@ pub fn scan(
         }
         if let Some(p) = pair {
             split_and_place(g, &mut order, &mut pos, idx, b_last, x, p);
-            reindex(&order, &mut pos, g.nodes.len());
+            reindex(&order, &mut pos, g.nodes.len(), idx);
+            whole.resize(g.nodes.len(), whole[x]);
             stats.pairwise += 1;
             continue;
         }
         // Fallback 2: duplicate b or f (section 4.1's three configurations).
         if dup_b_or_f(g, &mut order, &pos, x, &backs, &fs, stats) {
-            reindex(&order, &mut pos, g.nodes.len());
+            reindex(&order, &mut pos, g.nodes.len(), idx);
+            whole.resize(g.nodes.len(), whole[x]);
             stats.bf_dups += 1;
             continue;
         }
@@ -301,9 +322,7 @@ pub fn scan(
                 edges: g.edge_count(),
             });
         }
-        order.remove(idx);
-        order.insert(b_last, x);
-        reindex(&order, &mut pos, g.nodes.len());
+        move_whole(&mut order, &mut pos, idx, b_last);
         stats.whole_moves += 1;
     }
     tick(order.len() as u64, order.len() as u64);

@@ -12,32 +12,38 @@
 //! that side and cannot pass through `y`; from the other side, the segment to `y` cannot
 //! reach `x`).
 //!
-//! Pieces are kept in `f64` (the graph sees them exactly); a piece's corners are either
-//! corners of its input triangle (kept bit for bit at run time) or new points (rounded to
-//! `f32` at run time, where they move by a rounding error: only pixels whose centre is within
-//! that distance of the cut can see it).
+//! Pieces are kept in `f64` for the graph. At run time a piece is not drawn from its own
+//! corners (cut points rounded to `f32` would bend the input's edges: at a silhouette the
+//! pixels in that sliver are gained or lost by both the front and the back triangle), but
+//! as its whole input triangle with the piece's [`Clip`]s tested per fragment at the
+//! fragment's position on the input triangle: the two sides of a cut test the same plane,
+//! one `>= 0` and the other `< 0`, so every fragment of the input triangle belongs to
+//! exactly one piece, whatever the rounding.
 
 use std::collections::HashMap;
 
 use glam::DVec3;
 
-use super::geom::EPS;
+use super::geom::{Plane, EPS};
 use super::graph::facing;
 
-/// A corner of a piece: a corner of its input triangle, or a new point (normalized frame).
+/// A half-space a piece keeps of its input triangle: the points `p` with
+/// `plane.eval(p) >= 0` when `nonneg`, else those with `plane.eval(p) < 0` (the two pieces
+/// of a cut share the plane, so they take complementary sets of points).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Corner {
-    Input(u8),
-    New(DVec3),
+pub struct Clip {
+    pub plane: Plane,
+    pub nonneg: bool,
 }
 
 /// A piece of an input triangle (the whole triangle when it is not split).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Piece {
     pub tri: u32,
-    pub corners: [Corner; 3],
-    /// The corners' positions (normalized frame).
+    /// The corners (normalized frame).
     pub pos: [DVec3; 3],
+    /// What it keeps of its input triangle (empty: all of it).
+    pub clips: Vec<Clip>,
 }
 
 /// What splitting did.
@@ -74,8 +80,8 @@ pub fn split_crossing(tris: &[[DVec3; 3]]) -> Result<(Vec<Piece>, SplitStats), S
         .enumerate()
         .map(|(t, p)| Piece {
             tri: t as u32,
-            corners: [Corner::Input(0), Corner::Input(1), Corner::Input(2)],
             pos: *p,
+            clips: Vec::new(),
         })
         .collect();
     let mut stats = SplitStats::default();
@@ -121,6 +127,19 @@ pub fn split_crossing(tris: &[[DVec3; 3]]) -> Result<(Vec<Piece>, SplitStats), S
     }
     stats.extra_pieces = (pieces.len() - tris.len()) as u64;
     Ok((pieces, stats))
+}
+
+/// Where the edge `a`-`b` meets the plane whose signed distances at `a` and `b` are `da`
+/// and `db` (of opposite signs), computed from the endpoints in one fixed order: the pieces
+/// on the two sides of an edge, cut by the same plane, get the same point bit for bit.
+fn edge_point(a: DVec3, da: f64, b: DVec3, db: f64) -> DVec3 {
+    let key = |v: DVec3| v.to_array().map(f64::to_bits);
+    let ((a, da), (b, db)) = if key(a) <= key(b) {
+        ((a, da), (b, db))
+    } else {
+        ((b, db), (a, da))
+    };
+    a + (b - a) * (da / (da - db))
 }
 
 /// Pairs of pieces whose bounding boxes overlap (`i < j`).
@@ -256,30 +275,60 @@ fn coplanar_overlap(a: &[DVec3; 3], b: &[DVec3; 3], n: DVec3) -> bool {
 }
 
 /// The pieces of `p` on either side of `by`'s plane (a triangle and a quad, the quad in two
-/// triangles; corners on the plane go to both sides).
+/// triangles; corners on the plane go to both sides). Each keeps `p`'s clips plus its side
+/// of the cut, and a quad's triangles their side of the diagonal (a plane through it,
+/// across the triangle).
 fn cut(p: &Piece, by: &[DVec3; 3]) -> Vec<Piece> {
     let h = facing(by, false);
     let d = p.pos.map(|v| h.eval(v));
+    let normal = (p.pos[1] - p.pos[0]).cross(p.pos[2] - p.pos[0]);
     let mut out = Vec::with_capacity(3);
     for sign in [1.0f64, -1.0] {
-        let mut poly: Vec<(Corner, DVec3)> = Vec::with_capacity(4);
+        let mut poly: Vec<DVec3> = Vec::with_capacity(4);
         for k in 0..3 {
             let l = (k + 1) % 3;
             let (x, y) = (d[k] * sign, d[l] * sign);
             if x >= -ON {
-                poly.push((p.corners[k], p.pos[k]));
+                poly.push(p.pos[k]);
             }
             if (x > ON && y < -ON) || (x < -ON && y > ON) {
-                let v = p.pos[k] + (p.pos[l] - p.pos[k]) * (d[k] / (d[k] - d[l]));
-                poly.push((Corner::New(v), v));
+                poly.push(edge_point(p.pos[k], d[k], p.pos[l], d[l]));
             }
         }
-        for k in 1..poly.len().saturating_sub(1) {
-            out.push(Piece {
+        let mut clips = p.clips.clone();
+        clips.push(Clip {
+            plane: h,
+            nonneg: sign > 0.0,
+        });
+        match poly.len() {
+            3 => out.push(Piece {
                 tri: p.tri,
-                corners: [poly[0].0, poly[k].0, poly[k + 1].0],
-                pos: [poly[0].1, poly[k].1, poly[k + 1].1],
-            });
+                pos: [poly[0], poly[1], poly[2]],
+                clips,
+            }),
+            4 => {
+                let diag = Plane::through((poly[2] - poly[0]).cross(normal), poly[0]);
+                let Some(diag) = diag else {
+                    continue;
+                };
+                let first_nonneg = diag.eval(poly[1]) >= 0.0;
+                for (tri, nonneg) in [
+                    ([poly[0], poly[1], poly[2]], first_nonneg),
+                    ([poly[0], poly[2], poly[3]], !first_nonneg),
+                ] {
+                    let mut c = clips.clone();
+                    c.push(Clip {
+                        plane: diag,
+                        nonneg,
+                    });
+                    out.push(Piece {
+                        tri: p.tri,
+                        pos: tri,
+                        clips: c,
+                    });
+                }
+            }
+            _ => {}
         }
     }
     out
@@ -324,6 +373,42 @@ mod tests {
             .sum();
         let whole = area(if split_tri == 0 { &a } else { &b });
         assert!((total - whole).abs() < 1e-12, "{total} vs {whole}");
+    }
+
+    #[test]
+    fn the_clips_of_the_pieces_take_every_point_of_the_triangle_once() {
+        let a = [
+            DVec3::new(-1.0, -1.0, 0.0),
+            DVec3::new(1.0, -1.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.0),
+        ];
+        let b = [
+            DVec3::new(0.0, -0.5, -1.0),
+            DVec3::new(0.0, 0.5, -1.0),
+            DVec3::new(0.1, 0.0, 1.0),
+        ];
+        let (pieces, _) = split_crossing(&[a, b]).unwrap();
+        let split_tri = pieces.iter().find(|p| !p.clips.is_empty()).unwrap().tri;
+        let t = if split_tri == 0 { a } else { b };
+        let of: Vec<&Piece> = pieces.iter().filter(|p| p.tri == split_tri).collect();
+        assert!(of.len() >= 3, "{}", of.len());
+        // Points of the triangle, on the cut and the diagonals included (the corners and
+        // the midpoints of every piece's edges).
+        let mut pts: Vec<DVec3> = t.to_vec();
+        for p in &of {
+            for k in 0..3 {
+                pts.push(p.pos[k]);
+                pts.push((p.pos[k] + p.pos[(k + 1) % 3]) * 0.5);
+            }
+            pts.push((p.pos[0] + p.pos[1] + p.pos[2]) / 3.0);
+        }
+        for q in pts {
+            let n = of
+                .iter()
+                .filter(|p| p.clips.iter().all(|c| (c.plane.eval(q) >= 0.0) == c.nonneg))
+                .count();
+            assert_eq!(n, 1, "{q} is in {n} pieces");
+        }
     }
 
     #[test]
