@@ -24,12 +24,11 @@
 mod clock;
 mod table;
 
-
 use crate::memory::{Addr, OpKind};
 pub use clock::MAX_CLOCK_LANES;
 use clock::{Clocks, NO_CLOCK, NO_LANE, UNTRACKED};
-use table::FastMap;
 use table::AddrTable;
+use table::FastMap;
 
 /// The kinds of hazard.
 #[derive(
@@ -100,7 +99,6 @@ impl HazardCounts {
         }
     }
 }
-
 
 #[derive(Clone, Copy)]
 struct Access {
@@ -248,7 +246,6 @@ struct RawHazard {
     other: InvocationId,
     step: u64,
 }
-
 
 /// Counting and keeping hazards (apart from the per-address state, so a report can be
 /// made while that state is borrowed).

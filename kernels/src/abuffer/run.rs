@@ -35,6 +35,9 @@ pub(super) struct AbRun<'a> {
     pub n: usize,
     /// Every pass's framebuffer; target 0 is the resolve's (geometry passes write none).
     fb: Framebuffer,
+    /// Bytes this frame uses that an earlier frame of the same draw kept for it instead of
+    /// allocating them on the device (`ll`'s kept counts): storage all the same.
+    pub kept_bytes: u64,
 }
 
 impl<'a> AbRun<'a> {
@@ -50,6 +53,7 @@ impl<'a> AbRun<'a> {
             exec,
             n: pixels(frame),
             fb: resolve::framebuffer(frame)?,
+            kept_bytes: 0,
         })
     }
 
@@ -112,7 +116,8 @@ impl<'a> AbRun<'a> {
         dropped: u64,
         work: impl FnOnce(&Device) -> Result<Readback, AlgoError> + Send + 'static,
     ) -> AlgoResult {
-        let storage_bytes = self.device.memory.bytes() + self.n as u64 * resolve::TARGET_BYTES;
+        let storage_bytes =
+            self.device.memory.bytes() + self.kept_bytes + self.n as u64 * resolve::TARGET_BYTES;
         let AbRun {
             device, params, fb, ..
         } = self;
@@ -159,7 +164,9 @@ impl<'a> AbRun<'a> {
         AlgoResult {
             capture: Some(capture),
             image: Some(image),
-            storage_bytes: self.device.memory.bytes() + self.n as u64 * resolve::TARGET_BYTES,
+            storage_bytes: self.device.memory.bytes()
+                + self.kept_bytes
+                + self.n as u64 * resolve::TARGET_BYTES,
             report,
             checks,
             dropped,

@@ -176,6 +176,8 @@ pub fn sized_by_count(
         let last = LAST.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((k, sized)) = last.as_ref() {
             if *k == key {
+                // The kept counts are this frame's count buffer: its storage still.
+                run.kept_bytes += sized.counts.len() as u64 * 4;
                 return Ok(Arc::clone(sized));
             }
         }
