@@ -338,9 +338,8 @@ fn cut(p: &Piece, by: &[DVec3; 3]) -> Vec<Piece> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn two_crossing_triangles_are_split_into_non_crossing_pieces() {
-        // A horizontal triangle and a vertical one through its middle.
+    /// A horizontal triangle and a vertical one through its middle.
+    fn crossing_pair() -> [[DVec3; 3]; 2] {
         let a = [
             DVec3::new(-1.0, -1.0, 0.0),
             DVec3::new(1.0, -1.0, 0.0),
@@ -351,6 +350,12 @@ mod tests {
             DVec3::new(0.0, 0.5, -1.0),
             DVec3::new(0.1, 0.0, 1.0),
         ];
+        [a, b]
+    }
+
+    #[test]
+    fn two_crossing_triangles_are_split_into_non_crossing_pieces() {
+        let [a, b] = crossing_pair();
         assert!(matches!(crossing(&a, &b), Cross::Yes));
         let (pieces, stats) = split_crossing(&[a, b]).unwrap();
         assert_eq!(stats.crossings, 1);
@@ -377,16 +382,7 @@ mod tests {
 
     #[test]
     fn the_clips_of_the_pieces_take_every_point_of_the_triangle_once() {
-        let a = [
-            DVec3::new(-1.0, -1.0, 0.0),
-            DVec3::new(1.0, -1.0, 0.0),
-            DVec3::new(0.0, 1.0, 0.0),
-        ];
-        let b = [
-            DVec3::new(0.0, -0.5, -1.0),
-            DVec3::new(0.0, 0.5, -1.0),
-            DVec3::new(0.1, 0.0, 1.0),
-        ];
+        let [a, b] = crossing_pair();
         let (pieces, _) = split_crossing(&[a, b]).unwrap();
         let split_tri = pieces.iter().find(|p| !p.clips.is_empty()).unwrap().tri;
         let t = if split_tri == 0 { a } else { b };
