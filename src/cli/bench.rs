@@ -7,14 +7,19 @@ use super::progress::progress;
 use crate::run;
 
 /// The options of `bench`: a run, timed over frames.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, clap::Args)]
 pub struct BenchOptions {
+    #[command(flatten)]
     pub run: RunOptions,
     /// Frames to time (the median is reported).
+    #[arg(long, default_value_t = 10)]
     pub frames: usize,
     /// Frames run before the timed ones.
+    #[arg(long, default_value_t = 2)]
     pub warmup: usize,
-    /// Also measure the machine's floor under the frame (`--algo count` only).
+    /// Also measure the machine's floor under the frame (`--algo count` only): its atomic
+    /// adds alone on the same threads, and with the allocation of a zeroed buffer.
+    #[arg(long)]
     pub floor: bool,
 }
 

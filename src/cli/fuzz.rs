@@ -8,26 +8,65 @@ use super::options::{takes_range, OccupancyOptions};
 use crate::fuzz::{CampaignState, Shard};
 use crate::run;
 
-/// The options of `fuzz`. Each field is the command line's option of the same name
-/// (`fragrace fuzz --help` says what each means), parsed but not yet checked.
-#[derive(Clone, Debug)]
+/// The options of `fuzz`. Each field is the command line's option of the same name (its doc
+/// comment is the option's help), parsed but not yet checked.
+#[derive(Clone, Debug, clap::Args)]
 pub struct FuzzOptions {
+    /// Stop after this long (e.g. 60s, 10m, 1h).
+    #[arg(long)]
     pub time: Option<String>,
+    #[arg(long)]
     pub iterations: Option<u64>,
+    /// Algorithms to fuzz (repeat or comma-separate; default: all but truth).
+    #[arg(long, value_delimiter = ',')]
     pub algo: Vec<String>,
+    /// Parallel workers.
+    #[arg(long, default_value_t = 1)]
     pub jobs: usize,
+    #[arg(long, default_value = "fuzz-out")]
     pub out: PathBuf,
+    #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Continue the campaign in --out where it stopped.
+    #[arg(long)]
     pub resume: bool,
+    /// A directory of OBJ meshes to draw scenes from as well.
+    #[arg(long)]
     pub meshes: Option<PathBuf>,
+    /// Seconds to shrink each new case.
+    #[arg(long, default_value_t = 20)]
     pub shrink_secs: u64,
+    /// Largest viewport side.
+    #[arg(long, default_value_t = 48)]
     pub max_size: u32,
+    /// Schedules run on each generated scene: its scene is loaded and its truth computed
+    /// once, then this many executions of its run (other seeds) are checked against it.
+    #[arg(long, default_value_t = crate::fuzz::DEFAULT_SCHEDULES)]
     pub schedules: u64,
+    /// Only these built-in scenes (comma-separated; default: a random mix).
+    #[arg(long, value_delimiter = ',')]
     pub scene: Vec<String>,
+    /// Occupancy culling for every fuzzed algorithm that takes it (default: none).
+    #[command(flatten)]
     pub occupancy: OccupancyOptions,
+    #[arg(long)]
     pub json: bool,
+    /// Refuse a campaign whose runs in flight are estimated above this much memory (default:
+    /// half of the physical memory).
+    #[arg(long, value_name = "SIZE")]
     pub memory_limit: Option<String>,
+    /// Run only the I-th of N disjoint slices of the campaign's iterations (I from 1): N
+    /// machines each run one slice, `--merge` combines their directories.
+    #[arg(long, value_name = "I/N", conflicts_with = "merge")]
     pub shard: Option<String>,
+    /// Combine the case directories of a campaign's shards into --out (deduplicated by
+    /// signature, the smallest case of each kept) and print the merged summary.
+    /// The options of a campaign's runs have no effect on a merge, and are refused with it.
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = [
+        "time", "iterations", "resume", "algo", "jobs", "seed", "meshes", "shrink_secs",
+        "max_size", "scene", "memory_limit", "occupancy", "range", "occupancy_fill",
+        "schedules",
+    ])]
     pub merge: Vec<PathBuf>,
 }
 

@@ -5,7 +5,7 @@
 //!
 //! A command is a function `cmd_NAME(&Options, ...) -> Result<_, CliError>` that checks its
 //! options, runs, prints its summary on stdout (text, or one JSON object with `json`),
-//! writes its files and returns. Its input is a plain struct of this library
+//! writes its files and returns. Its input is an options struct of this library
 //! ([`RunOptions`], [`run::CheckOptions`], [`bench::BenchOptions`], [`fuzz::FuzzOptions`],
 //! [`report::ReportOptions`], [`racebench::RacebenchOptions`],
 //! [`presort::PresortOptions`], [`run::ReplayOptions`]): one field per option of the command
@@ -21,17 +21,17 @@
 //!
 //! # How the binary calls it
 //!
-//! `main.rs` only parses: clap's derive structs (the help text, defaults, value parsers)
-//! convert field by field into these options, and `main` calls the command, printing an
-//! error as `error: ...` (the error and its sources, joined by `: `) on stderr with exit
-//! status 2. `replay` returns whether the case's observation still holds; the binary exits
-//! with status 1 when it does not.
+//! `main.rs` only parses: each options struct derives `clap::Args`, so a field's attribute
+//! is its option (name, default, value parser from [`parse`]) and its doc comment is the
+//! option's `--help` text, written once. `main` parses into these structs, calls the
+//! command, and prints an error as `error: ...` (the error and its sources, joined by
+//! `: `) on stderr with exit status 2. `replay` returns whether the case's observation
+//! still holds; the binary exits with status 1 when it does not.
 //!
-//! The options are plain structs here, and clap's derive stays in the binary, so that the
-//! library has no parser in its types: a test, a benchmark or another front end builds the
-//! options as values and calls the command. The cost is the conversion in `main.rs`, written
-//! as a destructuring of every field, so the compiler refuses an option added on one side
-//! only.
+//! The structs are still plain values to the library: a test, a benchmark or another front
+//! end builds them with struct syntax (`RunOptions { algo: "ll".into(),
+//! ..RunOptions::default() }`) and calls the command; no parser runs. `RunOptions::default()`
+//! is the command line's defaults, which its `default_value_t`s read.
 
 pub mod bench;
 pub mod error;
@@ -40,6 +40,7 @@ pub mod list;
 pub mod memory;
 pub mod options;
 pub mod outputs;
+pub mod parse;
 pub mod presort;
 pub mod progress;
 pub mod racebench;

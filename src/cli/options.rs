@@ -7,64 +7,176 @@ use std::path::PathBuf;
 use fragrace_kernels::Params;
 
 use super::error::{CliError, OptionError};
+use super::parse::{parse_binning, parse_step, parse_thickness};
 use crate::run::{self, RunSpec, SceneSpec};
 use crate::scene::Camera;
 
-/// The options of one run. Each field is the command line's option of the same name
-/// (`scene_file` is `--scene-file`; `fragrace render --help` says what each means), with
-/// the value parsed but not yet checked: [`RunOptions::spec`] checks it.
-#[derive(Clone, Debug)]
+/// The options of one run, which are also the command line's (`render`, `check` and
+/// `bench` flatten them: each field is the option of the same name, `scene_file` is
+/// `--scene-file`, and its doc comment is the option's help). A value is parsed but not
+/// yet checked: [`RunOptions::spec`] checks it.
+#[derive(Clone, Debug, clap::Args)]
 pub struct RunOptions {
+    /// A built-in scene (see `fragrace list`).
+    #[arg(long, default_value_t = RunOptions::default().scene, conflicts_with_all = ["obj", "scene_file"])]
     pub scene: String,
+    /// A scene file (JSON: OBJ objects with placements, colours and opacities, and a
+    /// camera; README "Scene files").
+    #[arg(long, value_name = "PATH", conflicts_with = "obj")]
     pub scene_file: Option<PathBuf>,
+    /// An OBJ file (plain or .gz) instead of a built-in scene; repeated, a scene of several
+    /// objects (one per file; see --geometry-culling).
+    #[arg(long)]
     pub obj: Vec<PathBuf>,
+    /// With several --obj: file i is moved by i times this vector (X,Y,Z, in the files'
+    /// units), e.g. the same file three times in a row.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, requires = "obj")]
     pub obj_step: Option<[f32; 3]>,
+    /// Where each --obj file goes: repeated once per file, in order (X,Y,Z in the files'
+    /// units, added to --obj-step's move); --scene-file also rotates and scales.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, allow_negative_numbers = true, requires = "obj")]
     pub place: Vec<[f32; 3]>,
+    /// Multi-pass peelers (front-to-back and dual): per iteration an occlusion query of each
+    /// object's bounding box against what is left to peel, and conditional rendering of the
+    /// objects (completely peeled ones are culled; depth-fighting paper, section 3.3).
+    #[arg(long)]
     pub geometry_culling: bool,
+    #[arg(long, default_value_t = RunOptions::default().algo)]
     pub algo: String,
+    #[arg(long, default_value_t = RunOptions::default().width)]
     pub width: u32,
+    #[arg(long, default_value_t = RunOptions::default().height)]
     pub height: u32,
+    /// Degrees about +Y (0: eye on +Z, 90: on +X).
+    #[arg(long, default_value_t = RunOptions::default().azimuth, allow_negative_numbers = true)]
     pub azimuth: f32,
+    #[arg(long, default_value_t = RunOptions::default().elevation, allow_negative_numbers = true)]
     pub elevation: f32,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = RunOptions::default().fov)]
     pub fov: f32,
+    /// Distance from the eye to the point looked at (default: the bounding sphere fills
+    /// 80 % of the view), in units of the normalised scene (largest extent 1).
+    #[arg(long)]
     pub distance: Option<f32>,
+    /// The point looked at (default the scene's centre, the origin).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_step, allow_negative_numbers = true)]
     pub look_at: Option<[f32; 3]>,
+    /// Parallel projection instead of perspective.
+    #[arg(long)]
     pub orthographic: bool,
+    /// How --out shades kept fragments: lit (headlight, Lambert and Blinn-Phong, materials'
+    /// colour and opacity), translucent (Beer-Lambert absorption through the layers),
+    /// fresnel (translucent times Fresnel transmittance), id (the algorithm's own composite in
+    /// the peer's hash colours at --alpha). Default: lit for `render` (id for the algorithms
+    /// that keep only an image), id for `check`.
+    #[arg(long)]
     pub shade: Option<crate::render::Shade>,
+    /// Translucent and fresnel shading: absorption per unit of the normalised scene; a
+    /// channel absorbs sigma (1 - its colour).
+    #[arg(long, default_value_t = RunOptions::default().sigma)]
     pub sigma: f32,
+    /// Colour R,G,B (each in [0, 1]) of every object, or repeated: of each object in order.
+    #[arg(long, value_name = "R,G,B", value_parser = parse_step)]
     pub color: Vec<[f32; 3]>,
+    /// Opacity in [0, 1] of every object, or repeated: of each object in order (lit shading).
+    #[arg(long, allow_negative_numbers = true)]
     pub opacity: Vec<f32>,
+    /// Render N views around the scene (azimuth + 360 i / N) to --out: an animated GIF
+    /// when it ends in .gif, else numbered PNGs (NAME-000.png, ...).
+    #[arg(long, value_name = "N", requires = "out")]
     pub turntable: Option<u32>,
+    /// ordered | parallel | scheduled
+    #[arg(long, default_value_t = RunOptions::default().exec)]
     pub exec: String,
+    /// Scheduling policy: random, pct:D, warp:N, reverse, fifo, far-first, bytes:HEX.
+    #[arg(long, default_value_t = RunOptions::default().policy)]
     pub policy: String,
+    #[arg(long, default_value_t = RunOptions::default().seed)]
     pub seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
     pub threads: Option<usize>,
+    /// Invocations in flight under the scheduled executor.
+    #[arg(long, default_value_t = RunOptions::default().window)]
     pub window: usize,
+    /// Scheduled: pixels per side of the blocks fragments are admitted by.
+    #[arg(long, default_value_t = RunOptions::default().block)]
     pub block: u32,
+    /// Scheduled: interleave only invocations about to touch the same address or pixel.
+    #[arg(long)]
     pub reduce: bool,
+    /// Per-mille probability that a weak compare-exchange fails spuriously.
+    #[arg(long, default_value_t = RunOptions::default().spurious_cas)]
     pub spurious_cas: u32,
+    /// Parallel: lanes per warp (fragments shaded together by one thread).
+    #[arg(long, default_value_t = RunOptions::default().lanes)]
     pub lanes: usize,
+    /// Parallel: lanes run one after the other instead of in SIMT lockstep (one memory
+    /// access each per turn). Faster; races then come only from other threads.
+    #[arg(long)]
     pub no_lockstep: bool,
+    /// Parallel: most triangles of one tile per unit of work; smaller units put more
+    /// threads on one tile at once (when the pass's fixed-function results commute).
+    #[arg(long, default_value_t = RunOptions::default().segment)]
     pub segment: u32,
+    /// Parallel: `auto` runs passes that need nothing of the framebuffer (no depth or
+    /// stencil test, no colour target: counting, captures) unbinned, chunks of triangles
+    /// set up, rasterized and shaded by whichever thread takes them; `always` bins every
+    /// pass into tiles.
+    #[arg(long, default_value = "auto", value_parser = parse_binning)]
     pub binning: fragrace_emu::Binning,
+    /// Scheduled: lockstep forward progress in warps of N lanes (no independent thread
+    /// scheduling, as on pre-Volta GPUs): lanes spinning in a loop hold back their
+    /// warp-mates past it, so a spinlock whose holder shares their warp deadlocks.
+    /// 0: lanes progress independently.
+    #[arg(long, default_value_t = RunOptions::default().simt)]
     pub simt: u32,
+    /// kb-spinlock: lock attempts before a fragment gives up (4294967295: never).
+    #[arg(long, default_value_t = RunOptions::default().spin_cap)]
     pub spin_cap: u32,
+    /// k of the k-buffers.
+    #[arg(long, default_value_t = RunOptions::default().k)]
     pub k: u32,
+    /// Opacity of every fragment in the OIT composite.
+    #[arg(long, default_value_t = RunOptions::default().alpha)]
     pub alpha: f32,
+    #[command(flatten)]
     pub occupancy: OccupancyOptions,
+    /// Merging algorithms: the z-thickness of every fragment, `NxP` (N times the z-resolution
+    /// P(z) of a 24-bit depth buffer, equation 9; `NxP:BITS` for other precisions) or a
+    /// fixed view depth (e.g. 0.01).
+    #[arg(long, default_value = "2xP", value_parser = parse_thickness)]
     pub thickness: fragrace_kernels::merging::Thickness,
+    /// Merging algorithms: beta of equation 4 (SFM: 0 exact optics, 1 linear), in [0, 1].
+    #[arg(long, default_value_t = RunOptions::default().beta)]
     pub beta: f32,
+    /// The presorted algorithms: lists written by `fragrace presort` for this mesh (without
+    /// it, the mesh is preprocessed first, with 6 partitions).
+    #[arg(long, value_name = "FILE")]
     pub presorted: Option<PathBuf>,
+    /// Output PNG.
+    #[arg(long)]
     pub out: Option<PathBuf>,
+    /// For `count`: per-pixel counts as little-endian u32, row-major, top row first.
+    #[arg(long)]
     pub raw_out: Option<PathBuf>,
+    /// Directory for heatmaps (depth complexity, errors, hazards, image difference, culled,
+    /// bucket collisions).
+    #[arg(long)]
     pub heatmap: Option<PathBuf>,
+    /// Print one JSON object on stdout.
+    #[arg(long)]
     pub json: bool,
+    /// Refuse runs whose estimated peak memory is above this (e.g. 8G, 512M; default: half
+    /// of the physical memory).
+    #[arg(long, value_name = "SIZE")]
     pub memory_limit: Option<String>,
 }
 
-/// The command line's defaults: `fragrace render` with no option. The binary's options
-/// take their defaults from here (`--binning auto` and `--thickness 2xP`, parsed by the
-/// binary, are `Binning::default()` and `Thickness::default()`).
+/// The command line's defaults: `fragrace render` with no option. The options take their
+/// defaults from here (`--binning auto` and `--thickness 2xP`, parsed by
+/// [`super::parse`], are `Binning::default()` and `Thickness::default()`).
 impl Default for RunOptions {
     fn default() -> RunOptions {
         let params = Params::default();
@@ -120,10 +232,21 @@ impl Default for RunOptions {
 
 /// The occupancy-culling options of `render`, `check`, `bench`, `fuzz` and `report`:
 /// `--occupancy D`, `--range`, `--occupancy-fill`.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, clap::Args)]
 pub struct OccupancyOptions {
+    /// Occupancy-map culling in front of the k-buffer's capture pass, with D words (32 D
+    /// depth sub-intervals) per pixel, 1 to 64 and at least k/32 (`fragrace list` says
+    /// which algorithms take it).
+    #[arg(long, value_name = "D")]
     pub occupancy: Option<u32>,
+    /// Occupancy culling, and the bucket schemes (bdp, bdp2, adp): the per-pixel depth
+    /// range from the scene (`exact`), its bounding box (`bbox`) or its convex hull
+    /// (`hull`). Default exact.
+    #[arg(long)]
     pub range: Option<fragrace_kernels::occupancy::RangeSource>,
+    /// Occupancy culling: set the map's bits with `atomic` OR (default), or with a `plain`
+    /// load, OR and store (racy by design: bits are lost).
+    #[arg(long)]
     pub occupancy_fill: Option<fragrace_kernels::occupancy::FillMode>,
 }
 

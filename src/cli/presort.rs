@@ -11,17 +11,21 @@ use super::error::{CliError, OptionError};
 use super::progress::progress;
 
 /// The options of `presort`.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, clap::Args)]
 pub struct PresortOptions {
     /// The mesh: an OBJ file (plain or .gz), or a built-in scene's name.
     pub mesh: String,
     /// Faces of the bounding polyhedron (= viewpoint partitions = segments): 4, 6, 16 or 64.
+    #[arg(long, default_value_t = 6)]
     pub partitions: u32,
     /// Where to write the lists (written to a temporary file and renamed when complete).
+    #[arg(long)]
     pub out: PathBuf,
     /// Worker threads (partitions run one per task; default: all cores).
+    #[arg(long)]
     pub threads: Option<usize>,
     /// Print one JSON object on stdout.
+    #[arg(long)]
     pub json: bool,
 }
 

@@ -4,19 +4,26 @@ use super::error::CliError;
 use crate::racebench::{self, BenchConfig, BenchPolicy, BenchResult};
 
 /// The options of `racebench`.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, clap::Args)]
 pub struct RacebenchOptions {
     /// Schedules per kernel and policy (runs, for `parallel`).
+    #[arg(long, default_value_t = 200)]
     pub schedules: u64,
     /// Comma-separated policies (scheduled policy names, or `parallel`).
+    #[arg(long, default_value = "random,pct:2,pct:3,warp:32,far-first,parallel")]
     pub policies: String,
     /// Comma-separated kernel names (default: all).
+    #[arg(long)]
     pub kernels: Option<String>,
     /// Worker threads of the sweep (default: all cores).
+    #[arg(long)]
     pub threads: Option<usize>,
-    /// Run every schedule even after a racy kernel's race was found (a precision run).
+    /// Run every schedule even after a racy kernel's race was found (a precision run: every
+    /// report is seen). By default a racy kernel stops at its first true report.
+    #[arg(long)]
     pub all_schedules: bool,
     /// The full result as JSON.
+    #[arg(long)]
     pub json: bool,
 }
 

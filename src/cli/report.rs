@@ -13,27 +13,72 @@ use crate::fuzz::Shard;
 use crate::run::{self, RunSpec, SceneSpec};
 use crate::scene::Camera;
 
-/// The options of `report`. Each field is the command line's option of the same name
-/// (`fragrace report --help` says what each means), parsed but not yet checked.
-#[derive(Clone, Debug)]
+/// The options of `report`. Each field is the command line's option of the same name (its doc
+/// comment is the option's help), parsed but not yet checked.
+#[derive(Clone, Debug, clap::Args)]
 pub struct ReportOptions {
+    /// Algorithms (default: all).
+    #[arg(long, value_delimiter = ',')]
     pub algo: Vec<String>,
+    /// Scenes: built-in names or OBJ paths.
+    #[arg(long, value_delimiter = ',', default_value = "hairball,cubes")]
     pub scenes: Vec<String>,
+    #[arg(long, default_value_t = 256)]
     pub size: u32,
+    /// ordered | parallel | scheduled (scheduled runs use --policy and --seed).
+    #[arg(long, default_value = "parallel")]
     pub exec: String,
+    #[arg(long, default_value = "random")]
     pub policy: String,
+    #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    #[arg(long)]
     pub threads: Option<usize>,
+    #[arg(long, default_value_t = 8)]
     pub k: u32,
+    /// Instead of the table: EPR of each algorithm over this many azimuths, as CSV on stdout
+    /// and a plot to --out (.svg or .png). In a sweep, `--algo NAME@EXEC` runs one algorithm
+    /// under another executor (e.g. `kb-rmw,kb-rmw@scheduled`).
+    #[arg(long)]
     pub views: Option<u32>,
+    /// Views computed at once (--views): a work-stealing pool of this many threads, each
+    /// view's runs using --threads as well. Memory: this many runs at once.
+    #[arg(long, default_value_t = 1, requires = "views")]
     pub jobs: usize,
+    /// Only the I-th of N disjoint slices of the views (--views; I from 1): view v goes to
+    /// slice v % N + 1, so N machines can each compute one; the slices' CSV rows together
+    /// are the whole sweep's (sort them by azimuth).
+    #[arg(long, value_name = "I/N", requires = "views")]
     pub shard: Option<String>,
+    #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Occupancy culling for the algorithms that take it (their rows are named `NAME+occ`);
+    /// the others run as they are.
+    #[command(flatten)]
     pub occupancy: OccupancyOptions,
+    /// Refuse a report whose largest run is estimated above this much memory (default: half
+    /// of the physical memory).
+    #[arg(long, value_name = "SIZE")]
     pub memory_limit: Option<String>,
+    /// Instead of the table: the seeds' tables and figures, measured, written to --out DIR
+    /// (index.html, SVG and PNG per figure, CSV and Markdown per table, report.json).
+    /// depth-fighting, bucket, occupancy, merging, presorted, hazards (comma-separated), or
+    /// all.
+    #[arg(long, value_name = "SECTIONS", conflicts_with_all = [
+        "views", "algo", "scenes", "size", "exec", "policy", "seed", "k", "jobs", "shard",
+        "memory_limit", "occupancy", "range", "occupancy_fill",
+    ])]
     pub paper: Option<String>,
+    /// --paper: built-in and shipped scenes only, small images, few views (minutes).
+    #[arg(long, requires = "paper")]
     pub quick: bool,
+    /// --paper: a directory of meshes (.obj, .obj.gz) for the full report (default: the
+    /// shipped meshes of assets/).
+    #[arg(long, value_name = "DIR", requires = "paper", conflicts_with = "quick")]
     pub models: Option<PathBuf>,
+    /// --paper: the llvmpipe peer's script (oit.py, with Python's moderngl), run by the
+    /// hazards section next to the k-buffer's race; without it the page says it is absent.
+    #[arg(long, value_name = "FILE", requires = "paper")]
     pub peer: Option<PathBuf>,
 }
 

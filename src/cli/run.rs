@@ -13,20 +13,25 @@ use super::progress::progress;
 use crate::run::{self, RunSpec, SceneSpec};
 
 /// The options of `check`: a run, over `schedules` seeds.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, clap::Args)]
 pub struct CheckOptions {
+    #[command(flatten)]
     pub run: RunOptions,
     /// Schedules (seeds seed, seed+1, ...) to run under the scheduled executor.
+    #[arg(long, default_value_t = 1)]
     pub schedules: u64,
 }
 
 /// The options of `replay`.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, clap::Args)]
 pub struct ReplayOptions {
     /// The case file.
     pub case: PathBuf,
+    #[arg(long)]
     pub json: bool,
-    /// `--memory-limit`.
+    /// Refuse a case whose estimated peak memory is above this (default: half of the
+    /// physical memory).
+    #[arg(long, value_name = "SIZE")]
     pub memory_limit: Option<String>,
 }
 
