@@ -187,7 +187,9 @@ pub(super) struct ListResolve {
 
 impl FragmentKernel for ListResolve {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("list-resolve")
+        // A pixel no fragment reached has empty lists (the heads are filled with `EMPTY`):
+        // it writes the background.
+        KernelInfo::new("list-resolve").with_untouched_output(self.composite.background_bits())
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
