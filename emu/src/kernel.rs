@@ -52,6 +52,9 @@ pub struct KernelInfo {
     pub interpolants: bool,
     /// The per-pixel array the kernel accesses (see [`KernelInfo::with_pixel_array`]).
     pub pixel_array: Option<PixelArray>,
+    /// What a full-screen invocation does at a pixel no geometry pass of the device
+    /// rasterized (see [`KernelInfo::with_untouched_output`]).
+    pub untouched_output: Option<[u32; 4]>,
 }
 
 impl KernelInfo {
@@ -63,6 +66,7 @@ impl KernelInfo {
             interlock: None,
             interpolants: true,
             pixel_array: None,
+            untouched_output: None,
         }
     }
     pub const fn with_discard(mut self) -> KernelInfo {
@@ -101,6 +105,28 @@ impl KernelInfo {
             buffer: buf.id,
             stride,
         });
+        self
+    }
+}
+
+impl KernelInfo {
+    /// Declares, for a full-screen pass, that its invocation at a pixel where no geometry
+    /// pass of the device has rasterized a fragment does nothing but write `bits` to target
+    /// 0 (as [`Fragment::output_u32`] would; no other target, no discard, no fault, no
+    /// memory write): a resolve at an empty pixel, which writes the background. The fused
+    /// path of the `ordered` and `parallel` executors then writes `bits` to such pixels
+    /// without running the kernel, by screen blocks of 8 x 8 pixels that no fragment
+    /// reached (a coverage mask the geometry passes mark as they rasterize, as a GPU's
+    /// hierarchical stencil; `crate::pipeline::BlockMask`), and counts them in
+    /// [`Stats::skipped`](crate::Stats::skipped) instead of
+    /// [`Stats::shaded`](crate::Stats::shaded). The scheduled executor runs every pixel,
+    /// so a wrong declaration shows as a difference between executors, and in the image
+    /// the oracle compares with the truth. Ignored by geometry passes, and by full-screen
+    /// passes with more than one target.
+    ///
+    /// [`Fragment::output_u32`]: crate::Fragment::output_u32
+    pub const fn with_untouched_output(mut self, bits: [u32; 4]) -> KernelInfo {
+        self.untouched_output = Some(bits);
         self
     }
 }

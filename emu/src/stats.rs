@@ -18,6 +18,10 @@ pub struct Stats {
     pub early_culled: u64,
     /// Kernel invocations run.
     pub shaded: u64,
+    /// Full-screen invocations not run: their pixel no geometry pass reached, and the
+    /// kernel declared its output there (`KernelInfo::with_untouched_output`).
+    #[serde(default)]
+    pub skipped: u64,
     /// Invocations that called `discard`.
     pub discarded: u64,
     /// Fragments killed by the late depth/stencil test.
@@ -123,6 +127,7 @@ impl Stats {
         self.fragments_generated += o.fragments_generated;
         self.early_culled += o.early_culled;
         self.shaded += o.shaded;
+        self.skipped += o.skipped;
         self.discarded += o.discarded;
         self.late_culled += o.late_culled;
         self.samples_passed += o.samples_passed;

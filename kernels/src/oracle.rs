@@ -6,7 +6,9 @@
 //!   ([`Capacity`]): counts must be equal; A-buffers must hold the same multiset of
 //!   (depth, primitive); k-buffers the same sorted multiset of depths as the k nearest true
 //!   fragments (which of two equal-depth fragments was kept is not an error); `Nearest` the
-//!   nearest depth; images any channel off by more than 1/255.
+//!   nearest depth; images any channel off by more than 1/255. An uncovered pixel whose
+//!   image is not the background (the composite of nothing) is an error too, counted in
+//!   the error pixels (and the image's) though not among the covered ones.
 //! - R_h, the robustness ratio (depth-fighting paper, section 3): fragments captured over
 //!   fragments the algorithm should have captured (all of them, or `min(k, n)` per pixel).
 //! - C_p, the coplanarity probability (depth-fighting paper, Fig. 13): covered pixels with at
@@ -62,7 +64,8 @@ pub struct Metrics {
 pub struct ImageMetrics {
     /// Largest channel difference of any covered pixel.
     pub max_diff: f32,
-    /// Covered pixels with a channel off by more than [`IMAGE_TOLERANCE`] (or NaN).
+    /// Covered pixels with a channel off by more than [`IMAGE_TOLERANCE`] (or NaN), and
+    /// uncovered ones whose image is not the background.
     pub error_pixels: u64,
     /// `error_pixels` over covered pixels.
     pub image_epr: f64,
@@ -118,6 +121,28 @@ pub fn compare(
             *m.lemma_2_1_violations.as_mut().expect("set above") += violations as u64;
         }
         if tp.is_empty() {
+            // An empty pixel's image is the composite of nothing (the background): this
+            // is also what proves the resolves' declared output at pixels no geometry
+            // reached (`KernelInfo::with_untouched_output`), which the fused executors
+            // write without running the kernel.
+            if let Some(img) = result.image.as_ref() {
+                let want = crate::common::composite_frags(&[], params.alpha, params.background);
+                let got = img.get(p).copied().unwrap_or([f32::NAN; 4]);
+                let wrong = (0..3).any(|c| {
+                    let d = (got[c] - want[c]).abs();
+                    d.is_nan() || d > IMAGE_TOLERANCE
+                });
+                if wrong {
+                    if let Some(im) = image.as_mut() {
+                        im.error_pixels += 1;
+                        im.diff[p] = f32::INFINITY;
+                    }
+                    m.error_pixels += 1;
+                    m.error_mask[p] = true;
+                    m.first_error
+                        .get_or_insert(((p as u32) % t.width, (p as u32) / t.width));
+                }
+            }
             continue;
         }
         if let (Some(im), Some(img)) = (image.as_mut(), result.image.as_ref()) {

@@ -67,6 +67,15 @@ impl Composite {
         }
     }
 
+    /// The bits the composite of no fragment (the background) writes to target 0: what a
+    /// resolve declares it outputs at pixels no geometry reached
+    /// ([`KernelInfo::with_untouched_output`](fragrace_emu::KernelInfo::with_untouched_output)),
+    /// where its buffers hold nothing. The oracle checks every empty pixel's image against
+    /// it.
+    pub fn background_bits(&self) -> [u32; 4] {
+        composite_frags(&[], self.alpha, self.background).map(f32::to_bits)
+    }
+
     /// Writes the composite of `frags` (already in front-to-back order) to target 0.
     pub fn output(&self, f: &impl Fragment, frags: &[CapturedFrag]) {
         f.output(0, composite_frags(frags, self.alpha, self.background));

@@ -16,10 +16,13 @@
 
 mod report;
 mod tiles;
+mod touched;
 mod vertex;
 mod waves;
 
 pub use report::{OcclusionQuery, PassError, PassReport, PassState, PassTime};
+use touched::Touched;
+pub use touched::{BlockMask, BLOCK_SHIFT};
 use vertex::{VertexCache, VertexKey};
 use waves::{absorb, explicit_inputs, mode_of, Geometry};
 
@@ -44,6 +47,9 @@ pub struct Device {
     /// The last draw's vertices, for the next draw of the same mesh and matrix.
     #[cfg(not(loom))]
     vertices: VertexCache,
+    /// The screen blocks this device's geometry passes rasterized (see `touched`).
+    #[cfg(not(loom))]
+    touched: Touched,
 }
 
 impl Device {
@@ -69,6 +75,17 @@ impl Device {
     #[cfg(loom)]
     fn vertex_cache(&self) -> VertexCache {
         VertexCache::default()
+    }
+
+    /// The screen blocks this device's geometry passes reached (under loom, none is
+    /// kept: nothing is skipped).
+    #[cfg(not(loom))]
+    fn touched(&self) -> Option<&Touched> {
+        Some(&self.touched)
+    }
+    #[cfg(loom)]
+    fn touched(&self) -> Option<&Touched> {
+        None
     }
 
     /// Creates a zero-filled storage buffer.
@@ -254,6 +271,10 @@ impl Device {
     ) -> PassReport {
         let start = Instant::now();
         let info = kernel.info();
+        // Explicit fragments reach pixels without the rasterizer.
+        if let Some(t) = self.touched() {
+            t.forget();
+        }
         let interlock = info.interlock.map(|_| Interlock::new(width, height));
         let env = PassEnv {
             mode: mode_of(exec),
@@ -292,6 +313,10 @@ impl Device {
         each: impl FnMut(&crate::exec::Execution<'_>, &Memory) -> bool,
     ) -> u64 {
         let info = kernel.info();
+        // Explicit fragments reach pixels without the rasterizer.
+        if let Some(t) = self.touched() {
+            t.forget();
+        }
         let interlock = info.interlock.map(|_| Interlock::new(width, height));
         let env = PassEnv {
             mode: Mode::Scheduled,

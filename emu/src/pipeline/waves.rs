@@ -88,6 +88,11 @@ impl Device {
         // fused path (see `fused`): no fragment lists, one pass over each tile.
         let direct = matches!(exec.mode, ExecMode::Ordered | ExecMode::Parallel);
         let parallel = exec.mode == ExecMode::Parallel;
+        // The screen blocks this pass marks (geometry on the fused path) or may skip
+        // (a full-screen pass whose kernel declares its output at untouched pixels).
+        let touched = self.touched();
+        let (fw, fh) = (fb.width, fb.height);
+        let marking = || touched.and_then(|t| t.for_marking(fw, fh));
         let fused_pass = |instance: u32, first: u32, single: bool| crate::exec::fused::FusedPass {
             state,
             instance,
@@ -102,6 +107,8 @@ impl Device {
                 .then_some(exec.segment.max(1)),
             seq_base: *seq_base,
             flat_depth: f32::NAN,
+            touched: None,
+            untouched_output: None,
         };
         let pixels = fb.width as u64 * fb.height as u64;
         if let Geometry::Unbinned {
@@ -113,7 +120,11 @@ impl Device {
         {
             // `Device::draw` makes unbinned geometry only for passes this path runs.
             debug_assert!(direct && info.interlock.is_none() && contention.is_none());
-            let pass = fused_pass(*instance, *first, *single);
+            let mask = marking();
+            let pass = crate::exec::fused::FusedPass {
+                touched: mask.as_deref(),
+                ..fused_pass(*instance, *first, *single)
+            };
             let (outcome, counts, rejected, imbalance) =
                 crate::exec::fused::run_unbinned(kernel, &env_base, &pass, prepared);
             report.imbalance += imbalance;
@@ -137,7 +148,11 @@ impl Device {
             },
         ) = (direct, info.interlock, contention.as_ref(), geo)
         {
-            let pass = fused_pass(*instance, *first, *single);
+            let mask = marking();
+            let pass = crate::exec::fused::FusedPass {
+                touched: mask.as_deref(),
+                ..fused_pass(*instance, *first, *single)
+            };
             let (outcome, counts, imbalance) =
                 crate::exec::fused::run_fused(kernel, &env_base, &pass, binned, fb.tiles_mut());
             report.imbalance += imbalance;
@@ -152,8 +167,16 @@ impl Device {
             (direct, info.interlock, contention.as_ref(), geo)
         {
             if crate::exec::fused::fullscreen_fuses(state, env_base.samples) {
+                // Skipping needs the kernel's word on untouched pixels and a mask of this
+                // frame; it defines target 0 only.
+                let untouched_output = info.untouched_output.filter(|_| targets <= 1);
+                let mask = untouched_output
+                    .and(touched)
+                    .and_then(|t| t.for_reading(fw, fh));
                 let pass = crate::exec::fused::FusedPass {
                     flat_depth: 0.5,
+                    touched: mask.as_deref(),
+                    untouched_output,
                     ..fused_pass(0, 0, false)
                 };
                 let (outcome, counts, imbalance) =
@@ -164,6 +187,12 @@ impl Device {
                 counts.add_to(&mut report.stats);
                 absorb(report, outcome, &self.memory);
                 return;
+            }
+        }
+        if !matches!(geo, Geometry::FullScreen) {
+            // The general path's fragments mark no block.
+            if let Some(t) = touched {
+                t.forget();
             }
         }
         let tile_count = fb.tiles().len();

@@ -143,7 +143,10 @@ impl ArrayResolve {
 
 impl FragmentKernel for ArrayResolve {
     fn info(&self) -> KernelInfo {
+        // A pixel no fragment reached stored none (its length is 0): it writes the
+        // background.
         KernelInfo::new("abuffer-array-resolve")
+            .with_untouched_output(self.composite.background_bits())
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();

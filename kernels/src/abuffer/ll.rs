@@ -187,7 +187,9 @@ pub(super) struct ListResolve {
 
 impl FragmentKernel for ListResolve {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("list-resolve")
+        // A pixel no fragment reached has empty lists (the heads are filled with `EMPTY`):
+        // it writes the background.
+        KernelInfo::new("list-resolve").with_untouched_output(self.composite.background_bits())
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
@@ -196,6 +198,9 @@ impl FragmentKernel for ListResolve {
         // An empty pixel (most of a frame) loads its one head and writes the background.
         if self.lists == 1 && head == EMPTY {
             self.composite.output(&f, &[]);
+            return;
+        }
+        if self.lists == 1 && self.resolve_short(&f, head).await {
             return;
         }
         // The lists are gathered in this thread's scratch vectors, reused from pixel to
@@ -241,6 +246,51 @@ impl FragmentKernel for ListResolve {
         }
         self.composite.output(&f, &all);
         SCRATCH.with(|s| s.set((all, nodes, frags)));
+    }
+}
+
+/// Most nodes of a list [`ListResolve::resolve_short`] gathers on the stack (the bunny at
+/// 2048 x 2048 has 4 fragments a covered pixel on average, the 871K dragon 6).
+const SHORT: usize = 16;
+
+impl ListResolve {
+    /// The resolve of a single list of at most [`SHORT`] nodes, all in the pool, gathered on
+    /// the stack rather than in the thread's scratch vectors (whose take and put back cost
+    /// about a tenth of the resolve's instructions). Returns false, having only loaded,
+    /// when the list is longer or leaves the pool: the general walk then does it (and
+    /// counts the fault).
+    async fn resolve_short(&self, f: &impl Fragment, head: u32) -> bool {
+        let mut nodes = [0u32; SHORT];
+        let mut frags = [CapturedFrag {
+            depth: 0.0,
+            prim: 0,
+        }; SHORT];
+        let mut n = 0;
+        let mut cur = head;
+        while cur != EMPTY {
+            if n == SHORT || cur >= self.pool_nodes || n as u32 >= self.pool_nodes {
+                return false;
+            }
+            let mut rec = [0u32; NODE_WORDS as usize];
+            f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec)
+                .await;
+            nodes[n] = cur;
+            frags[n] = CapturedFrag::from_bits(rec[0], rec[1]);
+            n += 1;
+            cur = rec[NEXT as usize];
+        }
+        let frags = &mut frags[..n];
+        sort_fragments(frags);
+        for (&node, fr) in nodes.iter().zip(frags.iter()) {
+            f.store_record(
+                self.pool.nodes,
+                node * NODE_WORDS,
+                &[fr.depth.to_bits(), fr.prim],
+            )
+            .await;
+        }
+        self.composite.output(f, frags);
+        true
     }
 }
 

@@ -23,7 +23,8 @@ struct Resolve {
 
 impl FragmentKernel for Resolve {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("kb-resolve")
+        // A pixel no fragment reached has every slot empty: it writes the background.
+        KernelInfo::new("kb-resolve").with_untouched_output(self.composite.background_bits())
     }
     async fn shade(&self, f: impl Fragment) {
         let base = f.pixel_index() * self.k;

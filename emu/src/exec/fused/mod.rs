@@ -30,6 +30,7 @@ use crate::exec::{Acc, ShadeOutcome};
 use crate::framebuffer::TileMemory;
 use crate::invocation::PassEnv;
 use crate::kernel::{FragInput, FragmentKernel};
+use crate::pipeline::{BlockMask, BLOCK_SHIFT};
 use crate::raster::{Binned, FlatChunk, Prepared, Segment, SetupTriangle, Span};
 use crate::state::FragmentState;
 use crate::sync::pool;
@@ -59,6 +60,13 @@ pub(crate) struct FusedPass<'a> {
     /// reads it: `Fragment::depth` interpolates their triangle's plane), 0.5 in full-screen
     /// passes (their fragments' depth).
     pub flat_depth: f32,
+    /// Geometry passes: the screen blocks their covered runs mark. Full-screen passes:
+    /// the blocks no geometry reached, whose pixels get `untouched_output` without running
+    /// the kernel (both set, or no skipping).
+    pub touched: Option<&'a BlockMask>,
+    /// What the kernel declared it writes to target 0 at an untouched pixel
+    /// (`KernelInfo::untouched_output`).
+    pub untouched_output: Option<[u32; 4]>,
 }
 
 /// Where a unit of work's covered runs come from: a segment of a tile's bin lists
@@ -84,26 +92,49 @@ impl SpanSource for SegmentSpans<'_> {
 /// The pixels of one tile in a full-screen pass: a span per row, every sample covered, no
 /// setup record (`tri` = `u32::MAX`), primitive 0, front facing (as the general path's
 /// full-screen fragments).
-struct FullScreenSpans {
+struct FullScreenSpans<'m> {
     x0: u32,
     y0: u32,
     w: u32,
     h: u32,
     coverage: u8,
+    /// Only the pixels of blocks this mask marks (the others are skipped:
+    /// `Worker::skip_untouched`).
+    touched: Option<&'m BlockMask>,
 }
 
-impl SpanSource for FullScreenSpans {
+impl SpanSource for FullScreenSpans<'_> {
     fn spans<'s>(&'s self, buf: &'s mut Vec<Span>) -> &'s [Span] {
         buf.clear();
-        buf.extend((self.y0..self.y0 + self.h).map(|y| Span {
+        let span = |y, x0, x1| Span {
             y,
-            x0: self.x0,
-            x1: self.x0 + self.w,
+            x0,
+            x1,
             tri: u32::MAX,
             coverage: self.coverage,
             source: 0,
             front_facing: true,
-        }));
+        };
+        for y in self.y0..self.y0 + self.h {
+            let Some(mask) = self.touched else {
+                buf.push(span(y, self.x0, self.x0 + self.w));
+                continue;
+            };
+            let mut lx = 0;
+            while lx < self.w {
+                let end = worker::block_end(self.x0, lx, self.w);
+                if mask.touched((self.x0 + lx) >> BLOCK_SHIFT, y >> BLOCK_SHIFT) {
+                    // Touched runs next to each other make one span.
+                    match buf.last_mut() {
+                        Some(last) if last.y == y && last.x1 == self.x0 + lx => {
+                            last.x1 = self.x0 + end
+                        }
+                        _ => buf.push(span(y, self.x0 + lx, self.x0 + end)),
+                    }
+                }
+                lx = end;
+            }
+        }
         buf
     }
 }
@@ -121,6 +152,8 @@ pub(crate) struct FusedCounts {
     pub early_culled: u64,
     pub late_culled: u64,
     pub samples_passed: u64,
+    /// Full-screen invocations not run (their block untouched: `FusedPass::touched`).
+    pub skipped: u64,
 }
 
 impl FusedCounts {
@@ -130,6 +163,7 @@ impl FusedCounts {
         stats.early_culled += self.early_culled;
         stats.late_culled += self.late_culled;
         stats.samples_passed += self.samples_passed;
+        stats.skipped += self.skipped;
     }
 
     fn add(&mut self, o: &FusedCounts) {
@@ -137,6 +171,7 @@ impl FusedCounts {
         self.early_culled += o.early_culled;
         self.late_culled += o.late_culled;
         self.samples_passed += o.samples_passed;
+        self.skipped += o.skipped;
     }
 }
 
@@ -308,12 +343,17 @@ pub(crate) fn run_fullscreen<K: FragmentKernel>(
                 w.run_tile_fullscreen(tile, env, coverage);
                 continue;
             }
+            let skip = pass.touched.zip(pass.untouched_output);
+            if let Some((mask, bits)) = skip {
+                w.skip_untouched(tile, mask, bits, coverage);
+            }
             let src = FullScreenSpans {
                 x0: tile.x0,
                 y0: tile.y0,
                 w: tile.w,
                 h: tile.h,
                 coverage,
+                touched: skip.map(|(mask, _)| mask),
             };
             w.run_unit(&src, env, Some(TileAccess::Exclusive(tile)));
         }
@@ -461,6 +501,11 @@ impl FusedPass<'_> {
     /// Depth or stencil tests run after shading.
     fn late_tests(&self) -> bool {
         !self.early && (self.state.depth.test || self.state.stencil.enabled)
+    }
+
+    /// The mask a geometry pass marks (full-screen passes only read theirs).
+    fn marks(&self) -> Option<&BlockMask> {
+        self.touched.filter(|_| self.untouched_output.is_none())
     }
 
     /// Nothing per pixel around the kernel: no test before or after shading and no target

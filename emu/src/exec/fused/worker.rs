@@ -12,6 +12,7 @@ use crate::framebuffer::TileMemory;
 use crate::invocation::{DirectFrag, DirectState, Frag, Invocation, Mode, PassEnv};
 use crate::kernel::{FragInput, FragmentKernel};
 use crate::memory::{PixelArray, PixelPrefetcher};
+use crate::pipeline::{BlockMask, BLOCK_SHIFT};
 use crate::raster::{SampleCount, Span};
 
 use super::{tile_of, FusedCounts, FusedPass, RowSetup, SpanSource, TileAccess};
@@ -93,6 +94,11 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
     ) -> Option<TileAccess<'t>> {
         let mut buf = std::mem::take(&mut self.spans);
         let spans = src.spans(&mut buf);
+        if let Some(mask) = self.pass.marks() {
+            for s in spans {
+                mask.mark_run(s.y, s.x0, s.x1);
+            }
+        }
         // Without lockstep (or with one lane) nothing interleaves inside a worker.
         let tile = if !self.pass.lockstep || self.slots.len() == 1 {
             if self.pass.counting() {
@@ -294,6 +300,8 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let state = DirectState::new();
         let mut tally = Tally::default();
         let (x0, y0) = (tile.x0, tile.y0);
+        // Blocks no geometry reached: their pixels get the kernel's declared output.
+        let skip = pass.touched.zip(pass.untouched_output);
         for ly in 0..tile.h {
             let y = y0 + ly;
             // Full-screen ids are by pixel, row-major (`Row::row_seq` with source 0).
@@ -310,39 +318,87 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 depth: pass.flat_depth,
                 ticket: 0,
             });
-            for lx in 0..tile.w {
-                let x = x0 + lx;
-                state.next_pixel(row_seq.wrapping_add(x as u64), x);
-                slot.clear_outputs();
-                shade_direct(kernel, slot, &state, env);
-                if slot.faulted() {
-                    // Counted (and its fault kept) by the slot's path; nothing is written.
-                    state.spill(slot);
-                    acc.count(slot);
-                    continue;
-                }
-                tally.add_direct(&state, samples);
-                if state.discarded.get() || targets == 0 {
-                    continue;
-                }
-                if plain {
-                    let at = (ly * tile.tile_size + lx) as usize;
-                    for (plane, o) in tile.color.iter_mut().zip(&slot.outputs).take(targets) {
-                        plane[at] = o.get();
+            let mut lx = 0;
+            while lx < tile.w {
+                // The pixels up to the next block boundary: skipped together or shaded.
+                let end = block_end(x0, lx, tile.w);
+                if let Some((mask, bits)) = skip {
+                    if !mask.touched((x0 + lx) >> BLOCK_SHIFT, y >> BLOCK_SHIFT) {
+                        write_untouched(tile, pass.state, ly, lx..end, cov, bits, targets);
+                        counts.skipped += u64::from(end - lx);
+                        counts.samples_passed += u64::from(samples) * u64::from(end - lx);
+                        lx = end;
+                        continue;
                     }
-                    continue;
                 }
-                let mut colors = [[0u32; 4]; 8];
-                for (c, o) in colors.iter_mut().zip(&slot.outputs).take(targets) {
-                    *c = o.get();
+                let run = lx..end;
+                lx = end;
+                for lx in run {
+                    let x = x0 + lx;
+                    state.next_pixel(row_seq.wrapping_add(x as u64), x);
+                    slot.clear_outputs();
+                    shade_direct(kernel, slot, &state, env);
+                    if slot.faulted() {
+                        // Counted (and its fault kept) by the slot's path; nothing is written.
+                        state.spill(slot);
+                        acc.count(slot);
+                        continue;
+                    }
+                    tally.add_direct(&state, samples);
+                    if state.discarded.get() || targets == 0 {
+                        continue;
+                    }
+                    if plain {
+                        let at = (ly * tile.tile_size + lx) as usize;
+                        for (plane, o) in tile.color.iter_mut().zip(&slot.outputs).take(targets) {
+                            plane[at] = o.get();
+                        }
+                        continue;
+                    }
+                    let mut colors = [[0u32; 4]; 8];
+                    for (c, o) in colors.iter_mut().zip(&slot.outputs).take(targets) {
+                        *c = o.get();
+                    }
+                    tile.write_outputs(pass.state, lx, ly, cov, &colors[..targets]);
                 }
-                tile.write_outputs(pass.state, lx, ly, cov, &colors[..targets]);
             }
         }
         slot.clear_outputs();
         state.drain_ops(slot);
         acc.add_tally(tally);
         counts.samples_passed += tally.samples_passed;
+    }
+
+    /// Writes the declared output of a full-screen kernel to the pixels of `tile` in blocks
+    /// no geometry reached (`mask`), and counts them as skipped; the lockstep path then
+    /// shades the rest ([`super::FullScreenSpans`] with the same mask).
+    pub(super) fn skip_untouched(
+        &mut self,
+        tile: &mut TileMemory,
+        mask: &BlockMask,
+        bits: [u32; 4],
+        coverage: u8,
+    ) {
+        let pass = self.pass;
+        let cov = coverage & pass.state.sample_mask & self.all_samples;
+        if cov == 0 {
+            return;
+        }
+        let samples = u64::from(samples_of(cov));
+        let targets = pass.targets.min(8);
+        for ly in 0..tile.h {
+            let y = tile.y0 + ly;
+            let mut lx = 0;
+            while lx < tile.w {
+                let end = block_end(tile.x0, lx, tile.w);
+                if !mask.touched((tile.x0 + lx) >> BLOCK_SHIFT, y >> BLOCK_SHIFT) {
+                    write_untouched(tile, pass.state, ly, lx..end, cov, bits, targets);
+                    self.counts.skipped += u64::from(end - lx);
+                    self.counts.samples_passed += samples * u64::from(end - lx);
+                }
+                lx = end;
+            }
+        }
     }
 
     /// [`Self::run_unit`] with lockstep warps: fragments gather into a warp of slots,
@@ -557,6 +613,42 @@ fn late(
             }
             t.write_outputs(state, lx, ly, mask, &colors[..pass.targets]);
         }
+    }
+}
+
+/// The end (tile-relative, exclusive) of the run of pixels from `lx` to the next block
+/// boundary of the touched mask (or the tile's end).
+#[inline(always)]
+pub(super) fn block_end(x0: u32, lx: u32, w: u32) -> u32 {
+    let x = x0 + lx;
+    ((((x >> BLOCK_SHIFT) + 1) << BLOCK_SHIFT) - x0).min(w)
+}
+
+/// Writes `bits` (a kernel's declared output at untouched pixels, target 0) to the pixels
+/// `run` of row `ly` of `tile`, as the target writes of invocations that output it would.
+#[inline]
+pub(super) fn write_untouched(
+    tile: &mut TileMemory,
+    state: &crate::state::FragmentState,
+    ly: u32,
+    run: std::ops::Range<u32>,
+    cov: u8,
+    bits: [u32; 4],
+    targets: usize,
+) {
+    if targets == 0 {
+        return;
+    }
+    debug_assert_eq!(targets, 1);
+    if tile.samples == 1 && cov == 1 && state.targets[0].plain_write() {
+        // The bits go straight to the texels (what `write_outputs` computes).
+        let row = (ly * tile.tile_size) as usize;
+        tile.color[0][row + run.start as usize..row + run.end as usize].fill(bits);
+        return;
+    }
+    let outputs = [bits];
+    for lx in run {
+        tile.write_outputs(state, lx, ly, cov, &outputs);
     }
 }
 
