@@ -76,6 +76,23 @@ thread_local! {
     static SCRATCH: RefCell<Option<SchedScratch>> = const { RefCell::new(None) };
 }
 
+/// Whether an in-flight invocation can be granted its pending step: any step but entering
+/// the interlock or passing its turn, and those when the lock allows (`claim`: the words
+/// it claims; `None` without interlock).
+#[inline]
+fn runnable(inv: &Invocation, claim: Option<&Claim>, env: &PassEnv<'_>) -> bool {
+    let claim = match (claim, env.interlock, env.interlock_mode) {
+        (Some(c), Some(l), Some(m)) => Some((l, m, c)),
+        _ => None,
+    };
+    match inv.pending.get() {
+        Some(StepKind::InterlockBegin) => claim.is_none_or(|(l, m, c)| l.can_enter_claim(m, c)),
+        Some(StepKind::PassTurn) => claim.is_none_or(|(l, _, c)| l.is_turn_claim(c)),
+        Some(_) => true,
+        None => false,
+    }
+}
+
 fn candidate(inv: &Invocation, slot: usize) -> Candidate {
     let i = inv.input.get();
     Candidate {
@@ -159,6 +176,14 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     // stays so until its own next poll: the candidates are kept up to date as invocations
     // are admitted, stepped and retired instead of being rebuilt before every step.
     let simple = env.interlock.is_none() && scratch.simt.is_none();
+    // With interlock (and without the SIMT rule, whose filter drops candidates), the
+    // candidates are rebuilt only when they may have changed: an invocation is runnable
+    // unless it waits for the lock, and the lock changes only in steps that enter or leave
+    // it or pass a turn, or when an invocation retires. After any other step only the
+    // stepped invocation's own entry can change (it keeps its place, or leaves). Rebuilding
+    // them over every invocation in flight at every step was a tenth of a `kb-interlock`
+    // campaign (docs/performance.md).
+    let mut stale = true;
     let SchedScratch {
         detector,
         chooser,
@@ -215,6 +240,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 &mut colors[i * targets..(i + 1) * targets],
             );
             detector.finish(seq, step);
+            stale = true;
             if let Some(p) = inflight.iter().position(|&x| x == s) {
                 inflight.remove(p);
             }
@@ -251,6 +277,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 m.admit(s);
             }
             inflight.push(s);
+            stale = true;
             next += 1;
             // Run up to the first step.
             if let Polled::Done = poll_slot(&mut futs[s], &slots[s], &mut cx) {
@@ -261,31 +288,20 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         }
         if !deferred.is_empty() {
             pass_deferred(&mut deferred, env);
+            stale = true;
         }
         if inflight.is_empty() {
             break;
         }
-        if !simple {
+        if !simple && (stale || simt.is_some()) {
             cands.clear();
             for &s in inflight.iter() {
-                let inv = &slots[s];
                 // (`Frag::claim` is `None` without interlock, and so is the slot's.)
-                let claim = match (&claims[s], env.interlock, env.interlock_mode) {
-                    (Some(c), Some(l), Some(m)) => Some((l, m, c)),
-                    _ => None,
-                };
-                let runnable = match inv.pending.get() {
-                    Some(StepKind::InterlockBegin) => {
-                        claim.is_none_or(|(l, m, c)| l.can_enter_claim(m, c))
-                    }
-                    Some(StepKind::PassTurn) => claim.is_none_or(|(l, _, c)| l.is_turn_claim(c)),
-                    Some(_) => true,
-                    None => false,
-                };
-                if runnable {
-                    cands.push(candidate(inv, s));
+                if runnable(&slots[s], claims[s].as_ref(), env) {
+                    cands.push(candidate(&slots[s], s));
                 }
             }
+            stale = false;
             if let Some(m) = simt.as_mut() {
                 m.filter(cands, slots, which);
                 if m.deadlocked(cands) {
@@ -377,6 +393,11 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         } else {
             None
         };
+        // Whether the step leaves the lock as it is (see `stale`).
+        let lock_kept = matches!(
+            inv.pending.get(),
+            Some(StepKind::Mem { .. } | StepKind::Yield)
+        );
         if let Some(m) = simt.as_mut() {
             m.before_step(k, s, inv, env.memory);
         }
@@ -414,6 +435,12 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         } else if simple && inv.pending.get().is_none() {
             // Suspended on something other than a step: it will never be granted one.
             cands.remove(k);
+        } else if !simple && !stale {
+            if !lock_kept {
+                stale = true;
+            } else if !runnable(inv, claims[s].as_ref(), env) {
+                cands.remove(k);
+            }
         }
     }
     step
