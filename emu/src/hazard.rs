@@ -153,14 +153,17 @@ impl Reads {
         self.rest.clear();
     }
 
-    #[inline]
-    fn iter(&self) -> impl Iterator<Item = &Access> {
-        self.first.iter().chain(self.rest.iter())
-    }
-
     /// Drops `me.seq`'s earlier read, if any, and adds `me` last.
     #[inline]
     fn replace(&mut self, me: Access) {
+        if self.rest.is_empty() {
+            // (The common case: at most one reader so far.)
+            match self.first {
+                Some(r) if r.seq != me.seq => self.rest.push(me),
+                _ => self.first = Some(me),
+            }
+            return;
+        }
         if self.first.is_some_and(|r| r.seq == me.seq) {
             self.first = None;
         }
@@ -551,7 +554,9 @@ impl Detector {
         if let Some(l) = self.clocks.tracked(lane) {
             self.clocks.finish(l);
         }
-        self.open_records.retain(|&o| o != seq);
+        if !self.open_records.is_empty() {
+            self.open_records.retain(|&o| o != seq);
+        }
     }
 
     /// The slab index of `addr`, creating its state on first touch.
@@ -644,7 +649,7 @@ impl Detector {
             }
         }
         if write {
-            for r in st.reads.iter() {
+            for r in st.reads.first.iter().chain(&st.reads.rest) {
                 if (r.seq != seq) & (plain | r.plain) && !ordered(r) {
                     rep.report(invs, HazardKind::Race, addr, seq, r.seq, step);
                 }
