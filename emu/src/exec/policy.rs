@@ -283,7 +283,7 @@ impl Chooser {
             Policy::Fifo => self.round(cands, |c| u128::from(c.seq)),
             Policy::Reverse => self.round(cands, |c| u128::from(u64::MAX - c.seq)),
             Policy::FarFirst => self.round(cands, |c| {
-                u128::from(crate::memory::f32_order_key(-c.depth)) << 64 | u128::from(c.seq)
+                (u128::from(crate::memory::f32_order_key(-c.depth)) << 64) | u128::from(c.seq)
             }),
             Policy::Pct { .. } => {
                 // The first of the highest priority (every candidate was admitted).
