@@ -7,7 +7,10 @@
 # Usage: bash ci/fuzz_rate.sh [TIME] [ALGO...]   (defaults: 20s; kb-interlock ll kb-rmw
 # count fab)
 # Env: FRAGRACE=PATH runs that binary instead of this tree's release build; SCHEDULES=N
-# passes --schedules N (default: the binary's default).
+# passes --schedules N (default: the binary's default); ITERATIONS=N runs N iterations
+# (scenes) instead of TIME, the same work for both binaries. Each rate is also given per
+# second of CPU time (user + system, GNU time), which a loaded machine disturbs less than
+# the wall clock (its other jobs take the wall time, not the CPU time).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 time=${1:-20s}
@@ -22,37 +25,51 @@ else
 fi
 extra=()
 [ -n "${SCHEDULES:-}" ] && extra=(--schedules "$SCHEDULES")
+budget=(--time "$time")
+[ -n "${ITERATIONS:-}" ] && budget=(--iterations "$ITERATIONS")
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
+campaign() {
+    # campaign BINARY DIR [FLAGS...]: the campaign's JSON state, with "cpu_s" added.
+    local bin=$1 dir=$2
+    shift 2
+    rm -rf "$dir"
+    /usr/bin/time -f '%U %S' -o "$out/cpu" "$bin" fuzz --algo "$a" "${budget[@]}" --shrink-secs 0 "$@" --json --out "$dir" > "$out/state.json"
+    python3 -c '
+import json, sys
+d = json.load(open(sys.argv[1]))
+d["cpu_s"] = sum(map(float, open(sys.argv[2]).read().split()[-2:]))
+print(json.dumps(d))
+' "$out/state.json" "$out/cpu"
+}
 rate() {
-    # Prints "EXECUTIONS/S PHASES" from a campaign's JSON state.
+    # Prints "EXECUTIONS/S|PER CPU S|SCHEDULES|PHASES" from a campaign's JSON state.
     python3 -c '
 import json, sys
 d = json.load(sys.stdin)
 rate = d["executions"] / max(d["elapsed_s"], 1e-9)
+cpu = d["executions"] / d["cpu_s"] if d["cpu_s"] >= 0.5 else float("nan")  # (time rounds to 0.01 s)
 p = d.get("phases") or {}
 names = [("generate_s", "generation"), ("load_s", "load"), ("truth_s", "truth"),
          ("run_s", "run"), ("oracle_s", "oracle"), ("cases_s", "cases")]
 total = sum(p.get(k, 0) for k, _ in names)
 parts = ", ".join(f"{n} {100 * p.get(k, 0) / total:.0f} %" for k, n in names) if total else "-"
 schedules = d.get("schedules", 1)
-print(f"{rate:.1f}|{schedules}|{parts}")
+print(f"{rate:.1f}|{cpu:.1f}|{schedules}|{parts}")
 '
 }
-echo "| algorithm | executions/s | schedules per scene | where the time goes |$([ -n "${BASE:-}" ] && echo " before (BASE) | ratio |")"
-echo "|---|---|---|---|$([ -n "${BASE:-}" ] && echo "---|---|")"
+echo "| algorithm | executions/s | per CPU second | schedules per scene | where the time goes |$([ -n "${BASE:-}" ] && echo " before (BASE) | per CPU second | ratio (CPU) |")"
+echo "|---|---|---|---|---|$([ -n "${BASE:-}" ] && echo "---|---|---|")"
 for a in "${algos[@]}"; do
     before=
     if [ -n "${BASE:-}" ]; then
-        rm -rf "$out/b"
-        before=$(rate <<< "$("$BASE" fuzz --algo "$a" --time "$time" --shrink-secs 0 --json --out "$out/b")" | cut -d'|' -f1)
+        IFS='|' read -r before before_cpu _ _ < <(rate <<< "$(campaign "$BASE" "$out/b")")
     fi
-    rm -rf "$out/a"
-    IFS='|' read -r ours schedules phases < <(rate <<< "$("$F" fuzz --algo "$a" --time "$time" --shrink-secs 0 "${extra[@]}" --json --out "$out/a")")
+    IFS='|' read -r ours ours_cpu schedules phases < <(rate <<< "$(campaign "$F" "$out/a" "${extra[@]}")")
     if [ -n "$before" ]; then
-        ratio=$(python3 -c "print(f'{$ours / $before:.1f}x')")
-        echo "| $a | $ours | $schedules | $phases | $before | $ratio |"
+        ratio=$(python3 -c "print(f'{$ours / $before:.1f}x ({float(\"$ours_cpu\") / float(\"$before_cpu\"):.1f}x)')")
+        echo "| $a | $ours | $ours_cpu | $schedules | $phases | $before | $before_cpu | $ratio |"
     else
-        echo "| $a | $ours | $schedules | $phases |"
+        echo "| $a | $ours | $ours_cpu | $schedules | $phases |"
     fi
 done

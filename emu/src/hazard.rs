@@ -22,11 +22,13 @@
 //! it steps.
 
 mod clock;
+mod reads;
 mod table;
 
 use crate::memory::{Addr, OpKind};
 pub use clock::MAX_CLOCK_LANES;
 use clock::{Clocks, NO_CLOCK, NO_LANE, UNTRACKED};
+use reads::Reads;
 use table::AddrTable;
 use table::FastMap;
 
@@ -133,49 +135,6 @@ impl LockKey {
 #[inline]
 fn same_section(a: u64, b: u64) -> bool {
     (a >> 8 == b >> 8) & (a & b & 0xff != 0) & (a != NO_LOCK) & (b != NO_LOCK)
-}
-
-/// The reads of an address since its last write, one per invocation (its latest), in the
-/// order they were made: the first in the address's state itself, the others on the heap
-/// (most addresses have one reader at a time, and a read then touches no other cache line:
-/// pushing onto a vector of its own was a sixth of the detector's time in a `kb-interlock`
-/// campaign).
-#[derive(Default)]
-struct Reads {
-    first: Option<Access>,
-    rest: Vec<Access>,
-}
-
-impl Reads {
-    #[inline]
-    fn clear(&mut self) {
-        self.first = None;
-        self.rest.clear();
-    }
-
-    #[inline]
-    fn iter(&self) -> impl Iterator<Item = &Access> {
-        self.first.iter().chain(self.rest.iter())
-    }
-
-    /// Drops `me.seq`'s earlier read, if any, and adds `me` last.
-    #[inline]
-    fn replace(&mut self, me: Access) {
-        if self.first.is_some_and(|r| r.seq == me.seq) {
-            self.first = None;
-        }
-        if !self.rest.is_empty() {
-            self.rest.retain(|r| r.seq != me.seq);
-            if self.first.is_none() && !self.rest.is_empty() {
-                self.first = Some(self.rest.remove(0));
-            }
-        }
-        if self.first.is_none() {
-            self.first = Some(me);
-        } else {
-            self.rest.push(me);
-        }
-    }
 }
 
 #[derive(Default)]
@@ -551,7 +510,9 @@ impl Detector {
         if let Some(l) = self.clocks.tracked(lane) {
             self.clocks.finish(l);
         }
-        self.open_records.retain(|&o| o != seq);
+        if !self.open_records.is_empty() {
+            self.open_records.retain(|&o| o != seq);
+        }
     }
 
     /// The slab index of `addr`, creating its state on first touch.
@@ -644,7 +605,7 @@ impl Detector {
             }
         }
         if write {
-            for r in st.reads.iter() {
+            for r in st.reads.first.iter().chain(&st.reads.rest) {
                 if (r.seq != seq) & (plain | r.plain) && !ordered(r) {
                     rep.report(invs, HazardKind::Race, addr, seq, r.seq, step);
                 }

@@ -160,7 +160,7 @@ pub(crate) struct Chooser {
     /// Warp: last chosen seq.
     cursor: Option<u64>,
     /// Ordering policies: key of the last chosen (round robin).
-    round_cursor: Option<(u32, i128)>,
+    round_cursor: Option<u128>,
     /// Bytes: position.
     pos: usize,
 }
@@ -210,25 +210,31 @@ impl Chooser {
     }
 
     /// Round robin in the order of `key` (smallest first): the first candidate after the
-    /// last one chosen, wrapping around.
-    fn round(&mut self, cands: &[Candidate], key: impl Fn(&Candidate) -> (f32, i128)) -> usize {
-        let k = |c: &Candidate| {
-            let (a, b) = key(c);
-            (crate::memory::f32_order_key(a), b)
-        };
-        let after = self.round_cursor;
-        let mut best: Option<(usize, (u32, i128))> = None;
-        let mut first: Option<(usize, (u32, i128))> = None;
+    /// last one chosen, wrapping around. Keys are distinct (they end with the sequence
+    /// number) and packed into one integer (see the calls), which orders them as the
+    /// tuples they pack: one comparison per candidate, where comparing tuples of `Option`s
+    /// and `i128`s was a sixth of a `kb-interlock` campaign (docs/performance.md).
+    #[inline]
+    fn round(&mut self, cands: &[Candidate], key: impl Fn(&Candidate) -> u128) -> usize {
+        // Above the last chosen (everyone the first time). No key is `u128::MAX` (the
+        // packed keys use at most 96 bits), so `+ 1` cannot overflow.
+        let lo = self.round_cursor.map_or(0, |a| a + 1);
+        let (mut first, mut first_key) = (0, u128::MAX);
+        let (mut best, mut best_key) = (usize::MAX, u128::MAX);
         for (i, c) in cands.iter().enumerate() {
-            let kc = k(c);
-            if first.is_none_or(|(_, f)| kc < f) {
-                first = Some((i, kc));
+            let kc = key(c);
+            if kc < first_key {
+                (first, first_key) = (i, kc);
             }
-            if after.is_none_or(|a| kc > a) && best.is_none_or(|(_, b)| kc < b) {
-                best = Some((i, kc));
+            if kc >= lo && kc < best_key {
+                (best, best_key) = (i, kc);
             }
         }
-        let (i, kc) = best.or(first).expect("cands is not empty");
+        let (i, kc) = if best == usize::MAX {
+            (first, first_key)
+        } else {
+            (best, best_key)
+        };
         self.round_cursor = Some(kc);
         i
     }
@@ -271,9 +277,14 @@ impl Chooser {
             // The ordering policies take turns like a GPU's resident warps do: every
             // runnable invocation takes one step per round, the round in the policy's order.
             // (Run-to-completion in that order is the same policy with a window of 1.)
-            Policy::Fifo => self.round(cands, |c| (0.0, c.seq as i128)),
-            Policy::Reverse => self.round(cands, |c| (0.0, -(c.seq as i128))),
-            Policy::FarFirst => self.round(cands, |c| (-c.depth, c.seq as i128)),
+            // (Keys packed into a u128 as (first part) << 64 | (second part): ascending
+            // sequence numbers, descending ones (`u64::MAX - seq` orders as `-seq`), and
+            // the farthest depth first, then ascending sequence numbers.)
+            Policy::Fifo => self.round(cands, |c| u128::from(c.seq)),
+            Policy::Reverse => self.round(cands, |c| u128::from(u64::MAX - c.seq)),
+            Policy::FarFirst => self.round(cands, |c| {
+                (u128::from(crate::memory::f32_order_key(-c.depth)) << 64) | u128::from(c.seq)
+            }),
             Policy::Pct { .. } => {
                 // The first of the highest priority (every candidate was admitted).
                 let pick = |prio: &[u64]| {
@@ -321,6 +332,79 @@ impl Chooser {
                 };
                 self.pos += 1;
                 i
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The round robin as it was before its keys were packed: tuples of an order key and
+    /// an `i128`, compared as `Option`s.
+    fn round_tuples(
+        cursor: &mut Option<(u32, i128)>,
+        cands: &[Candidate],
+        key: impl Fn(&Candidate) -> (f32, i128),
+    ) -> usize {
+        let k = |c: &Candidate| {
+            let (a, b) = key(c);
+            (crate::memory::f32_order_key(a), b)
+        };
+        let mut best: Option<(usize, (u32, i128))> = None;
+        let mut first: Option<(usize, (u32, i128))> = None;
+        for (i, c) in cands.iter().enumerate() {
+            let kc = k(c);
+            if first.is_none_or(|(_, f)| kc < f) {
+                first = Some((i, kc));
+            }
+            if cursor.is_none_or(|a| kc > a) && best.is_none_or(|(_, b)| kc < b) {
+                best = Some((i, kc));
+            }
+        }
+        let (i, kc) = best.or(first).expect("not empty");
+        *cursor = Some(kc);
+        i
+    }
+
+    #[test]
+    fn ordering_policies_choose_as_the_tuple_keys_did() {
+        let mut rng = SmallRng::seed_from_u64(5);
+        for policy in [Policy::Fifo, Policy::Reverse, Policy::FarFirst] {
+            let mut chooser = Chooser::new(&policy, 1, 100);
+            let mut cursor = None;
+            let mut seqs: Vec<u64> = Vec::new();
+            for step in 0..2000 {
+                // Candidates come and go; depths collide often (FarFirst's ties).
+                if seqs.is_empty() || rng.gen_bool(0.3) {
+                    seqs.push(rng.gen::<u64>() >> rng.gen_range(0..64));
+                }
+                if seqs.len() > 1 && rng.gen_bool(0.2) {
+                    seqs.swap_remove(rng.gen_range(0..seqs.len()));
+                }
+                seqs.sort_unstable();
+                seqs.dedup();
+                let cands: Vec<Candidate> = seqs
+                    .iter()
+                    .map(|&seq| Candidate {
+                        seq,
+                        depth: [0.25f32, 0.5, -0.0, 0.0, 1.0][(seq % 5) as usize],
+                        slot: 0,
+                    })
+                    .collect();
+                let want = match policy {
+                    Policy::Fifo => round_tuples(&mut cursor, &cands, |c| (0.0, c.seq as i128)),
+                    Policy::Reverse => {
+                        round_tuples(&mut cursor, &cands, |c| (0.0, -(c.seq as i128)))
+                    }
+                    _ => round_tuples(&mut cursor, &cands, |c| (-c.depth, c.seq as i128)),
+                };
+                assert_eq!(
+                    chooser.choose(&cands, step),
+                    want,
+                    "{policy} at step {step}"
+                );
             }
         }
     }

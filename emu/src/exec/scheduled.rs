@@ -394,10 +394,12 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             None
         };
         // Whether the step leaves the lock as it is (see `stale`).
-        let lock_kept = matches!(
-            inv.pending.get(),
-            Some(StepKind::Mem { .. } | StepKind::Yield)
-        );
+        // (Not read without interlock: the candidates are kept up to date there.)
+        let lock_kept = !simple
+            && matches!(
+                inv.pending.get(),
+                Some(StepKind::Mem { .. } | StepKind::Yield)
+            );
         if let Some(m) = simt.as_mut() {
             m.before_step(k, s, inv, env.memory);
         }

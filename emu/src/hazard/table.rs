@@ -87,17 +87,17 @@ impl AddrTable {
         if index >= DENSE_MAX {
             return self.sparse.get_or_insert(addr, fresh);
         }
-        let index = index as usize;
-        if buffer >= self.dense.len() || index >= self.dense[buffer].len() {
-            self.grow(buffer, index);
+        let (index, gen) = (index as usize, self.gen);
+        if let Some(e) = self.dense.get_mut(buffer).and_then(|d| d.get_mut(index)) {
+            if e.0 == gen {
+                return (e.1, false);
+            }
+            *e = (gen, fresh);
+            return (fresh, true);
         }
-        let e = &mut self.dense[buffer][index];
-        if e.0 == self.gen {
-            (e.1, false)
-        } else {
-            *e = (self.gen, fresh);
-            (fresh, true)
-        }
+        self.grow(buffer, index);
+        self.dense[buffer][index] = (gen, fresh);
+        (fresh, true)
     }
 
     /// Makes room for `index` in `buffer`'s dense index.
