@@ -161,6 +161,7 @@ fn torus_is_exact_from_random_viewpoints_under_every_executor() {
         &PresortConfig {
             partitions: 6,
             threads: 2,
+            ..Default::default()
         },
         &Silent,
     )
@@ -186,6 +187,7 @@ fn every_partition_count_gives_exact_lists() {
             &PresortConfig {
                 partitions,
                 threads: 2,
+                ..Default::default()
             },
             &Silent,
         )
@@ -326,6 +328,7 @@ fn degenerate_and_duplicate_triangles_are_refused() {
         &PresortConfig {
             partitions: 5,
             threads: 1,
+            ..Default::default()
         },
         &Silent,
     )

@@ -120,6 +120,7 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
         &PresortConfig {
             partitions: a.partitions,
             threads,
+            ..Default::default()
         },
         &bar,
     )?;
@@ -144,6 +145,11 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
                 "lp_calls": s.scan.lp_calls,
                 "touching_tests": s.scan.touching_tests,
                 "touching_planes": s.scan.touching_planes,
+                "cyclic_components": s.cells.cyclic_components,
+                "largest_component": s.cells.largest_component,
+                "cell_cuts": s.cells.cuts,
+                "prefix_cuts": s.cells.prefix_cuts,
+                "max_cell_depth": s.cells.max_depth,
                 "graph_s": s.graph_time.as_secs_f64(),
                 "scan_s": s.scan_time.as_secs_f64(),
             })

@@ -42,6 +42,7 @@ fn measure(mesh: &Mesh, partitions: u32, threads: usize) -> Measured {
         &PresortConfig {
             partitions,
             threads,
+            ..Default::default()
         },
         &Silent,
     )

@@ -13,12 +13,15 @@
 //! - [`graph`]: the occlusion graph of a partition (back-facing duplicates included);
 //! - [`order`]: the preliminary order (depth sort and feedback-arc heuristic);
 //! - [`scan`]: the back-edge scan with duplication and cutting planes (section 4.1);
+//! - [`scc`], [`cells`]: the default in place of the scan: cyclic components resolved by
+//!   subdividing viewpoint space with the same cutting planes;
 //! - [`input`]: what meshes are accepted; [`split`]: intersecting triangles split apart;
 //!   [`file`]: the stored result.
 //!
 //! Run time (section 5): [`runtime`] (`presorted`, `presorted-vs`, `presorted-ssbo`,
 //! `presorted-ssbo-interlock`).
 
+pub mod cells;
 pub mod file;
 pub mod geom;
 pub mod graph;
@@ -27,6 +30,7 @@ pub mod order;
 pub mod partition;
 pub mod runtime;
 pub mod scan;
+pub mod scc;
 pub mod separate;
 pub mod split;
 
@@ -47,6 +51,8 @@ pub struct PresortConfig {
     pub partitions: u32,
     /// Worker threads (partitions run one per task).
     pub threads: usize,
+    /// How cycles of the occlusion graph are broken.
+    pub method: Method,
 }
 
 impl Default for PresortConfig {
@@ -54,8 +60,21 @@ impl Default for PresortConfig {
         PresortConfig {
             partitions: 6,
             threads: 2,
+            method: Method::default(),
         }
     }
+}
+
+/// How cycles of the occlusion graph are broken (both place copies with test planes).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Method {
+    /// Strongly connected components, each cyclic one resolved by cutting viewpoint space
+    /// into cells ([`cells`]).
+    #[default]
+    Cells,
+    /// The paper's back-edge scan over a preliminary order ([`scan`], section 4.1): its
+    /// copies multiply on the teapot (see `cells`).
+    Scan,
 }
 
 /// One triangle instance of a segment, in draw order.
@@ -90,6 +109,8 @@ pub struct PartitionStats {
     /// Back-edges of the preliminary order.
     pub back_edges: usize,
     pub scan: scan::ScanStats,
+    /// What the cell subdivision did ([`Method::Cells`]).
+    pub cells: cells::CellStats,
     pub graph_time: Duration,
     pub scan_time: Duration,
 }
@@ -169,6 +190,11 @@ pub enum PresortError {
         partition: usize,
         error: scan::ScanError,
     },
+    #[error("partition {partition}: {error}")]
+    Cells {
+        partition: usize,
+        error: cells::CellError,
+    },
 }
 
 /// Progress of preprocessing: `(partition, phase, done, total)`, phase `"graph"` or
@@ -183,6 +209,10 @@ pub struct Silent;
 impl Progress for Silent {
     fn update(&self, _: usize, _: &'static str, _: u64, _: u64) {}
 }
+
+/// Rounds of cutting pieces of cycles seen whole from a viewpoint before preprocessing
+/// gives up ([`split::break_cycle`]).
+pub const MAX_CYCLE_ROUNDS: u32 = 8;
 
 /// Preprocesses `mesh` (sections 3-4.2): every partition in parallel, one per task.
 pub fn presort(
@@ -203,21 +233,51 @@ pub fn presort(
         .iter()
         .map(|t| t.map(|i| frame.to_local(mesh.positions[i as usize].as_dvec3())))
         .collect();
-    let (split_pieces, split_stats) = split::split_crossing(&input)?;
-    let tris: Arc<[[DVec3; 3]]> = split_pieces.iter().map(|p| p.pos).collect();
-    let pieces = world_pieces(&frame, &split_pieces);
+    let (mut split_pieces, mut split_stats) = split::split_crossing(&input)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(cfg.threads)
         .build()
         .map_err(|e| PresortError::Config(format!("thread pool: {e}")))?;
-    // (Collecting into a `Result` stops starting partitions after the first error.)
-    let results: Vec<(Segment, PartitionStats)> = pool.install(|| {
-        use rayon::prelude::*;
-        (0..dirs.len())
-            .into_par_iter()
-            .map(|k| presort_partition(&tris, &dirs, k, &frame, progress))
-            .collect::<Result<Vec<_>, PresortError>>()
-    })?;
+    // Rounds: a cycle seen whole from some viewpoint is broken by cutting one of its pieces
+    // by another's plane, and every partition runs again on the new pieces.
+    let mut round = 0;
+    let results: Vec<(Segment, PartitionStats)> = loop {
+        let tris: Arc<[[DVec3; 3]]> = split_pieces.iter().map(|p| p.pos).collect();
+        let all: Vec<Result<(Segment, PartitionStats), PresortError>> = pool.install(|| {
+            use rayon::prelude::*;
+            (0..dirs.len())
+                .into_par_iter()
+                .map(|k| presort_partition(&tris, &dirs, k, &frame, cfg.method, progress))
+                .collect()
+        });
+        if all.iter().all(Result::is_ok) {
+            break all.into_iter().map(|r| r.expect("checked")).collect();
+        }
+        round += 1;
+        let mut cut = 0u64;
+        let mut first_err: Option<PresortError> = None;
+        for r in all {
+            let Err(e) = r else { continue };
+            if let PresortError::Cells {
+                error: cells::CellError::Visible { cycles, .. },
+                ..
+            } = &e
+            {
+                if round <= MAX_CYCLE_ROUNDS {
+                    for c in cycles {
+                        cut += u64::from(split::break_cycle(&mut split_pieces, c));
+                    }
+                }
+            }
+            first_err.get_or_insert(e);
+        }
+        if cut == 0 {
+            return Err(first_err.expect("some partition failed"));
+        }
+        split_stats.cycle_cuts += cut;
+        split_stats.extra_pieces = (split_pieces.len() - input.len()) as u64;
+    };
+    let pieces = world_pieces(&frame, &split_pieces);
     let (segments, stats): (Vec<Segment>, Vec<PartitionStats>) = results.into_iter().unzip();
     Ok(Presorted {
         mesh_hash: input::mesh_hash(mesh),
@@ -255,6 +315,7 @@ fn presort_partition(
     dirs: &[DVec3],
     k: usize,
     frame: &Frame3,
+    method: Method,
     progress: &dyn Progress,
 ) -> Result<(Segment, PartitionStats), PresortError> {
     let t0 = Instant::now();
@@ -269,30 +330,46 @@ fn presort_partition(
         ..Default::default()
     };
     let t1 = Instant::now();
-    // A viewpoint of the partition: out along its face normal.
-    let eye = dirs[k] * 3.0;
-    let prelim = order::preliminary(&g, eye);
-    stats.back_edges = order::back_edges(&g, &prelim);
-    let mut sstats = scan::ScanStats::default();
-    let final_order = scan::scan(&mut g, prelim, &mut sstats, &|d, t| {
-        progress.update(k, "scan", d, t)
-    })
-    .map_err(|error| PresortError::Scan {
-        partition: k,
-        error,
-    })?;
-    stats.scan = sstats;
+    let placed: Vec<cells::Placed> = match method {
+        Method::Cells => {
+            let mut cstats = cells::CellStats::default();
+            let placed = cells::resolve(&g, &mut cstats, &|d, t| progress.update(k, "scan", d, t))
+                .map_err(|error| PresortError::Cells {
+                    partition: k,
+                    error,
+                })?;
+            stats.cells = cstats;
+            placed
+        }
+        Method::Scan => {
+            // A viewpoint of the partition: out along its face normal.
+            let eye = dirs[k] * 3.0;
+            let prelim = order::preliminary(&g, eye);
+            stats.back_edges = order::back_edges(&g, &prelim);
+            let mut sstats = scan::ScanStats::default();
+            let final_order = scan::scan(&mut g, prelim, &mut sstats, &|d, t| {
+                progress.update(k, "scan", d, t)
+            })
+            .map_err(|error| PresortError::Scan {
+                partition: k,
+                error,
+            })?;
+            stats.scan = sstats;
+            final_order.into_iter().map(|x| (x, Vec::new())).collect()
+        }
+    };
     stats.scan_time = t1.elapsed();
-    Ok((segment_of(&g, &final_order, frame), stats))
+    Ok((segment_of(&g, &placed, frame), stats))
 }
 
-/// The segment of a scanned graph: instances in draw order, test planes in world space,
-/// the last copy of each triangle and facing marked.
-fn segment_of(g: &graph::Graph, order: &[usize], frame: &Frame3) -> Segment {
+/// The segment of a resolved graph: instances in draw order with their test planes (the
+/// node's cuts and its cell's planes) in world space, the last copy of each triangle and
+/// facing marked.
+fn segment_of(g: &graph::Graph, order: &[cells::Placed], frame: &Frame3) -> Segment {
     let mut seen = std::collections::HashSet::new();
     let mut last = vec![false; order.len()];
-    for (i, &x) in order.iter().enumerate().rev() {
-        let n = &g.nodes[x];
+    for (i, (x, _)) in order.iter().enumerate().rev() {
+        let n = &g.nodes[*x];
         if seen.insert((n.tri, n.back)) {
             last[i] = true;
         }
@@ -300,8 +377,8 @@ fn segment_of(g: &graph::Graph, order: &[usize], frame: &Frame3) -> Segment {
     let instances = order
         .iter()
         .zip(last)
-        .map(|(&x, last)| {
-            let n = &g.nodes[x];
+        .map(|((x, cell), last)| {
+            let n = &g.nodes[*x];
             Instance {
                 piece: n.tri,
                 back: n.back,
@@ -309,6 +386,7 @@ fn segment_of(g: &graph::Graph, order: &[usize], frame: &Frame3) -> Segment {
                 planes: n
                     .cuts
                     .iter()
+                    .chain(cell)
                     .map(|p| frame.world_plane(p).map(|c| c as f32))
                     .collect(),
             }

@@ -204,6 +204,7 @@ pub fn prepared(mesh: &Mesh, params: &Params, threads: usize) -> Result<Arc<Prep
             &PresortConfig {
                 partitions: 6,
                 threads: threads.max(1),
+                ..Default::default()
             },
             &Silent,
         )

@@ -53,6 +53,8 @@ pub struct SplitStats {
     pub crossings: u64,
     /// Pieces beyond the input triangles.
     pub extra_pieces: u64,
+    /// Cuts that broke cycles seen whole from a viewpoint ([`break_cycle`]).
+    pub cycle_cuts: u64,
 }
 
 /// Why splitting failed.
@@ -128,6 +130,44 @@ pub fn split_crossing(tris: &[[DVec3; 3]]) -> Result<(Vec<Piece>, SplitStats), S
     stats.extra_pieces = (pieces.len() - tris.len()) as u64;
     Ok((pieces, stats))
 }
+
+/// Breaks a cycle of pieces seen whole from some viewpoint ("Depth-Presorted Triangle
+/// Lists", section 4: "additional preprocessing can break cycles by splitting triangles
+/// when needed"): the first piece of the cycle (in cycle order, neighbours first) that
+/// reaches across another's plane by more than [`CYCLE_CUT_MIN`] on both sides is cut by
+/// that plane, as a crossing pair is. The pieces stay in place (the cut piece's first part
+/// keeps its index, the others go last). False when no piece straddles another's plane.
+pub fn break_cycle(pieces: &mut Vec<Piece>, cycle: &[u32]) -> bool {
+    let k = cycle.len();
+    let mut pairs: Vec<(usize, usize)> = (0..k)
+        .flat_map(|i| (0..k).filter(move |&j| j != i).map(move |j| (i, j)))
+        .collect();
+    pairs.sort_by_key(|&(i, j)| (i + k - j) % k);
+    for (i, j) in pairs {
+        let (a, b) = (cycle[i] as usize, cycle[j] as usize);
+        if a == b || a >= pieces.len() || b >= pieces.len() {
+            continue;
+        }
+        let h = facing(&pieces[b].pos, false);
+        let d = pieces[a].pos.map(|v| h.eval(v));
+        let lo = d.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = d.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if lo < -CYCLE_CUT_MIN && hi > CYCLE_CUT_MIN {
+            let by = pieces[b].pos;
+            let mut parts = cut(&pieces[a], &by).into_iter();
+            if let Some(first) = parts.next() {
+                pieces[a] = first;
+                pieces.extend(parts);
+                return true;
+            }
+        }
+    }
+    false
+}
+
+/// How far (normalized frame) a piece must reach to both sides of a plane for
+/// [`break_cycle`] to cut it there (a thinner part would be a sliver).
+pub const CYCLE_CUT_MIN: f64 = 1e-6;
 
 /// Where the edge `a`-`b` meets the plane whose signed distances at `a` and `b` are `da`
 /// and `db` (of opposite signs), computed from the endpoints in one fixed order: the pieces
