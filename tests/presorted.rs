@@ -176,6 +176,32 @@ fn torus_is_exact_from_random_viewpoints_under_every_executor() {
     assert_eq!(inside, 0);
 }
 
+/// The paper's back-edge scan (section 4.1), kept beside the cell subdivision that is the
+/// default: exact where it finishes (on the 12x6 torus at 6 partitions; its copies multiply
+/// on the teapot).
+#[test]
+fn the_papers_scan_is_exact_on_the_torus() {
+    let (pos, idx) = torus(12, 6);
+    let scene = scene_of(&pos, &idx);
+    let mesh = loaded_mesh(&scene);
+    let lists = presorted::presort(
+        &mesh,
+        &PresortConfig {
+            partitions: 6,
+            threads: 2,
+            method: presorted::Method::Scan,
+        },
+        &Silent,
+    )
+    .unwrap();
+    let f = tmp("torus6-scan.bin");
+    file::save(&lists, &f).unwrap();
+    assert_eq!(
+        exact_from_random_views(&scene, &f, &["presorted", "presorted-vs"], 4),
+        0
+    );
+}
+
 #[test]
 fn every_partition_count_gives_exact_lists() {
     let (pos, idx) = torus(8, 4);

@@ -49,7 +49,9 @@ pub use interlock::InterlockMode;
 pub use invocation::{Access, CompareExchange, DirectFrag, Frag, Performed, Store};
 pub use kernel::{FaultKind, FragInput, FragmentKernel, KernelInfo};
 pub use memory::{Buf, Memory, PixelArray, Values, Word};
-pub use pipeline::{Device, Fault, OcclusionQuery, PassError, PassReport, PassState, PassTime};
+pub use pipeline::{
+    Coverage, Device, Fault, OcclusionQuery, PassError, PassReport, PassState, PassTime,
+};
 pub use raster::{CullMode, FrontFace, RasterState, SampleCount, Viewport};
 pub use state::{
     BlendEquation, BlendFactor, BlendState, CompareFunc, DepthState, EarlyTests, Format,

@@ -25,6 +25,16 @@ pub fn parse_binning(s: &str) -> Result<fragrace_emu::Binning, String> {
     fragrace_emu::Binning::from_name(s).ok_or_else(|| format!("`{s}`: expected `auto` or `always`"))
 }
 
+/// `presort --method`: `cells` or `scan`.
+pub fn parse_method(s: &str) -> Result<fragrace_kernels::presorted::Method, String> {
+    use fragrace_kernels::presorted::Method;
+    match s {
+        "cells" => Ok(Method::Cells),
+        "scan" => Ok(Method::Scan),
+        _ => Err(format!("`{s}`: expected `cells` or `scan`")),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -47,5 +57,10 @@ mod tests {
             Ok(fragrace_kernels::merging::Thickness::default())
         );
         assert!(parse_thickness("-1").is_err());
+        assert_eq!(
+            parse_method("scan"),
+            Ok(fragrace_kernels::presorted::Method::Scan)
+        );
+        assert!(parse_method("lp").unwrap_err().contains("`lp`"));
     }
 }

@@ -24,6 +24,11 @@ pub struct PresortOptions {
     /// Worker threads (partitions run one per task; default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// How cycles of the occlusion graph are broken: `cells` (strongly connected components,
+    /// each cyclic one cut into cells of viewpoint space) or `scan` (the paper's back-edge
+    /// scan of section 4.1, whose copies can multiply without bound on curved meshes).
+    #[arg(long, default_value = "cells", value_parser = super::parse::parse_method)]
+    pub method: fragrace_kernels::presorted::Method,
     /// Print one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -120,7 +125,7 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
         &PresortConfig {
             partitions: a.partitions,
             threads,
-            ..Default::default()
+            method: a.method,
         },
         &bar,
     )?;

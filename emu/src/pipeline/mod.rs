@@ -22,7 +22,7 @@ mod waves;
 
 pub use report::{OcclusionQuery, PassError, PassReport, PassState, PassTime};
 use touched::Touched;
-pub use touched::{BlockMask, BLOCK_SHIFT};
+pub use touched::{BlockMask, Coverage, BLOCK_SHIFT};
 use vertex::{VertexCache, VertexKey};
 use waves::{absorb, explicit_inputs, mode_of, Geometry};
 
@@ -63,6 +63,22 @@ impl Device {
         Device {
             memory: Memory::with_threads(threads),
             ..Device::default()
+        }
+    }
+
+    /// This device with its geometry passes marking the screen blocks they reach, or not
+    /// ([`Coverage`]; untracked by default). Under loom nothing is marked or skipped.
+    pub fn with_coverage(self, coverage: Coverage) -> Device {
+        #[cfg(not(loom))]
+        {
+            let mut d = self;
+            d.touched.coverage = coverage;
+            d
+        }
+        #[cfg(loom)]
+        {
+            let _ = coverage;
+            self
         }
     }
 

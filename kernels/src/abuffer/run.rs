@@ -47,7 +47,8 @@ impl<'a> AbRun<'a> {
         exec: &'a ExecConfig,
     ) -> Result<AbRun<'a>, AlgoError> {
         Ok(AbRun {
-            device: common::fresh(exec),
+            // The resolve skips the pixels no geometry reached (`with_untouched_output`).
+            device: common::fresh(exec).with_coverage(fragrace_emu::Coverage::Tracked),
             frame: *frame,
             params,
             exec,

@@ -67,7 +67,8 @@ impl<'a> KbRun<'a> {
         exec: &'a ExecConfig,
     ) -> Result<KbRun<'a>, AlgoError> {
         Ok(KbRun {
-            device: common::fresh(exec),
+            // The resolve skips the pixels no geometry reached (`with_untouched_output`).
+            device: common::fresh(exec).with_coverage(fragrace_emu::Coverage::Tracked),
             frame: *frame,
             params,
             exec,
