@@ -151,21 +151,23 @@ fn exact_from_random_views(scene: &SceneSpec, file: &Path, algos: &[&str], views
     inside
 }
 
-#[test]
-fn torus_is_exact_from_random_viewpoints_under_every_executor() {
+/// The 12 x 6 torus and its lists for 6 partitions on 2 threads, cycles broken by `method`.
+fn presorted_torus(method: presorted::Method) -> (SceneSpec, presorted::Presorted) {
     let (pos, idx) = torus(12, 6);
     let scene = scene_of(&pos, &idx);
     let mesh = loaded_mesh(&scene);
-    let lists = presorted::presort(
-        &mesh,
-        &PresortConfig {
-            partitions: 6,
-            threads: 2,
-            ..Default::default()
-        },
-        &Silent,
-    )
-    .unwrap();
+    let config = PresortConfig {
+        partitions: 6,
+        threads: 2,
+        method,
+    };
+    let lists = presorted::presort(&mesh, &config, &Silent).unwrap();
+    (scene, lists)
+}
+
+#[test]
+fn torus_is_exact_from_random_viewpoints_under_every_executor() {
+    let (scene, lists) = presorted_torus(presorted::Method::default());
     assert_eq!(lists.segments.len(), 6);
     assert!(lists.duplication_ratio() >= 1.0);
     let f = tmp("torus6.bin");
@@ -181,19 +183,7 @@ fn torus_is_exact_from_random_viewpoints_under_every_executor() {
 /// on the teapot).
 #[test]
 fn the_papers_scan_is_exact_on_the_torus() {
-    let (pos, idx) = torus(12, 6);
-    let scene = scene_of(&pos, &idx);
-    let mesh = loaded_mesh(&scene);
-    let lists = presorted::presort(
-        &mesh,
-        &PresortConfig {
-            partitions: 6,
-            threads: 2,
-            method: presorted::Method::Scan,
-        },
-        &Silent,
-    )
-    .unwrap();
+    let (scene, lists) = presorted_torus(presorted::Method::Scan);
     let f = tmp("torus6-scan.bin");
     file::save(&lists, &f).unwrap();
     assert_eq!(

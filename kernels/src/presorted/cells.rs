@@ -392,22 +392,11 @@ fn cutting_plane(regions: &[&Region]) -> Option<(Plane, bool)> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::partition::{directions, partition_region};
     use super::*;
-    use std::sync::Arc;
 
     #[test]
     fn an_acyclic_graph_keeps_one_instance_per_node() {
-        let b = [
-            DVec3::new(-0.3, -0.3, -0.2),
-            DVec3::new(0.4, -0.3, -0.2),
-            DVec3::new(-0.3, 0.4, -0.2),
-        ];
-        let a = b.map(|p| p + DVec3::new(0.0, 0.0, 0.4));
-        let tris: Arc<[[DVec3; 3]]> = vec![a, b].into();
-        let dirs = directions(6).unwrap();
-        let k = dirs.iter().position(|d| d.z > 0.5).unwrap();
-        let g = Graph::build(tris, &partition_region(&dirs, k), &|_, _| {});
+        let g = super::super::graph::tests::stacked_pair();
         let mut stats = CellStats::default();
         let out = resolve(&g, &mut stats, &|_, _| {}).unwrap();
         // b (occluded) is drawn before a.

@@ -289,13 +289,13 @@ impl Graph {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::super::partition::{directions, partition_region};
     use super::*;
 
-    #[test]
-    fn two_stacked_triangles_have_the_expected_edges() {
-        // Two horizontal triangles, one above the other, seen from above (+z partition).
+    /// The graph of two horizontal triangles, a (tri 0) above b (tri 1), in the partition
+    /// seen from above (+z).
+    pub(in crate::presorted) fn stacked_pair() -> Graph {
         let b = [
             DVec3::new(-0.3, -0.3, -0.2),
             DVec3::new(0.4, -0.3, -0.2),
@@ -305,7 +305,12 @@ mod tests {
         let tris: Arc<[[DVec3; 3]]> = vec![a, b].into();
         let dirs = directions(6).unwrap();
         let k = dirs.iter().position(|d| d.z > 0.5).unwrap();
-        let g = Graph::build(tris, &partition_region(&dirs, k), &|_, _| {});
+        Graph::build(tris, &partition_region(&dirs, k), &|_, _| {})
+    }
+
+    #[test]
+    fn two_stacked_triangles_have_the_expected_edges() {
+        let g = stacked_pair();
         // From above both front copies are rendered; the back copies never are.
         assert_eq!(g.nodes.len(), 2);
         assert!(g.nodes.iter().all(|n| !n.back));
