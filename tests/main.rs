@@ -12,6 +12,7 @@ mod acceptance;
 mod bucket;
 mod camera;
 mod cli;
+mod coverage;
 mod differential;
 mod fuzz_smoke;
 mod geometry_culling;

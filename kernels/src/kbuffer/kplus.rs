@@ -25,7 +25,9 @@
 //! still the k smallest (which of two equal depths is kept is not an error for the
 //! oracle's `KNearest` comparison).
 
-use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, InterlockMode, KernelInfo};
+use fragrace_emu::{
+    Buf, Coverage, ExecConfig, Fragment, FragmentKernel, InterlockMode, KernelInfo,
+};
 
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
@@ -244,7 +246,8 @@ struct Resolve {
 
 impl FragmentKernel for Resolve {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("kplus-resolve")
+        // At a pixel no geometry reached the count is 0: the composite of nothing.
+        KernelInfo::new("kplus-resolve").with_untouched_output(self.composite.background_bits())
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
@@ -345,7 +348,8 @@ fn run(
             "{n} pixels x k = {k} slots exceed the 2^32-word buffer limit"
         )));
     }
-    let mut device = common::fresh(exec);
+    // The resolve skips the pixels no geometry reached (`with_untouched_output`).
+    let mut device = common::fresh(exec).with_coverage(Coverage::Tracked);
     let slots = device.buffer::<u32>("kplus-slots", words)?;
     device.memory.fill(slots, EMPTY)?;
     let count = device.buffer::<u32>("kplus-count", n as u64)?;

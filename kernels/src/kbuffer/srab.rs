@@ -54,7 +54,7 @@
 //! not speed (the paper: SRAB "is significantly lessened from the additional geometry pass").
 
 use fragrace_emu::{
-    Buf, CompareFunc, ExecConfig, Format, Fragment, FragmentKernel, FragmentState, Framebuffer,
+    Buf, CompareFunc, Coverage, ExecConfig, Format, Fragment, FragmentKernel, FragmentState, Framebuffer,
     Image, KernelInfo, PassState, RasterState, SampleCount, StencilFace, StencilOp, StencilState,
     TargetState,
 };
@@ -170,7 +170,9 @@ struct Resolve<'a> {
 
 impl FragmentKernel for Resolve<'_> {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new("srab-resolve")
+        // At a pixel no geometry reached every sample is still the clear's EMPTY: the
+        // composite of nothing.
+        KernelInfo::new("srab-resolve").with_untouched_output(self.composite.background_bits())
     }
     async fn shade(&self, f: impl Fragment) {
         let mut frags = Vec::with_capacity(SAMPLES);
@@ -271,7 +273,8 @@ fn run(
             params.k
         )));
     }
-    let mut device = common::fresh(exec);
+    // The resolve skips the pixels no geometry reached (`with_untouched_output`).
+    let mut device = common::fresh(exec).with_coverage(Coverage::Tracked);
 
     // 1. Count pass (instrumentation, loss accounting): the truth's fragments per pixel
     //    (single-sample rasterization).

@@ -29,7 +29,7 @@
 //! overflowed RGBA16F.
 
 use fragrace_emu::{
-    BlendEquation, BlendFactor, BlendState, ExecConfig, Format, Fragment, FragmentKernel, Image,
+    BlendEquation, BlendFactor, BlendState, Coverage, ExecConfig, Format, Fragment, FragmentKernel, Image,
     KernelInfo, SampleCount, TargetState,
 };
 
@@ -85,7 +85,11 @@ struct Resolve<'a> {
 
 impl FragmentKernel for Resolve<'_> {
     fn info(&self) -> KernelInfo {
+        // At a pixel no geometry reached the revealage is still its clear, 1: the
+        // background, as below.
+        let bg = self.background;
         KernelInfo::new("wboit-resolve")
+            .with_untouched_output([bg[0], bg[1], bg[2], 0.0].map(f32::to_bits))
     }
     async fn shade(&self, f: impl Fragment) {
         let (x, y) = (f.x(), f.y());
@@ -135,7 +139,8 @@ impl Algorithm for Wboit {
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
         let n = pixels(frame);
-        let device = common::fresh(exec);
+        // The resolve skips the pixels no geometry reached (`with_untouched_output`).
+        let device = common::fresh(exec).with_coverage(Coverage::Tracked);
         let mut fb = framebuffer(frame, SampleCount::X1, &[Format::RGBA32F, Format::R32F])?;
         fb.clear_color(0, [0; 4]);
         fb.clear_color(1, [1f32.to_bits(), 0, 0, 0]);

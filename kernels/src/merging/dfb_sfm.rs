@@ -12,7 +12,9 @@
 //! fragments front to back (Algorithm 1, line 23). Every step is deterministic once the
 //! fragments are stored, so the image is the same bits under every executor.
 
-use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, FragmentState, KernelInfo};
+use fragrace_emu::{
+    Buf, Coverage, ExecConfig, Fragment, FragmentKernel, FragmentState, KernelInfo,
+};
 
 use super::algorithm1::output_fragments;
 use super::record::{composite, ZFrag};
@@ -52,7 +54,10 @@ struct SfmResolve {
 
 impl FragmentKernel for SfmResolve {
     fn info(&self) -> KernelInfo {
+        // At a pixel no geometry reached the count is 0: the resolve would store zeros into
+        // its zeroed instrumentation words and output the composite of nothing.
         KernelInfo::new("dfb-sfm-resolve")
+            .with_untouched_output(composite(&[], self.background).map(f32::to_bits))
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();
@@ -115,7 +120,8 @@ impl Algorithm for DfbSfm {
         }
         let model = ZModel::of(frame, params)?;
         let n = pixels(frame) as u64;
-        let mut device = common::fresh(exec);
+        // The resolve skips the pixels no geometry reached (`with_untouched_output`).
+        let mut device = common::fresh(exec).with_coverage(Coverage::Tracked);
         let counts = device.buffer::<u32>("dfb-sfm-counts", n)?;
         let offsets = device.buffer::<u32>("dfb-sfm-offsets", n)?;
         let fill = device.buffer::<u32>("dfb-sfm-fill", n)?;

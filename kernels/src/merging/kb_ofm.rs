@@ -12,7 +12,7 @@
 //! at a time it keeps the k nearest merged bands; two fragments of a pixel in flight together
 //! lose one's update.
 
-use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
+use fragrace_emu::{Buf, Coverage, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
 use super::ofm::ofm;
 use super::record::{composite, ZFrag, WORDS};
@@ -91,7 +91,10 @@ struct Resolve {
 
 impl FragmentKernel for Resolve {
     fn info(&self) -> KernelInfo {
+        // At a pixel no geometry reached every record is empty (zeroed buffer): the
+        // composite of nothing.
         KernelInfo::new("kb-ofm-resolve")
+            .with_untouched_output(composite(&[], self.background).map(f32::to_bits))
     }
     async fn shade(&self, f: impl Fragment) {
         let base = f.pixel_index() * self.k * WORDS;
@@ -139,7 +142,8 @@ impl Algorithm for KbOfm {
         let k = k_of(params)?;
         let model = ZModel::of(frame, params)?;
         let n = pixels(frame) as u64;
-        let mut device = common::fresh(exec);
+        // The resolve skips the pixels no geometry reached (`with_untouched_output`).
+        let mut device = common::fresh(exec).with_coverage(Coverage::Tracked);
         // Zeroed: a record with nothing merged (n = 0) is empty.
         let records = device.buffer::<f32>("kb-ofm-records", n * u64::from(k * WORDS))?;
         let store = Store { k, records, model };

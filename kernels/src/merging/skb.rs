@@ -26,7 +26,9 @@
 //! - `skb-ofm-unordered`: the same store with no synchronization, what the paper says
 //!   happens without pixel synchronization: its read-modify-write of the records races.
 
-use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, InterlockMode, KernelInfo};
+use fragrace_emu::{
+    Buf, Coverage, ExecConfig, Fragment, FragmentKernel, InterlockMode, KernelInfo,
+};
 
 use super::ofm::ofm;
 use super::record::{composite, ZFrag, WORDS};
@@ -197,7 +199,10 @@ struct Resolve {
 
 impl FragmentKernel for Resolve {
     fn info(&self) -> KernelInfo {
+        // At a pixel no geometry reached, the count is 0 and the tail empty (zeroed
+        // buffers): the composite of nothing.
         KernelInfo::new("skb-ofm-resolve")
+            .with_untouched_output(composite(&[], self.background).map(f32::to_bits))
     }
     async fn shade(&self, f: impl Fragment) {
         let (b, p) = (self.b, f.pixel_index());
@@ -263,7 +268,8 @@ impl Algorithm for SkbOfm {
         let k = k_of(params)?;
         let model = ZModel::of(frame, params)?;
         let n = pixels(frame) as u64;
-        let mut device = common::fresh(exec);
+        // The resolve skips the pixels no geometry reached (`with_untouched_output`).
+        let mut device = common::fresh(exec).with_coverage(Coverage::Tracked);
         let core = device.buffer::<f32>("skb-ofm-core", n * u64::from(k * WORDS))?;
         let tail = device.buffer::<f32>("skb-ofm-tail", n * u64::from(WORDS))?;
         // Zeroed: a record with nothing merged (n = 0) is empty.
