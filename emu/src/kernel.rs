@@ -55,6 +55,9 @@ pub struct KernelInfo {
     /// What a full-screen invocation does at a pixel no geometry pass of the device
     /// rasterized (see [`KernelInfo::with_untouched_output`]).
     pub untouched_output: Option<[u32; 4]>,
+    /// A full-screen kernel whose invocation at a pixel reads only what invocations at that
+    /// pixel wrote (see [`KernelInfo::with_by_region_reads`]).
+    pub by_region: bool,
 }
 
 impl KernelInfo {
@@ -67,6 +70,7 @@ impl KernelInfo {
             interpolants: true,
             pixel_array: None,
             untouched_output: None,
+            by_region: false,
         }
     }
     pub const fn with_discard(mut self) -> KernelInfo {
@@ -127,6 +131,24 @@ impl KernelInfo {
     /// [`Fragment::output_u32`]: crate::Fragment::output_u32
     pub const fn with_untouched_output(mut self, bits: [u32; 4]) -> KernelInfo {
         self.untouched_output = Some(bits);
+        self
+    }
+    /// Declares, for a full-screen pass, a by-region dependency on the geometry pass before
+    /// it (Vulkan's `VK_DEPENDENCY_BY_REGION_BIT` between two subpasses, Metal's tile
+    /// shaders, pixel local storage): its invocation at pixel `p` reads only words that
+    /// invocations at `p` wrote, in that geometry pass or in passes before it, never a word
+    /// an invocation at another pixel wrote (commutative updates of shared counters, whose
+    /// value it does not read, are allowed). [`Device::draw_then_fullscreen`] may then run
+    /// the two passes tile by tile on one worker (the tile's fragments, then the tile's
+    /// full-screen invocations), while the tile's data is still in the cache; the results
+    /// are those of the two passes one after the other, up to the order in which
+    /// invocations of different pixels take shared counters, which the executors already
+    /// leave free. Ignored by [`Device::fullscreen`].
+    ///
+    /// [`Device::draw_then_fullscreen`]: crate::Device::draw_then_fullscreen
+    /// [`Device::fullscreen`]: crate::Device::fullscreen
+    pub const fn with_by_region_reads(mut self) -> KernelInfo {
+        self.by_region = true;
         self
     }
 }

@@ -9,11 +9,13 @@
 //! This module knows nothing of any algorithm, and runs no shading loop of its own: it
 //! hands fragments (or, on the fused path, set-up triangles and tiles) to [`crate::exec`].
 //!
-//! Files: this one (the [`Device`] and its passes), `report` (what a pass did), `vertex`
+//! Files: this one (the [`Device`] and its passes), `region` (a geometry pass and a
+//! full-screen pass run tile by tile), `report` (what a pass did), `vertex`
 //! (clip-space transform, and the last draw's vertices kept for the next), `waves` (a pass
 //! wave of tiles by wave of tiles), `tiles` (the per-tile fixed-function stages before and
 //! after shading).
 
+mod region;
 mod report;
 mod tiles;
 mod touched;
@@ -26,7 +28,7 @@ pub use touched::{BlockMask, Coverage, BLOCK_SHIFT};
 use vertex::{VertexCache, VertexKey};
 use waves::{absorb, explicit_inputs, mode_of, Geometry};
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use crate::exec::{shade, Binning, ExecConfig, ExecMode, FragOut};
 use crate::framebuffer::Framebuffer;
@@ -125,6 +127,20 @@ impl Device {
         kernel: &K,
         exec: &ExecConfig,
     ) -> Result<PassReport, PassError> {
+        self.draw_with::<K, K>(fb, draw, state, kernel, exec, None)
+    }
+
+    /// [`Device::draw`], and with `then` the full-screen pass that follows it run tile by
+    /// tile with it (`region`: only for the draws [`Device::draw_then_fullscreen`] fuses).
+    fn draw_with<K: FragmentKernel, R: FragmentKernel>(
+        &self,
+        fb: &mut Framebuffer,
+        draw: &Draw<'_>,
+        state: &PassState,
+        kernel: &K,
+        exec: &ExecConfig,
+        mut then: Option<&mut region::Then<'_, R>>,
+    ) -> Result<PassReport, PassError> {
         let start = Instant::now();
         if draw
             .mesh
@@ -178,7 +194,8 @@ impl Device {
         };
         let mut seq_base = 0u64;
         // Passes that need nothing of the framebuffer skip binning (see `Binning::Auto`).
-        let try_unbinned = exec.mode == ExecMode::Parallel
+        let try_unbinned = then.is_none()
+            && exec.mode == ExecMode::Parallel
             && exec.binning == Binning::Auto
             && !exec.contention
             && info.interlock.is_none()
@@ -251,19 +268,34 @@ impl Device {
                     single,
                 }
             };
-            self.run_waves(
-                fb,
-                &geo,
-                &state.fragment,
-                kernel,
-                exec,
-                &mut seq_base,
-                &mut report,
-            );
+            match (then.as_deref_mut(), &geo) {
+                (Some(then), Geometry::Binned { binned, .. }) => {
+                    let pass = region::GeometryPass {
+                        binned,
+                        instance,
+                        first: draw.triangles.start,
+                        single,
+                        state: &state.fragment,
+                        kernel,
+                    };
+                    self.run_by_region(fb, pass, then, exec, &mut report);
+                }
+                _ => self.run_waves(
+                    fb,
+                    &geo,
+                    &state.fragment,
+                    kernel,
+                    exec,
+                    &mut seq_base,
+                    &mut report,
+                ),
+            }
             vertices.projected = Some(prepared.into_projected());
             self.vertex_cache().keep(vertices);
         }
-        report.wall = start.elapsed();
+        // The full-screen pass's share of the fused wall time is its own.
+        let then_wall = then.map_or(Duration::ZERO, |t| t.report.wall);
+        report.wall = start.elapsed().saturating_sub(then_wall);
         report.passes.push(PassTime {
             kernel: info.name,
             full_screen: false,

@@ -2,6 +2,7 @@
 //! invocation per pixel, no rasterizer involved), and draws for the fused path of the direct
 //! executors.
 
+mod by_region;
 mod common;
 mod draws;
 mod faults;

@@ -189,7 +189,10 @@ impl FragmentKernel for ListResolve {
     fn info(&self) -> KernelInfo {
         // A pixel no fragment reached has empty lists (the heads are filled with `EMPTY`):
         // it writes the background.
-        KernelInfo::new("list-resolve").with_untouched_output(self.composite.background_bits())
+        KernelInfo::new("list-resolve")
+            .with_untouched_output(self.composite.background_bits())
+            // A pixel's lists hold only nodes its own fragments inserted.
+            .with_by_region_reads()
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();

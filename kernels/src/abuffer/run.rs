@@ -92,7 +92,8 @@ impl<'a> AbRun<'a> {
         resolve::pass(&self.device, &mut self.fb, kernel, self.exec)
     }
 
-    /// The store pass with `store`, then the resolve with `resolve`, both merged into
+    /// The store pass with `store`, then the resolve with `resolve` (tile by tile when the
+    /// resolve declares by-region reads and the executor can), both merged into
     /// `report`; returns the fragments the store pass generated (what the algorithm's
     /// "every fragment stored" check accounts for).
     pub(super) fn store_and_resolve<S: FragmentKernel, R: FragmentKernel>(
@@ -101,9 +102,20 @@ impl<'a> AbRun<'a> {
         store: &S,
         resolve: &R,
     ) -> Result<u64, AlgoError> {
-        let store_report = self.capture(store)?;
+        // A resolve that reads by region runs tile by tile with the store pass where the
+        // executor can (`Device::draw_then_fullscreen`).
+        let draw = fragrace_emu::Draw::new(self.frame.mesh, self.frame.view_proj);
+        let (store_report, resolve_report) = self.device.draw_then_fullscreen(
+            &mut self.fb,
+            &draw,
+            &capture_state(),
+            store,
+            &resolve::state(),
+            resolve,
+            self.exec,
+        )?;
         report.merge(&store_report);
-        report.merge(&self.resolve(resolve)?);
+        report.merge(&resolve_report);
         Ok(store_report.stats.fragments_generated)
     }
 

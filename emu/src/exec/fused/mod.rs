@@ -339,23 +339,7 @@ pub(crate) fn run_fullscreen<K: FragmentKernel>(
                 .unwrap_or_else(|e| e.into_inner())
                 .take();
             let Some(tile) = taken else { continue };
-            if !pass.lockstep || pass.lanes <= 1 {
-                w.run_tile_fullscreen(tile, env, coverage);
-                continue;
-            }
-            let skip = pass.touched.zip(pass.untouched_output);
-            if let Some((mask, bits)) = skip {
-                w.skip_untouched(tile, mask, bits, coverage);
-            }
-            let src = FullScreenSpans {
-                x0: tile.x0,
-                y0: tile.y0,
-                w: tile.w,
-                h: tile.h,
-                coverage,
-                touched: skip.map(|(mask, _)| mask),
-            };
-            w.run_unit(&src, env, Some(TileAccess::Exclusive(tile)));
+            fullscreen_tile(&mut w, tile, env, coverage);
         }
         w.finish()
     };
@@ -369,6 +353,124 @@ pub(crate) fn run_fullscreen<K: FragmentKernel>(
     // Full-screen invocations are not rasterized fragments: not counted as generated.
     counts.generated = 0;
     (outcome, counts, imbalance)
+}
+
+/// The full-screen invocations of one tile, `coverage` at every pixel: the per-pixel loop
+/// without lockstep, lockstep warps otherwise (after the untouched blocks' declared output).
+fn fullscreen_tile<K: FragmentKernel>(
+    w: &mut Worker<'_, K>,
+    tile: &mut TileMemory,
+    env: &PassEnv<'_>,
+    coverage: u8,
+) {
+    let pass = w.pass;
+    if !pass.lockstep || pass.lanes <= 1 {
+        w.run_tile_fullscreen(tile, env, coverage);
+        return;
+    }
+    let skip = pass.touched.zip(pass.untouched_output);
+    if let Some((mask, bits)) = skip {
+        w.skip_untouched(tile, mask, bits, coverage);
+    }
+    let src = FullScreenSpans {
+        x0: tile.x0,
+        y0: tile.y0,
+        w: tile.w,
+        h: tile.h,
+        coverage,
+        touched: skip.map(|(mask, _)| mask),
+    };
+    w.run_unit(&src, env, Some(TileAccess::Exclusive(tile)));
+}
+
+/// One pass of [`run_by_region`]: its kernel, environment and fused-pass description.
+pub(crate) struct RegionPass<'a, K> {
+    pub kernel: &'a K,
+    pub env: &'a PassEnv<'a>,
+    pub pass: &'a FusedPass<'a>,
+}
+
+/// What each pass of [`run_by_region`] did: its outcome and counts, and the time the
+/// workers spent in it (summed over workers).
+pub(crate) struct RegionResult {
+    pub outcome: ShadeOutcome,
+    pub counts: FusedCounts,
+    pub busy: Duration,
+}
+
+/// Runs a geometry pass (`geo`, binned into `binned`) and a full-screen pass (`fs`) whose
+/// kernel reads by region (`KernelInfo::by_region`) tile by tile: a worker takes a tile,
+/// runs the geometry pass's units of that tile in API order ([`run_fused`] with one worker
+/// per tile), then the full-screen invocations of that tile ([`run_fullscreen`]), so the
+/// words the tile's fragments wrote are still in the worker's cache when its full-screen
+/// invocations read them (a tiled GPU's subpass with a by-region dependency). Each pass
+/// sees the same invocations, ids, counts and target writes as when run alone; only the
+/// interleaving of the two passes' invocations of different tiles differs. Returns the two
+/// passes' results and the threads' imbalance at the end.
+#[inline(never)]
+pub(crate) fn run_by_region<G: FragmentKernel, R: FragmentKernel>(
+    geo: RegionPass<'_, G>,
+    binned: &Binned,
+    fs: RegionPass<'_, R>,
+    tiles: &mut [TileMemory],
+) -> (RegionResult, RegionResult, Duration) {
+    debug_assert!(geo.pass.segment.is_none());
+    debug_assert!(!geo.pass.state.depth.test && !geo.pass.state.stencil.enabled);
+    debug_assert!(fullscreen_fuses(fs.pass.state, fs.env.samples) && fs.env.tris.is_empty());
+    let count = tiles.len();
+    let threads = geo.pass.threads.max(1).min(count.max(1));
+    let coverage = all_samples(fs.env.samples);
+    let slots: Vec<pool::Mutex<Option<&mut TileMemory>>> = tiles
+        .iter_mut()
+        .map(|t| pool::Mutex::new(Some(t)))
+        .collect();
+    let queue = SplitRange::new(count, threads);
+    let work = |me: usize| {
+        let mut g = Worker::new(geo.kernel, geo.env, geo.pass);
+        let mut r = Worker::new(fs.kernel, fs.env, fs.pass);
+        let mut segs = Vec::new();
+        let (mut g_busy, mut r_busy) = (Duration::ZERO, Duration::ZERO);
+        while let Some(index) = queue.next(me) {
+            let taken = slots[index]
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .take();
+            let Some(tile) = taken else { continue };
+            let start = Instant::now();
+            segs.clear();
+            binned.tile_segments(index, EXCLUSIVE_UNIT, &mut segs);
+            let mut access = Some(TileAccess::Exclusive(tile));
+            for &seg in &segs {
+                access = g.run_unit(&SegmentSpans { binned, seg }, geo.env, access);
+            }
+            let Some(TileAccess::Exclusive(tile)) = access else {
+                unreachable!("a geometry unit hands its exclusive tile back")
+            };
+            let mid = Instant::now();
+            fullscreen_tile(&mut r, tile, fs.env, coverage);
+            g_busy += mid - start;
+            r_busy += mid.elapsed();
+        }
+        (g.finish(), r.finish(), g_busy, r_busy)
+    };
+    let (results, imbalance) = broadcast_timed(threads, work);
+    let empty = || RegionResult {
+        outcome: ShadeOutcome::default(),
+        counts: FusedCounts::default(),
+        busy: Duration::ZERO,
+    };
+    let (mut g, mut r) = (empty(), empty());
+    for ((g_acc, g_counts), (r_acc, r_counts), g_busy, r_busy) in results {
+        g_acc.finish(&mut g.outcome);
+        g.counts.add(&g_counts);
+        g.busy += g_busy;
+        r_acc.finish(&mut r.outcome);
+        r.counts.add(&r_counts);
+        r.busy += r_busy;
+    }
+    // Full-screen invocations are not rasterized fragments: not counted as generated.
+    r.counts.generated = 0;
+    (g, r, imbalance)
 }
 
 /// [`pool::broadcast`], and how long the threads waited for the last one to finish: the sum

@@ -324,9 +324,13 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 let end = block_end(x0, lx, tile.w);
                 if let Some((mask, bits)) = skip {
                     if !mask.touched((x0 + lx) >> BLOCK_SHIFT, y >> BLOCK_SHIFT) {
-                        write_untouched(tile, pass.state, ly, lx..end, cov, bits, targets);
-                        counts.skipped += u64::from(end - lx);
-                        counts.samples_passed += u64::from(samples) * u64::from(end - lx);
+                        let untouched = Untouched {
+                            state: pass.state,
+                            cov,
+                            bits,
+                            targets,
+                        };
+                        untouched.skip_run(tile, ly, lx..end, counts);
                         lx = end;
                         continue;
                     }
@@ -384,17 +388,19 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         if cov == 0 {
             return;
         }
-        let samples = u64::from(samples_of(cov));
-        let targets = pass.targets.min(8);
+        let untouched = Untouched {
+            state: pass.state,
+            cov,
+            bits,
+            targets: pass.targets.min(8),
+        };
         for ly in 0..tile.h {
             let y = tile.y0 + ly;
             let mut lx = 0;
             while lx < tile.w {
                 let end = block_end(tile.x0, lx, tile.w);
                 if !mask.touched((tile.x0 + lx) >> BLOCK_SHIFT, y >> BLOCK_SHIFT) {
-                    write_untouched(tile, pass.state, ly, lx..end, cov, bits, targets);
-                    self.counts.skipped += u64::from(end - lx);
-                    self.counts.samples_passed += samples * u64::from(end - lx);
+                    untouched.skip_run(tile, ly, lx..end, &mut self.counts);
                 }
                 lx = end;
             }
@@ -624,31 +630,47 @@ pub(super) fn block_end(x0: u32, lx: u32, w: u32) -> u32 {
     ((((x >> BLOCK_SHIFT) + 1) << BLOCK_SHIFT) - x0).min(w)
 }
 
-/// Writes `bits` (a kernel's declared output at untouched pixels, target 0) to the pixels
-/// `run` of row `ly` of `tile`, as the target writes of invocations that output it would.
-#[inline]
-pub(super) fn write_untouched(
-    tile: &mut TileMemory,
-    state: &crate::state::FragmentState,
-    ly: u32,
-    run: std::ops::Range<u32>,
-    cov: u8,
-    bits: [u32; 4],
-    targets: usize,
-) {
-    if targets == 0 {
-        return;
-    }
-    debug_assert_eq!(targets, 1);
-    if tile.samples == 1 && cov == 1 && state.targets[0].plain_write() {
-        // The bits go straight to the texels (what `write_outputs` computes).
-        let row = (ly * tile.tile_size) as usize;
-        tile.color[0][row + run.start as usize..row + run.end as usize].fill(bits);
-        return;
-    }
-    let outputs = [bits];
-    for lx in run {
-        tile.write_outputs(state, lx, ly, cov, &outputs);
+/// What a full-screen pass does at the pixels of blocks no geometry reached, instead of
+/// running its kernel there: the kernel's declared output ([`crate::kernel::KernelInfo`]'s
+/// untouched output, target 0) written as the invocations' target writes would.
+#[derive(Clone, Copy)]
+pub(super) struct Untouched<'s> {
+    pub(super) state: &'s crate::state::FragmentState,
+    /// Every pixel's coverage (the pass's, as its invocations would have had).
+    pub(super) cov: u8,
+    pub(super) bits: [u32; 4],
+    pub(super) targets: usize,
+}
+
+impl Untouched<'_> {
+    /// The untouched-run step: writes the declared bits to the pixels `run` of row `ly` of
+    /// `tile`, counts them as skipped and their samples as passed (as the kernel's
+    /// invocations, which would not have discarded, would have been).
+    #[inline]
+    pub(super) fn skip_run(
+        &self,
+        tile: &mut TileMemory,
+        ly: u32,
+        run: std::ops::Range<u32>,
+        counts: &mut FusedCounts,
+    ) {
+        let n = u64::from(run.end - run.start);
+        counts.skipped += n;
+        counts.samples_passed += u64::from(samples_of(self.cov)) * n;
+        if self.targets == 0 {
+            return;
+        }
+        debug_assert_eq!(self.targets, 1);
+        if tile.samples == 1 && self.cov == 1 && self.state.targets[0].plain_write() {
+            // The bits go straight to the texels (what `write_outputs` computes).
+            let row = (ly * tile.tile_size) as usize;
+            tile.color[0][row + run.start as usize..row + run.end as usize].fill(self.bits);
+            return;
+        }
+        let outputs = [self.bits];
+        for lx in run {
+            tile.write_outputs(self.state, lx, ly, self.cov, &outputs);
+        }
     }
 }
 

@@ -1,0 +1,185 @@
+//! A geometry pass and a full-screen pass that reads by region, run together
+//! (`Device::draw_then_fullscreen`, tile by tile on the direct executors): the same image,
+//! lists and counts as the two passes one after the other, under every executor.
+
+use fragrace_emu::{
+    Buf, Coverage, Device, Draw, ExecConfig, Format, Fragment, FragmentKernel, FragmentState,
+    Framebuffer, KernelInfo, PassReport, PassState, SampleCount, TargetState,
+};
+use glam::Vec3;
+
+use super::common::*;
+
+const EMPTY: u32 = u32::MAX;
+const W: u32 = 37;
+const H: u32 = 29;
+
+/// Per-pixel linked lists: a node from one global counter, the fragment's primitive id in
+/// it, linked in by exchanging the pixel's head.
+struct Insert {
+    heads: Buf<u32>,
+    nodes: Buf<u32>,
+    next: Buf<u32>,
+}
+
+impl FragmentKernel for Insert {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("insert").without_interpolants()
+    }
+    async fn shade(&self, f: impl Fragment) {
+        let node = f.atomic_add(self.next, 0, 1).await;
+        f.store(self.nodes, node * 2, f.primitive_id()).await;
+        let old = f.atomic_exchange(self.heads, f.pixel_index(), node).await;
+        f.store(self.nodes, node * 2 + 1, old).await;
+    }
+}
+
+/// Walks its pixel's list: writes how many nodes and the sum of their primitive ids plus
+/// one, and at an untouched pixel (an empty list) zeros.
+struct Walk {
+    heads: Buf<u32>,
+    nodes: Buf<u32>,
+    by_region: bool,
+}
+
+impl FragmentKernel for Walk {
+    fn info(&self) -> KernelInfo {
+        let info = KernelInfo::new("walk").with_untouched_output([0; 4]);
+        if self.by_region {
+            info.with_by_region_reads()
+        } else {
+            info
+        }
+    }
+    async fn shade(&self, f: impl Fragment) {
+        let mut cur = f.load(self.heads, f.pixel_index()).await;
+        let (mut n, mut sum) = (0u32, 0u32);
+        while cur != EMPTY {
+            sum += f.load(self.nodes, cur * 2).await + 1;
+            n += 1;
+            cur = f.load(self.nodes, cur * 2 + 1).await;
+        }
+        f.output_u32(0, [n, sum, 0, 0]);
+    }
+}
+
+/// Overlapping triangles over part of the screen (blocks and tiles no fragment reaches).
+fn mesh() -> fragrace_emu::Mesh {
+    let mut positions = Vec::new();
+    let mut indices = Vec::new();
+    for (i, (x, y, s)) in [
+        (-0.8f32, -0.7f32, 0.9f32),
+        (-0.5, -0.4, 0.8),
+        (0.1, 0.0, 0.6),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let b = positions.len() as u32;
+        let z = 0.2 + 0.1 * i as f32;
+        positions.extend([
+            Vec3::new(x, y, z),
+            Vec3::new(x + s, y, z),
+            Vec3::new(x, y + s, z),
+        ]);
+        indices.push([b, b + 1, b + 2]);
+    }
+    fragrace_emu::Mesh {
+        positions,
+        normals: None,
+        indices,
+    }
+}
+
+struct Outcome {
+    image: Vec<[u32; 4]>,
+    /// Each pixel's list, as (primitive id) sets: node indices may differ.
+    lists: Vec<Vec<u32>>,
+    geometry: PassReport,
+    full: PassReport,
+}
+
+fn run(exec: &ExecConfig, together: bool, by_region: bool) -> Outcome {
+    let mut dev = Device::new().with_coverage(Coverage::Tracked);
+    let n = (W * H) as u64;
+    let heads = dev.buffer::<u32>("heads", n).unwrap();
+    let nodes = dev.buffer::<u32>("nodes", 2 * 4 * n).unwrap();
+    let next = dev.buffer::<u32>("next", 1).unwrap();
+    dev.memory.fill(heads, EMPTY).unwrap();
+    let mut fb = Framebuffer::new(W, H, SampleCount::X1, 8, &[Format::RGBA32UI]).unwrap();
+    let mesh = mesh();
+    let draw = Draw::new(&mesh, glam::Mat4::IDENTITY);
+    let state = PassState {
+        raster: Default::default(),
+        fragment: FragmentState::new(),
+        condition: None,
+    };
+    let mut fs_state = FragmentState::new();
+    fs_state.targets = vec![TargetState::new(Format::RGBA32UI)];
+    let insert = Insert { heads, nodes, next };
+    let walk = Walk {
+        heads,
+        nodes,
+        by_region,
+    };
+    let (geometry, full) = if together {
+        dev.draw_then_fullscreen(&mut fb, &draw, &state, &insert, &fs_state, &walk, exec)
+            .unwrap()
+    } else {
+        let g = dev.draw(&mut fb, &draw, &state, &insert, exec).unwrap();
+        let f = dev.fullscreen(&mut fb, &fs_state, &walk, exec).unwrap();
+        (g, f)
+    };
+    let h = dev.memory.read(heads).unwrap();
+    let nd = dev.memory.read(nodes).unwrap();
+    let lists = h
+        .iter()
+        .map(|&head| {
+            let mut l = Vec::new();
+            let mut cur = head;
+            while cur != EMPTY {
+                l.push(nd[cur as usize * 2]);
+                cur = nd[cur as usize * 2 + 1];
+            }
+            l.sort_unstable();
+            l
+        })
+        .collect();
+    Outcome {
+        image: fb.image(0).texels,
+        lists,
+        geometry,
+        full,
+    }
+}
+
+#[test]
+fn by_region_passes_run_together_give_the_two_passes_results_under_every_executor() {
+    let mut execs = all_execs();
+    execs.extend(direct_execs());
+    let truth = run(&ExecConfig::ordered(), false, false);
+    let covered = truth.lists.iter().filter(|l| !l.is_empty()).count();
+    assert!(covered > 0 && covered < (W * H) as usize / 2, "{covered}");
+    assert!(truth.lists.iter().any(|l| l.len() > 1), "overlapping lists");
+    assert!(truth.full.stats.skipped > 0, "untouched blocks skipped");
+    for exec in &execs {
+        for by_region in [false, true] {
+            let r = run(exec, true, by_region);
+            let what = format!("{:?}, by region {by_region}", exec.mode);
+            assert_eq!(r.image, truth.image, "{what}");
+            assert_eq!(r.lists, truth.lists, "{what}");
+            let (g, f) = (&r.geometry.stats, &r.full.stats);
+            assert_eq!(
+                g.fragments_generated,
+                truth.geometry.stats.fragments_generated
+            );
+            assert_eq!(g.shaded, truth.geometry.stats.shaded, "{what}");
+            assert_eq!((g.geometry_passes, f.fullscreen_passes), (1, 1), "{what}");
+            assert_eq!(f.shaded + f.skipped, u64::from(W * H), "{what}");
+            assert_eq!(f.samples_passed, truth.full.stats.samples_passed, "{what}");
+            assert_eq!(f.fragments_generated, 0, "{what}");
+            assert_eq!(r.full.passes.len(), 1, "{what}");
+            assert!(r.full.passes[0].full_screen, "{what}");
+        }
+    }
+}
