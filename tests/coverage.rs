@@ -11,9 +11,8 @@ use fragrace_emu::ExecConfig;
 use fragrace_kernels::HazardClass;
 
 /// The algorithms whose last full-screen pass skips untouched pixels under `parallel
-/// --no-lockstep`. The interlock algorithms (`kb-interlock`, `kplus`, `skb-ofm`, ...) are
-/// not here: their capture passes run on the general path, which marks no coverage, so
-/// their resolves run everywhere (exactly, as before).
+/// --no-lockstep` (the interlock ones' capture passes too run on the fused path there, by
+/// tile ownership, and mark the blocks they reach).
 const SKIPPING: &[&str] = &[
     "ll",
     "fab",
@@ -26,6 +25,11 @@ const SKIPPING: &[&str] = &[
     "kb-atomic32",
     "kb-atomic64",
     "kb-spinlock",
+    "kb-interlock",
+    "kb-interlock-unordered",
+    "kplus",
+    "kplus-heap",
+    "skb-ofm",
     "wboit",
     "skb-ofm-unordered",
     "dfb-sfm",

@@ -405,7 +405,19 @@ mod tests {
         let f = frame_sized(&mesh, 24, 20);
         let exec = ExecConfig::ordered();
         let params = Params::default();
-        for name in ["ll", "kb-rmw", "kb-atomic32", "kb-atomic64"] {
+        for name in [
+            "ll",
+            "kb-rmw",
+            "kb-atomic32",
+            "kb-atomic64",
+            "kb-interlock",
+            "kb-interlock-unordered",
+            "kplus",
+            "kplus-heap",
+            "skb-ofm",
+            "skb-ofm-unordered",
+            "kb-ofm",
+        ] {
             let algo = crate::algorithm(name).unwrap();
             let whole = algo.run(&f, &params, &exec).unwrap();
             let mut split = algo.run_frame(&f, &params, &exec).unwrap();

@@ -433,7 +433,7 @@ impl<'a> Frag<'a> {
     /// Enters the per-pixel critical section declared in [`KernelInfo::interlock`]
     /// (`beginInvocationInterlockARB`). Ordered mode enters in API order.
     pub async fn interlock_begin(&self) {
-        let (Some(lock), Some(mode)) = (self.env.interlock, self.env.interlock_mode) else {
+        let Some(mode) = self.env.interlock_mode else {
             self.inv.set_fault(FaultKind::Misuse {
                 message: "interlock_begin without declaring interlock in KernelInfo".into(),
             });
@@ -445,6 +445,13 @@ impl<'a> Frag<'a> {
             });
             return Halt.await;
         }
+        let Some(lock) = self.env.interlock else {
+            // Interlock by ownership (`PassEnv::interlock`): this pixel's fragments run one
+            // at a time in API order, so the section is free and this is its turn.
+            self.inv.in_interlock.set(true);
+            self.inv.entered_interlock.set(true);
+            return;
+        };
         let Some((_, _, claim)) = self.claim() else {
             return Halt.await;
         };
@@ -470,7 +477,7 @@ impl<'a> Frag<'a> {
 
     /// Leaves the critical section (`endInvocationInterlockARB`).
     pub async fn interlock_end(&self) {
-        let (Some(lock), Some(mode)) = (self.env.interlock, self.env.interlock_mode) else {
+        let Some(mode) = self.env.interlock_mode else {
             return;
         };
         if !self.inv.in_interlock.get() {
@@ -479,11 +486,14 @@ impl<'a> Frag<'a> {
             });
             return Halt.await;
         }
-        if self.env.mode == Mode::Scheduled {
-            self.step(StepKind::InterlockEnd).await;
-        }
-        if let Some((_, _, claim)) = self.claim() {
-            lock.leave_claim(mode, &claim);
+        // Interlock by ownership holds no lock to leave.
+        if let Some(lock) = self.env.interlock {
+            if self.env.mode == Mode::Scheduled {
+                self.step(StepKind::InterlockEnd).await;
+            }
+            if let Some((_, _, claim)) = self.claim() {
+                lock.leave_claim(mode, &claim);
+            }
         }
         self.inv.in_interlock.set(false);
     }

@@ -74,6 +74,11 @@ pub(crate) struct PassEnv<'a> {
     pub width: u32,
     pub height: u32,
     pub samples: u32,
+    /// The per-pixel critical sections of a kernel that declares interlock
+    /// (`interlock_mode`). `None` with a mode is interlock by ownership: the executor runs
+    /// each pixel's fragments one at a time, to their end, in API order, on the one thread
+    /// that owns the pixel's tile (the fused path without lockstep), so a section is
+    /// always free and entered in order, and there is no lock to take.
     pub interlock: Option<&'a Interlock>,
     pub interlock_mode: Option<InterlockMode>,
     /// Per-sample ordered interlock: each fragment's per-sample tickets, indexed by its

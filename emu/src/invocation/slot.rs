@@ -168,6 +168,15 @@ impl Invocation {
         }
     }
 
+    /// Forgets the critical section of the slot's previous fragment: the fused path keeps
+    /// one slot for all its fragments and resets only their state (`DirectState`), so a
+    /// pass under interlock by ownership calls this before each fragment.
+    #[inline(always)]
+    pub fn reset_interlock(&self) {
+        self.in_interlock.set(false);
+        self.entered_interlock.set(false);
+    }
+
     /// Resets the slot for a new fragment (every executor but the fused path).
     pub fn reset(&self, input: FragInput) {
         if self.has_fault.get() {

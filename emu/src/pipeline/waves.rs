@@ -37,7 +37,20 @@ impl Device {
             EarlyTests::Auto => !info.may_discard && !info.writes_depth,
         };
         let targets = state.targets.len();
-        let interlock = info.interlock.map(|m| {
+        let direct = matches!(exec.mode, ExecMode::Ordered | ExecMode::Parallel);
+        let parallel = exec.mode == ExecMode::Parallel;
+        // Interlock by ownership: on the fused path a binned pass without lockstep gives
+        // each tile to one worker, which shades its fragments one at a time to their end
+        // in API order (`crate::exec::fused`). Every fragment of a pixel then enters its
+        // critical section alone and in API order, as ordered interlock asks, with no lock:
+        // a GPU's pixel ordering by tile ownership. The invocations see no `Interlock`
+        // (`PassEnv::interlock` is `None` with the mode set).
+        let owned = info.interlock.is_some()
+            && direct
+            && !(parallel && exec.lockstep)
+            && !(exec.contention && parallel)
+            && matches!(geo, Geometry::Binned { .. });
+        let interlock = info.interlock.filter(|_| !owned).map(|m| {
             Interlock::with_samples(
                 fb.width,
                 fb.height,
@@ -84,10 +97,9 @@ impl Device {
             contention: contention.as_ref(),
             no_interpolants: !info.interpolants,
         };
-        // Ordered and parallel draws without interlock or contention counting take the
-        // fused path (see `fused`): no fragment lists, one pass over each tile.
-        let direct = matches!(exec.mode, ExecMode::Ordered | ExecMode::Parallel);
-        let parallel = exec.mode == ExecMode::Parallel;
+        // Ordered and parallel draws without contention counting take the fused path (see
+        // `fused`): no fragment lists, one pass over each tile; with interlock only when
+        // the tiles' ownership orders each pixel's fragments (`owned`).
         // The screen blocks this pass marks (geometry on the fused path) or may skip
         // (a full-screen pass whose kernel declares its output at untouched pixels).
         let touched = self.touched();
@@ -103,7 +115,8 @@ impl Device {
             lanes: if parallel { exec.batch.max(1) } else { 1 },
             lockstep: parallel && exec.lockstep,
             threads: if parallel { exec.threads.max(1) } else { 1 },
-            segment: (parallel && crate::exec::fused::commutes(state, targets))
+            // Segments of one tile shade on several threads at once: not under interlock.
+            segment: (parallel && !owned && crate::exec::fused::commutes(state, targets))
                 .then_some(exec.segment.max(1)),
             seq_base: *seq_base,
             flat_depth: f32::NAN,
@@ -139,15 +152,17 @@ impl Device {
         if let (
             true,
             None,
-            None,
             Geometry::Binned {
                 binned,
                 instance,
                 first,
                 single,
             },
-        ) = (direct, info.interlock, contention.as_ref(), geo)
-        {
+        ) = (
+            direct && (info.interlock.is_none() || owned),
+            contention.as_ref(),
+            geo,
+        ) {
             let mask = marking();
             let pass = crate::exec::fused::FusedPass {
                 touched: mask.as_deref(),

@@ -21,7 +21,7 @@
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, InterlockMode, KernelInfo};
 
 use super::checks::Shape;
-use super::run::KbRun;
+use super::run::{counter_total, KbRun};
 use super::slots::{rmw_insert, Slots, SplitSlots};
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
@@ -139,32 +139,38 @@ impl Algorithm for KbInterlock {
         };
         let report = run.capture(&store)?;
         let slots = Slots::Split(kb);
-        let shape = Shape::of(&slots.read(&run.device, run.k)?, true, None);
-        let entered = run.total(entries)?;
         let shaded = report.stats.shaded;
-        let disorder = run.device.memory.read(out_of_order)?[0];
-        let mut checks = vec![
-            shape.check(frame.width, false),
-            Check::new(
-                "every fragment entered its pixel's critical section exactly once (mutual exclusion)",
-                entered == shaded,
-                format!("entries counted inside the critical sections {entered}, fragments shaded {shaded}"),
-            ),
-        ];
-        checks.push(if self.mode.ordered {
-            Check::new(
-                "critical sections entered in primitive order per pixel",
-                disorder == 0,
-                format!("{disorder} entries after a later primitive"),
-            )
-        } else {
-            Check::new(
-                "entries out of primitive order (informational: unordered interlock does not order)",
-                true,
-                format!("{disorder} entries after a later primitive"),
-            )
-        });
-        run.finish(slots, report, checks, 0, 0)
+        let (width, ordered) = (frame.width, self.mode.ordered);
+        // The invariants read the slots and counters back after the frame
+        // ([`AlgoResult::deferred`]).
+        run.finish_deferred(slots, report, 0, 0, move |device, raw| {
+            let shape = Shape::of(raw, true, None);
+            let entered = counter_total(device, entries)?;
+            let disorder = device.memory.read(out_of_order)?[0];
+            Ok(vec![
+                shape.check(width, false),
+                Check::new(
+                    "every fragment entered its pixel's critical section exactly once (mutual exclusion)",
+                    entered == shaded,
+                    format!(
+                        "entries counted inside the critical sections {entered}, fragments shaded {shaded}"
+                    ),
+                ),
+                if ordered {
+                    Check::new(
+                        "critical sections entered in primitive order per pixel",
+                        disorder == 0,
+                        format!("{disorder} entries after a later primitive"),
+                    )
+                } else {
+                    Check::new(
+                        "entries out of primitive order (informational: unordered interlock does not order)",
+                        true,
+                        format!("{disorder} entries after a later primitive"),
+                    )
+                },
+            ])
+        })
     }
 }
 

@@ -30,7 +30,7 @@ use fragrace_emu::{
 };
 
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Deferred, Frame,
     HazardClass, Params,
 };
 use crate::common::{self, capture_state, geometry_pass, pixels, sort_fragments, EMPTY};
@@ -399,112 +399,118 @@ fn run(
         composite: Composite::of(params),
     };
     report.merge(&resolve::pass(&device, &mut fb, &kernel, exec)?);
-    let image = resolve::read_image(&fb);
-
-    // Read back what the structure really holds.
-    let slot_words = device.memory.read(slots)?;
-    let counts = device.memory.read(count)?;
-    let max_positions = match max_pos {
-        Some(b) => Some(device.memory.read(b)?),
-        None => None,
-    };
-    let bounds = device.memory.read(bound)?;
-    let evictions = device.memory.read(evicted)?;
-    let k_us = k as usize;
-    let record = |p: usize, i: usize| {
-        let w = (p * k_us + i) * SLOT_WORDS as usize;
-        CapturedFrag::from_bits(slot_words[w], slot_words[w + 1])
-    };
-
-    let mut lists = Vec::with_capacity(n);
-    let mut over_k = 0usize;
-    let mut structure_bad: Option<String> = None;
-    let mut bound_bad: Option<String> = None;
-    let mut unused_bad: Option<String> = None;
-    for p in 0..n {
-        let c = counts[p] as usize;
-        if c > k_us {
-            over_k += 1;
-        }
-        let c = c.min(k_us);
-        let kept: Vec<CapturedFrag> = (0..c).map(|i| record(p, i)).collect();
-        let max = kept
-            .iter()
-            .map(|f| f.depth)
-            .fold(f32::NEG_INFINITY, f32::max);
-        // The structure's invariant: the max-array's position names a maximal slot, the
-        // heap has every parent at least as far as its children.
-        if structure_bad.is_none() && c > 0 {
-            let ok = match &max_positions {
-                Some(mp) => (mp[p] as usize) < c && kept[mp[p] as usize].depth == max,
-                None => (1..c).all(|i| kept[(i - 1) / 2].depth >= kept[i].depth),
-            };
-            if !ok {
-                structure_bad = Some(format!("pixel {p}: {kept:?}"));
-            }
-        }
-        // The published bound is the maximum of a full buffer, +inf before it fills.
-        let want = if c == k_us { max } else { f32::INFINITY };
-        if bound_bad.is_none() && bounds[p] != want {
-            bound_bad = Some(format!(
-                "pixel {p}: bound {} but {} slots with maximum {max}",
-                bounds[p], c
-            ));
-        }
-        if unused_bad.is_none()
-            && (c..k_us)
-                .any(|i| record(p, i).prim != EMPTY || record(p, i).depth.to_bits() != EMPTY)
-        {
-            unused_bad = Some(format!("pixel {p}: a slot past the count was written"));
-        }
-        let mut kept = kept;
-        sort_fragments(&mut kept);
-        lists.push(kept);
-    }
-    let kept_total: u64 = counts.iter().map(|&c| c.min(k) as u64).sum();
-    let evicted_total: u64 = evictions.iter().map(|&e| e as u64).sum();
-    let culled = store_stats.discarded;
-    // Fragments that reached the store kernel (occupancy culling kills the others before
-    // shading: they are neither kept nor culled by the k+-buffer).
-    let generated = store_stats.fragments_generated - store_stats.early_culled;
-    let structure_name = match structure {
-        Structure::MaxArray => "max-array: the tracked position holds the maximum",
-        Structure::MaxHeap => "max-heap: every parent at least as far as its children",
-    };
-    let checks = vec![
-        Check::new(
-            "every fragment shaded, none faulted",
-            store_stats.shaded == generated && store_faults == 0 && store_stats.faulted == 0,
-            format!("generated {generated}, shaded {}, faulted {}", store_stats.shaded, store_stats.faulted),
-        ),
-        Check::new(
-            "every fragment kept, culled or evicted exactly once",
-            kept_total + culled + evicted_total == generated,
-            format!("kept {kept_total} + culled {culled} + evicted {evicted_total}, generated {generated}"),
-        ),
-        Check::new("count never exceeds k", over_k == 0, format!("{over_k} pixels over k = {k}")),
-        Check::new(structure_name, structure_bad.is_none(), structure_bad.unwrap_or_else(|| format!("{n} pixels"))),
-        Check::new(
-            "culling bound = maximum of a full buffer (+inf before)",
-            bound_bad.is_none(),
-            bound_bad.unwrap_or_else(|| format!("{n} pixels")),
-        ),
-        Check::new(
-            "slots past the count untouched",
-            unused_bad.is_none(),
-            unused_bad.unwrap_or_else(|| format!("{n} pixels")),
-        ),
-    ];
     // The culling stage's depth buffer shares the resolve's framebuffer: 4 bytes a pixel.
     let depth_bytes = if culling.is_some() { 4 } else { 0 };
     let storage_bytes = device.memory.bytes() + n as u64 * (resolve::TARGET_BYTES + depth_bytes);
+    let (width, height) = (frame.width, frame.height);
+    // What the structure really holds is read back and checked after the frame
+    // ([`AlgoResult::deferred`]).
+    let deferred = Deferred::new(move |r: &mut AlgoResult| {
+        let image = resolve::read_image(&fb);
+        // Read back what the structure really holds.
+        let slot_words = device.memory.read(slots)?;
+        let counts = device.memory.read(count)?;
+        let max_positions = match max_pos {
+            Some(b) => Some(device.memory.read(b)?),
+            None => None,
+        };
+        let bounds = device.memory.read(bound)?;
+        let evictions = device.memory.read(evicted)?;
+        let k_us = k as usize;
+        let record = |p: usize, i: usize| {
+            let w = (p * k_us + i) * SLOT_WORDS as usize;
+            CapturedFrag::from_bits(slot_words[w], slot_words[w + 1])
+        };
+
+        let mut lists = Vec::with_capacity(n);
+        let mut over_k = 0usize;
+        let mut structure_bad: Option<String> = None;
+        let mut bound_bad: Option<String> = None;
+        let mut unused_bad: Option<String> = None;
+        for p in 0..n {
+            let c = counts[p] as usize;
+            if c > k_us {
+                over_k += 1;
+            }
+            let c = c.min(k_us);
+            let kept: Vec<CapturedFrag> = (0..c).map(|i| record(p, i)).collect();
+            let max = kept
+                .iter()
+                .map(|f| f.depth)
+                .fold(f32::NEG_INFINITY, f32::max);
+            // The structure's invariant: the max-array's position names a maximal slot, the
+            // heap has every parent at least as far as its children.
+            if structure_bad.is_none() && c > 0 {
+                let ok = match &max_positions {
+                    Some(mp) => (mp[p] as usize) < c && kept[mp[p] as usize].depth == max,
+                    None => (1..c).all(|i| kept[(i - 1) / 2].depth >= kept[i].depth),
+                };
+                if !ok {
+                    structure_bad = Some(format!("pixel {p}: {kept:?}"));
+                }
+            }
+            // The published bound is the maximum of a full buffer, +inf before it fills.
+            let want = if c == k_us { max } else { f32::INFINITY };
+            if bound_bad.is_none() && bounds[p] != want {
+                bound_bad = Some(format!(
+                    "pixel {p}: bound {} but {} slots with maximum {max}",
+                    bounds[p], c
+                ));
+            }
+            if unused_bad.is_none()
+                && (c..k_us)
+                    .any(|i| record(p, i).prim != EMPTY || record(p, i).depth.to_bits() != EMPTY)
+            {
+                unused_bad = Some(format!("pixel {p}: a slot past the count was written"));
+            }
+            let mut kept = kept;
+            sort_fragments(&mut kept);
+            lists.push(kept);
+        }
+        let kept_total: u64 = counts.iter().map(|&c| c.min(k) as u64).sum();
+        let evicted_total: u64 = evictions.iter().map(|&e| e as u64).sum();
+        let culled = store_stats.discarded;
+        // Fragments that reached the store kernel (occupancy culling kills the others before
+        // shading: they are neither kept nor culled by the k+-buffer).
+        let generated = store_stats.fragments_generated - store_stats.early_culled;
+        let structure_name = match structure {
+            Structure::MaxArray => "max-array: the tracked position holds the maximum",
+            Structure::MaxHeap => "max-heap: every parent at least as far as its children",
+        };
+        let checks = vec![
+            Check::new(
+                "every fragment shaded, none faulted",
+                store_stats.shaded == generated && store_faults == 0 && store_stats.faulted == 0,
+                format!("generated {generated}, shaded {}, faulted {}", store_stats.shaded, store_stats.faulted),
+            ),
+            Check::new(
+                "every fragment kept, culled or evicted exactly once",
+                kept_total + culled + evicted_total == generated,
+                format!("kept {kept_total} + culled {culled} + evicted {evicted_total}, generated {generated}"),
+            ),
+            Check::new("count never exceeds k", over_k == 0, format!("{over_k} pixels over k = {k}")),
+            Check::new(structure_name, structure_bad.is_none(), structure_bad.unwrap_or_else(|| format!("{n} pixels"))),
+            Check::new(
+                "culling bound = maximum of a full buffer (+inf before)",
+                bound_bad.is_none(),
+                bound_bad.unwrap_or_else(|| format!("{n} pixels")),
+            ),
+            Check::new(
+                "slots past the count untouched",
+                unused_bad.is_none(),
+                unused_bad.unwrap_or_else(|| format!("{n} pixels")),
+            ),
+        ];
+        r.capture = Some(Capture::from_lists(width, height, lists));
+        r.image = Some(image);
+        r.checks.extend(checks);
+        Ok(())
+    });
     Ok(AlgoResult {
-        capture: Some(Capture::from_lists(frame.width, frame.height, lists)),
-        image: Some(image),
         report,
-        checks,
         storage_bytes,
         culling,
+        deferred: Some(deferred),
         ..Default::default()
     })
 }

@@ -114,13 +114,7 @@ impl<'a> KbRun<'a> {
 
     /// The sum of a per-pixel counter buffer (the instrumentation counts of the invariants).
     pub(super) fn total(&self, counter: Buf<u32>) -> Result<u64, AlgoError> {
-        Ok(self
-            .device
-            .memory
-            .read(counter)?
-            .iter()
-            .map(|&c| c as u64)
-            .sum())
+        counter_total(&self.device, counter)
     }
 
     /// [`KbRun::finish`] with the readbacks left out of the frame: the resolve runs now,
@@ -219,4 +213,10 @@ impl<'a> KbRun<'a> {
             ..Default::default()
         })
     }
+}
+
+/// The sum of a per-pixel counter buffer of `device` (the instrumentation counts of the
+/// invariants), also from a frame's deferred checks.
+pub(super) fn counter_total(device: &Device, counter: Buf<u32>) -> Result<u64, AlgoError> {
+    Ok(device.memory.read(counter)?.iter().map(|&c| c as u64).sum())
 }

@@ -19,7 +19,8 @@ use super::record::{composite, ZFrag, WORDS};
 use super::skb::{k_of, MAX_K};
 use super::thickness::ZModel;
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Deferred, Frame, HazardClass,
+    Params,
 };
 use crate::common::{self, capture_state, framebuffer, geometry_pass, pixels};
 use crate::resolve;
@@ -164,40 +165,46 @@ impl Algorithm for KbOfm {
             background: params.background,
         };
         report.merge(&resolve::pass(&device, &mut fb, &kernel, exec)?);
-        let image = resolve::read_image(&fb);
-        let words = device.memory.read(records)?;
-        let held: f64 = words
-            .chunks(WORDS as usize)
-            .map(|w| f64::from(ZFrag::from_words(w).n))
-            .sum();
-        let generated = stats.fragments_generated;
-        let img_bad = image.iter().position(|v| v.iter().any(|c| !c.is_finite()));
-        let checks = vec![
-            Check::new(
-                "every fragment shaded, none faulted",
-                stats.shaded == generated && report.faults.is_empty(),
-                format!(
-                    "generated {generated}, shaded {}, faults {}",
-                    stats.shaded,
-                    report.faults.len()
+        let storage_bytes = device.memory.bytes() + n * resolve::TARGET_BYTES;
+        // The records are read back and checked after the frame ([`AlgoResult::deferred`]).
+        let deferred = Deferred::new(move |r: &mut AlgoResult| {
+            let image = resolve::read_image(&fb);
+            let words = device.memory.read(records)?;
+            let held: f64 = words
+                .chunks(WORDS as usize)
+                .map(|w| f64::from(ZFrag::from_words(w).n))
+                .sum();
+            let generated = stats.fragments_generated;
+            let img_bad = image.iter().position(|v| v.iter().any(|c| !c.is_finite()));
+            let checks = vec![
+                Check::new(
+                    "every fragment shaded, none faulted",
+                    stats.shaded == generated && r.report.faults.is_empty(),
+                    format!(
+                        "generated {generated}, shaded {}, faults {}",
+                        stats.shaded,
+                        r.report.faults.len()
+                    ),
                 ),
-            ),
-            Check::new(
-                "fragments held by the records (informational: overflow and lost updates drop them)",
-                true,
-                format!("{held} of {generated}"),
-            ),
-            Check::new(
-                "image finite",
-                img_bad.is_none(),
-                format!("first non-finite pixel {img_bad:?}"),
-            ),
-        ];
+                Check::new(
+                    "fragments held by the records (informational: overflow and lost updates drop them)",
+                    true,
+                    format!("{held} of {generated}"),
+                ),
+                Check::new(
+                    "image finite",
+                    img_bad.is_none(),
+                    format!("first non-finite pixel {img_bad:?}"),
+                ),
+            ];
+            r.image = Some(image);
+            r.checks.extend(checks);
+            Ok(())
+        });
         Ok(AlgoResult {
-            image: Some(image),
-            storage_bytes: device.memory.bytes() + n * resolve::TARGET_BYTES,
+            storage_bytes,
             report,
-            checks,
+            deferred: Some(deferred),
             ..Default::default()
         })
     }

@@ -34,7 +34,8 @@ use super::ofm::ofm;
 use super::record::{composite, ZFrag, WORDS};
 use super::thickness::ZModel;
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Deferred, Frame, HazardClass,
+    Params,
 };
 use crate::common::{self, capture_state, framebuffer, geometry_pass, pixels};
 use crate::resolve;
@@ -303,74 +304,81 @@ impl Algorithm for SkbOfm {
             background: params.background,
         };
         report.merge(&resolve::pass(&device, &mut fb, &kernel, exec)?);
-        let image = resolve::read_image(&fb);
+        let storage_bytes = device.memory.bytes() + n * resolve::TARGET_BYTES;
+        let sync = self.0;
+        // The records are read back and checked after the frame ([`AlgoResult::deferred`]).
+        let deferred = Deferred::new(move |r: &mut AlgoResult| {
+            let image = resolve::read_image(&fb);
 
-        let memory = &device.memory;
-        let (core, tail) = (memory.read(core)?, memory.read(tail)?);
-        let (count, max_pos) = (memory.read(count)?, memory.read(max_pos)?);
-        let record = |p: usize, i: usize| {
-            let w = (p * k as usize + i) * WORDS as usize;
-            ZFrag::from_words(&core[w..w + WORDS as usize])
-        };
-        let mut kept = 0.0f64;
-        let mut shape_bad = None;
-        for p in 0..n as usize {
-            let c = (count[p] as usize).min(k as usize);
-            let recs: Vec<ZFrag> = (0..c).map(|i| record(p, i)).collect();
-            let t = ZFrag::from_words(&tail[p * WORDS as usize..(p + 1) * WORDS as usize]);
-            kept += recs.iter().map(|r| f64::from(r.n)).sum::<f64>() + f64::from(t.n);
-            let disjoint = recs
-                .iter()
-                .enumerate()
-                .all(|(i, a)| recs[i + 1..].iter().all(|b| !a.overlaps(b)));
-            let before_tail = t.is_empty() || recs.iter().all(|r| r.z <= t.front());
-            let max_ok = c == 0 || recs[max_pos[p] as usize % c].z == recs[farthest(&recs)].z;
-            if shape_bad.is_none()
-                && !(count[p] as usize <= k as usize && disjoint && before_tail && max_ok)
-            {
-                shape_bad = Some(format!(
-                    "pixel {p}: count {}, disjoint {disjoint}, core before tail {before_tail}, max position right {max_ok}",
-                    count[p]
-                ));
+            let memory = &device.memory;
+            let (core, tail) = (memory.read(core)?, memory.read(tail)?);
+            let (count, max_pos) = (memory.read(count)?, memory.read(max_pos)?);
+            let record = |p: usize, i: usize| {
+                let w = (p * k as usize + i) * WORDS as usize;
+                ZFrag::from_words(&core[w..w + WORDS as usize])
+            };
+            let mut kept = 0.0f64;
+            let mut shape_bad = None;
+            for p in 0..n as usize {
+                let c = (count[p] as usize).min(k as usize);
+                let recs: Vec<ZFrag> = (0..c).map(|i| record(p, i)).collect();
+                let t = ZFrag::from_words(&tail[p * WORDS as usize..(p + 1) * WORDS as usize]);
+                kept += recs.iter().map(|r| f64::from(r.n)).sum::<f64>() + f64::from(t.n);
+                let disjoint = recs
+                    .iter()
+                    .enumerate()
+                    .all(|(i, a)| recs[i + 1..].iter().all(|b| !a.overlaps(b)));
+                let before_tail = t.is_empty() || recs.iter().all(|r| r.z <= t.front());
+                let max_ok = c == 0 || recs[max_pos[p] as usize % c].z == recs[farthest(&recs)].z;
+                if shape_bad.is_none()
+                    && !(count[p] as usize <= k as usize && disjoint && before_tail && max_ok)
+                {
+                    shape_bad = Some(format!(
+                        "pixel {p}: count {}, disjoint {disjoint}, core before tail {before_tail}, max position right {max_ok}",
+                        count[p]
+                    ));
+                }
             }
-        }
-        let generated = stats.fragments_generated;
-        let img_bad = image.iter().position(|v| v.iter().any(|c| !c.is_finite()));
-        let synced = self.0 != Sync::Unsynchronized;
-        let label = |name: &str| {
-            if synced {
-                name.to_string()
-            } else {
-                format!("{name} (informational: no synchronization)")
-            }
-        };
-        let checks = vec![
-            Check::new(
-                "every fragment shaded, none faulted",
-                stats.shaded == generated && report.faults.is_empty(),
-                format!("generated {generated}, shaded {}, faults {}", stats.shaded, report.faults.len()),
-            ),
-            Check::new(
-                label("every fragment merged into exactly one record (core or tail)"),
-                !synced || kept == generated as f64,
-                format!("records hold {kept} fragments, generated {generated}"),
-            ),
-            Check::new(
-                label("core: at most k records, pairwise disjoint, in front of the tail, max array right"),
-                !synced || shape_bad.is_none(),
-                shape_bad.unwrap_or_else(|| format!("{n} pixels")),
-            ),
-            Check::new(
-                "image finite",
-                img_bad.is_none(),
-                format!("first non-finite pixel {img_bad:?}"),
-            ),
-        ];
+            let generated = stats.fragments_generated;
+            let img_bad = image.iter().position(|v| v.iter().any(|c| !c.is_finite()));
+            let synced = sync != Sync::Unsynchronized;
+            let label = |name: &str| {
+                if synced {
+                    name.to_string()
+                } else {
+                    format!("{name} (informational: no synchronization)")
+                }
+            };
+            let checks = vec![
+                Check::new(
+                    "every fragment shaded, none faulted",
+                    stats.shaded == generated && r.report.faults.is_empty(),
+                    format!("generated {generated}, shaded {}, faults {}", stats.shaded, r.report.faults.len()),
+                ),
+                Check::new(
+                    label("every fragment merged into exactly one record (core or tail)"),
+                    !synced || kept == generated as f64,
+                    format!("records hold {kept} fragments, generated {generated}"),
+                ),
+                Check::new(
+                    label("core: at most k records, pairwise disjoint, in front of the tail, max array right"),
+                    !synced || shape_bad.is_none(),
+                    shape_bad.unwrap_or_else(|| format!("{n} pixels")),
+                ),
+                Check::new(
+                    "image finite",
+                    img_bad.is_none(),
+                    format!("first non-finite pixel {img_bad:?}"),
+                ),
+            ];
+            r.image = Some(image);
+            r.checks.extend(checks);
+            Ok(())
+        });
         Ok(AlgoResult {
-            image: Some(image),
-            storage_bytes: device.memory.bytes() + n * resolve::TARGET_BYTES,
+            storage_bytes,
             report,
-            checks,
+            deferred: Some(deferred),
             ..Default::default()
         })
     }

@@ -21,8 +21,14 @@
 //! takes them. Without lockstep such passes also shade through a loop of their own
 //! (`Worker::run_unit_counting`), which carries nothing per pixel but the kernel.
 //!
-//! This module knows no algorithm; it does not handle interlock (ordered interlock needs the
-//! per-pixel tickets of the general path) nor the contention table.
+//! Interlock runs here by ownership, without lockstep: a binned pass's tile belongs to one
+//! worker, which shades its fragments one at a time to their end in API order, so each
+//! pixel's critical sections are entered alone and in order with no lock (a GPU orders a
+//! pixel's fragments the same way, by the tile's owner). Lockstep warps interleave the
+//! fragments of a pixel, so interlock with lockstep takes the general path and its
+//! per-pixel tickets (`crate::pipeline`), as does the contention table.
+//!
+//! This module knows no algorithm.
 
 use std::time::{Duration, Instant};
 

@@ -542,9 +542,13 @@ fn shade_direct<'a, K: FragmentKernel>(
     debug_assert!(matches!(env.mode, Mode::Direct { .. }));
     // `DirectFrag` counts no contention: passes that keep the table take the general path.
     debug_assert!(env.contention.is_none());
+    if env.interlock_mode.is_some() {
+        inv.reset_interlock();
+    }
     let r = catch_unwind(AssertUnwindSafe(|| {
         let mut cx = Context::from_waker(Waker::noop());
-        // Interlock is not used on this path, so the kernel is the whole invocation.
+        // Interlock here is by ownership (no lock to leave, no turn to pass: `PassEnv::
+        // interlock`), so the kernel is the whole invocation.
         let frag = DirectFrag::new(Frag { inv, env }, state);
         // One poll: under `DirectFrag` nothing suspends, and an invocation is pending
         // only once it has faulted (it is then dropped).
