@@ -139,7 +139,7 @@ pub fn resolve(
                 }
                 let region = g.nodes[x]
                     .region
-                    .cut(&e.occl)
+                    .cut(&g.occl(e))
                     .intersect(&g.nodes[e.to].region);
                 if !region.is_empty() {
                     edges.push(CellEdge {

@@ -353,17 +353,19 @@ pub fn occlusion_planes(a: &[DVec3; 3], b: &[DVec3; 3]) -> Vec<Plane> {
         let Some(pl) = Plane::through(n, p) else {
             return;
         };
+        // Generators on both sides (most candidates) end the test early.
         let mut lo = 0.0f64;
         let mut hi = 0.0f64;
-        for v in a {
-            let s = pl.eval(*v);
+        for s in a
+            .iter()
+            .map(|v| pl.eval(*v))
+            .chain(rays.iter().map(|r| pl.n.dot(*r)))
+        {
             lo = lo.min(s);
             hi = hi.max(s);
-        }
-        for r in &rays {
-            let s = pl.n.dot(*r);
-            lo = lo.min(s);
-            hi = hi.max(s);
+            if lo < -EPS && hi > EPS {
+                return;
+            }
         }
         let keep = if lo >= -EPS {
             Some(pl)

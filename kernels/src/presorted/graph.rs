@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use glam::DVec3;
 
-use super::geom::{occlusion_planes, Plane, Region, EPS};
+use super::geom::{occlusion_planes, Plane, Region, EPS, MIN_WIDTH};
 use super::separate::Shape;
 
 /// One triangle instance.
@@ -25,15 +25,13 @@ pub struct Node {
     pub region: Region,
 }
 
-/// One occlusion edge: `from` occludes `to` from the viewpoints of `region`.
-#[derive(Clone, Debug)]
+/// One occlusion edge: `from` occludes `to` from some viewpoint of both regions. Only the
+/// endpoints are stored (the graph has up to n^2 edges): the occlusion region and the
+/// reduced region are recomputed where needed ([`Graph::occl`], [`Graph::edge_region`]).
+#[derive(Clone, Copy, Debug)]
 pub struct Edge {
     pub from: usize,
     pub to: usize,
-    /// The unreduced occlusion region's half-spaces (shared by the copies of an edge).
-    pub occl: Arc<[Plane]>,
-    /// The reduced occlusion region's vertices (eq. 1).
-    pub verts: Vec<DVec3>,
     pub alive: bool,
 }
 
@@ -83,6 +81,51 @@ fn may_occlude(a: &[DVec3; 3], b: &[DVec3; 3], ra: &Region, rb: &Region) -> bool
     !(ra.outside_any(&bound) || rb.outside_any(&bound))
 }
 
+/// A sphere holding a triangle: its centroid and the distance to its farthest vertex.
+fn bounding_sphere(t: &[DVec3; 3]) -> (DVec3, f64) {
+    let c = (t[0] + t[1] + t[2]) / 3.0;
+    let r = t.iter().map(|p| (*p - c).length()).fold(0.0, f64::max);
+    (c, r * (1.0 + 1e-9) + EPS)
+}
+
+/// Whether `region` lies wholly outside a convex set holding `O_{a->b}` (a conservative
+/// rejection, cheaper than the occlusion region): with `a` in the ball `(ca, ra)` and `b` in
+/// `(cb, rb)` (disjoint), `O_{a->b} = a + cone(a - b)` lies in the ball of `a` plus the
+/// circular cone of axis `w = (ca - cb)/|ca - cb|` and half-angle `asin((ra + rb)/|ca - cb|)`.
+/// Every direction `n` within the dual cone (at most `90° - α` from `w`) has `n . d >= 0`
+/// along that cone, so `O` lies in `n . (x - ca) >= -ra`; the test tries `w` itself and the
+/// direction of the dual cone nearest to the region's centre as seen from `ca`.
+fn cone_misses(sa: (DVec3, f64), sb: (DVec3, f64), region: &Region) -> bool {
+    let ((ca, ra), (cb, rb)) = (sa, sb);
+    let w = ca - cb;
+    let dist = w.length();
+    if region.is_empty() || dist <= (ra + rb) * (1.0 + 1e-9) {
+        return region.is_empty();
+    }
+    let w = w / dist;
+    let sin_a = (ra + rb) / dist;
+    let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
+    let centre = region.verts.iter().copied().sum::<DVec3>() / region.verts.len() as f64;
+    let m = ca - centre;
+    let along = m.dot(w);
+    let perp = m - w * along;
+    let pl = perp.length();
+    let toward = if along >= m.length() * sin_a {
+        m.normalize_or_zero()
+    } else if pl > 1e-12 {
+        w * sin_a + perp / pl * cos_a
+    } else {
+        w
+    };
+    [w, toward].iter().any(|n| {
+        *n != DVec3::ZERO
+            && region
+                .verts
+                .iter()
+                .all(|v| n.dot(*v - ca) < -ra - MIN_WIDTH)
+    })
+}
+
 impl Graph {
     /// Nodes (front and back copy of every triangle whose copy can be rendered from the
     /// partition) and every edge. `tick(done, total)` reports progress over the nodes.
@@ -110,6 +153,7 @@ impl Graph {
             .iter()
             .map(|x| facing(&tris[x.tri as usize], x.back))
             .collect();
+        let spheres: Vec<(DVec3, f64)> = tris.iter().map(bounding_sphere).collect();
         let mut occl_cache: HashMap<(u32, u32), Arc<[Plane]>> = HashMap::new();
         for i in 0..n {
             if i % 64 == 0 {
@@ -135,14 +179,18 @@ impl Graph {
                 {
                     continue;
                 }
-                if !may_occlude(a, b, &g.nodes[i].region, &g.nodes[j].region) {
+                let (sa, sb) = (spheres[ti as usize], spheres[tj as usize]);
+                if cone_misses(sa, sb, &g.nodes[i].region)
+                    || cone_misses(sa, sb, &g.nodes[j].region)
+                    || !may_occlude(a, b, &g.nodes[i].region, &g.nodes[j].region)
+                {
                     continue;
                 }
                 let occl = occl_cache
                     .entry((ti, tj))
                     .or_insert_with(|| occlusion_planes(a, b).into())
                     .clone();
-                g.try_edge(i, j, occl);
+                g.try_edge(i, j, &occl);
             }
             // Occlusion planes of pairs with node i's triangle are no longer needed once
             // both of its copies are done.
@@ -161,25 +209,16 @@ impl Graph {
         self.nodes.len() - 1
     }
 
-    /// Adds `from -> to` if its reduced occlusion region has an interior.
-    pub fn try_edge(&mut self, from: usize, to: usize, occl: Arc<[Plane]>) -> bool {
-        let (ef, et) = (&self.nodes[from].region, &self.nodes[to].region);
-        if ef.outside_any(&occl) || et.outside_any(&occl) {
-            return false;
-        }
-        let reduced = self.nodes[from]
-            .region
-            .cut(&occl)
-            .intersect(&self.nodes[to].region);
-        if reduced.is_empty() {
+    /// Adds `from -> to` if its reduced occlusion region has an interior (`occl`: the
+    /// occlusion region of their triangles).
+    pub fn try_edge(&mut self, from: usize, to: usize, occl: &[Plane]) -> bool {
+        if self.reduced(from, to, occl).is_empty() {
             return false;
         }
         let id = self.edges.len();
         self.edges.push(Edge {
             from,
             to,
-            occl,
-            verts: reduced.verts,
             alive: true,
         });
         self.out[from].push(id);
@@ -203,18 +242,40 @@ impl Graph {
             .filter(|e| e.alive)
     }
 
-    /// The reduced occlusion region of edge `e` (eq. 1) as the separating-axis test sees it
-    /// (recomputed: edges keep only its vertices).
-    pub fn edge_shape(&self, e: usize) -> Shape {
+    /// The reduced occlusion region `O_{from->to} ∩ E_from ∩ E_to` (eq. 1), empty when
+    /// either rendering region lies outside one of `occl`'s planes (the paper's cheap out).
+    fn reduced(&self, from: usize, to: usize, occl: &[Plane]) -> Region {
+        let (ef, et) = (&self.nodes[from].region, &self.nodes[to].region);
+        if ef.outside_any(occl) || et.outside_any(occl) {
+            return Region::default();
+        }
+        ef.cut(occl).intersect(et)
+    }
+
+    /// The occlusion region of the triangles of an edge's endpoints (section 4.1.1).
+    pub fn occl(&self, e: &Edge) -> Vec<Plane> {
+        let t = |x: usize| &self.tris[self.nodes[x].tri as usize];
+        occlusion_planes(t(e.from), t(e.to))
+    }
+
+    /// The reduced occlusion region of edge `e` (eq. 1), recomputed.
+    pub fn edge_region(&self, e: usize) -> Region {
         let ed = &self.edges[e];
-        let r = self.nodes[ed.from]
-            .region
-            .cut(&ed.occl)
-            .intersect(&self.nodes[ed.to].region);
+        self.reduced(ed.from, ed.to, &self.occl(ed))
+    }
+
+    /// The vertices of edge `e`'s reduced occlusion region.
+    pub fn edge_verts(&self, e: usize) -> Vec<DVec3> {
+        self.edge_region(e).verts
+    }
+
+    /// The reduced occlusion region of edge `e` (eq. 1) as the separating-axis test sees it.
+    pub fn edge_shape(&self, e: usize) -> Shape {
+        let r = self.edge_region(e);
         Shape {
             normals: r.normals(),
             edges: r.edge_dirs(),
-            verts: ed.verts.clone(),
+            verts: r.verts,
         }
     }
 
@@ -255,12 +316,12 @@ impl Graph {
                 continue;
             }
             self.edges[e].alive = false;
-            let (to, occl) = (self.edges[e].to, self.edges[e].occl.clone());
+            let (to, occl) = (self.edges[e].to, self.occl(&self.edges[e]));
             if keep_alive {
-                self.try_edge(x, to, occl.clone());
+                self.try_edge(x, to, &occl);
             }
             if let Some(n) = new {
-                self.try_edge(n, to, occl);
+                self.try_edge(n, to, &occl);
             }
         }
         for e in ins {
@@ -268,12 +329,12 @@ impl Graph {
                 continue;
             }
             self.edges[e].alive = false;
-            let (from, occl) = (self.edges[e].from, self.edges[e].occl.clone());
+            let (from, occl) = (self.edges[e].from, self.occl(&self.edges[e]));
             if keep_alive {
-                self.try_edge(from, x, occl.clone());
+                self.try_edge(from, x, &occl);
             }
             if let Some(n) = new {
-                self.try_edge(from, n, occl);
+                self.try_edge(from, n, &occl);
             }
         }
         // Drop the dead edge ids from the other endpoints' lists (the scan walks them).
@@ -306,6 +367,52 @@ pub(super) mod tests {
         let dirs = directions(6).unwrap();
         let k = dirs.iter().position(|d| d.z > 0.5).unwrap();
         Graph::build(tris, &partition_region(&dirs, k), &|_, _| {})
+    }
+
+    #[test]
+    fn the_cone_test_rejects_only_pairs_without_an_edge() {
+        // Random small triangles in the unit ball (a fixed LCG), each pair against each
+        // partition of the cube: a rejection must mean an empty reduced region, and it must
+        // reject many pairs (else it prunes nothing).
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let tris: Vec<[DVec3; 3]> = (0..40)
+            .map(|_| {
+                let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;
+                [0, 1, 2].map(|_| c + DVec3::new(rnd(), rnd(), rnd()) * 0.15)
+            })
+            .collect();
+        let dirs = directions(6).unwrap();
+        let (mut rejected, mut edges) = (0, 0);
+        for k in 0..dirs.len() {
+            let part = partition_region(&dirs, k);
+            for (ia, a) in tris.iter().enumerate() {
+                for (ib, b) in tris.iter().enumerate() {
+                    if ia == ib {
+                        continue;
+                    }
+                    let (ea, eb) = (part.cut(&[facing(a, false)]), part.cut(&[facing(b, true)]));
+                    let occl = occlusion_planes(a, b);
+                    let reduced = ea.cut(&occl).intersect(&eb);
+                    let (sa, sb) = (bounding_sphere(a), bounding_sphere(b));
+                    if cone_misses(sa, sb, &ea) || cone_misses(sa, sb, &eb) {
+                        rejected += 1;
+                        assert!(
+                            reduced.is_empty(),
+                            "pair {ia} -> {ib} rejected with an edge"
+                        );
+                    }
+                    edges += usize::from(!reduced.is_empty());
+                }
+            }
+        }
+        assert!(edges > 0);
+        assert!(rejected > 6 * 40 * 39 / 4, "only {rejected} pairs rejected");
     }
 
     #[test]

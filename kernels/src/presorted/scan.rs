@@ -219,10 +219,7 @@ pub fn scan(
             stats.moves += 1;
             continue;
         }
-        let rb: Vec<DVec3> = backs
-            .iter()
-            .flat_map(|&e| g.edges[e].verts.iter().copied())
-            .collect();
+        let rb: Vec<DVec3> = backs.iter().flat_map(|&e| g.edge_verts(e)).collect();
         // Greedy growth of R_f (eq. 3-5).
         let mut rf: Vec<DVec3> = Vec::new();
         let mut rf_edges: Vec<usize> = Vec::new();
@@ -234,7 +231,7 @@ pub fn scan(
                 break;
             }
             let mut cand = rf.clone();
-            cand.extend(g.edges[e].verts.iter().copied());
+            cand.extend(g.edge_verts(e));
             let shapes = || {
                 let rbs = rb_shape
                     .get_or_insert_with(|| {
@@ -291,7 +288,7 @@ pub fn scan(
                 }
                 let shapes = || (g.edge_shape(f), g.edge_shape(b));
                 if let Some(p) =
-                    cutting_plane(&g.edges[f].verts, &g.edges[b].verts, None, shapes, stats)
+                    cutting_plane(&g.edge_verts(f), &g.edge_verts(b), None, shapes, stats)
                 {
                     pair = Some(p);
                     break 'pairs;
@@ -377,9 +374,9 @@ fn dup_b_or_f(
     else {
         return false;
     };
-    let xb = g.edges[b_edge].verts.clone();
-    let bf_v = g.edges[bf].verts.clone();
-    let fx = g.edges[f_edge].verts.clone();
+    let xb = g.edge_verts(b_edge);
+    let bf_v = g.edge_verts(bf);
+    let fx = g.edge_verts(f_edge);
     // Duplicate b: the copy that serves x -> b goes before x.
     let shapes = || (g.edge_shape(bf), g.edge_shape(b_edge));
     if let Some(p) = cutting_plane(&bf_v, &xb, None, shapes, stats) {
