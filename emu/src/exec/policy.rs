@@ -235,13 +235,38 @@ impl Chooser {
         }
     }
 
-    /// Ranks the pass's `inputs` in the ordering policy's order (equal keys share a rank),
-    /// once per pass: a candidate then carries its rank, and the round robin compares one
-    /// integer per candidate instead of computing and comparing its key at every step
-    /// (the scan over the candidates with their keys was a fifth of a `kb-interlock`
-    /// campaign's instructions, docs/performance.md). Nothing for the other policies.
+    /// Ranks the pass's `inputs` in the ordering policy's order, once per pass: a candidate
+    /// then carries its rank, and the round robin compares one integer per candidate instead
+    /// of computing and comparing its key at every step (the scan over the candidates with
+    /// their keys was a fifth of a `kb-interlock` campaign's instructions,
+    /// docs/performance.md). A rank is any `u64` that orders as the key does (equal keys,
+    /// equal ranks): the sequence number itself (`Fifo`), its complement (`Reverse`), and
+    /// for `FarFirst` the depth's order key above the sequence number's offset from the
+    /// pass's first when those offsets fit in 32 bits (always, but for passes of more than
+    /// 2^32 fragments), else the key's place among the pass's sorted keys. Nothing for the
+    /// other policies.
     pub fn rank_inputs(&mut self, inputs: &[FragInput]) {
         self.ranks.clear();
+        match self.policy {
+            Policy::Fifo => self.ranks.extend(inputs.iter().map(|f| f.seq)),
+            Policy::Reverse => self.ranks.extend(inputs.iter().map(|f| u64::MAX - f.seq)),
+            Policy::FarFirst => {
+                let lo = inputs.iter().map(|f| f.seq).min().unwrap_or(0);
+                let hi = inputs.iter().map(|f| f.seq).max().unwrap_or(0);
+                if hi - lo <= u64::from(u32::MAX) {
+                    self.ranks.extend(inputs.iter().map(|f| {
+                        u64::from(crate::memory::f32_order_key(-f.depth)) << 32 | (f.seq - lo)
+                    }));
+                } else {
+                    self.rank_by_sorting(inputs);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// [`Chooser::rank_inputs`] by sorting the keys ([`Chooser::round_key`]): dense ranks.
+    fn rank_by_sorting(&mut self, inputs: &[FragInput]) {
         let Some(key) = self.round_key() else { return };
         self.order.clear();
         self.order
@@ -266,13 +291,14 @@ impl Chooser {
     }
 
     /// Round robin in rank order: the first candidate after the last one chosen, wrapping
-    /// around. One pass, one integer per candidate: `rank - lo`, wrapping, is smallest for
-    /// the smallest rank from `lo` up when there is one (those differences stay below
-    /// `u64::MAX - lo`, ranks being below `u64::MAX`), and otherwise for the smallest rank
-    /// of all (they all wrapped, in rank order).
+    /// around. One pass, one integer per candidate: with `lo` one above the last chosen
+    /// rank, `rank - lo` (wrapping) is at most `u64::MAX - lo` for the ranks from `lo` up
+    /// and more for the others, in rank order within each group: its smallest is the
+    /// smallest rank from `lo` up when there is one, and otherwise the smallest rank of all.
+    /// (After the rank `u64::MAX`, `lo` wraps to 0: the smallest of all, as nothing is above.)
     #[inline]
     fn round(&mut self, cands: &[Candidate]) -> usize {
-        let lo = self.round_cursor.map_or(0, |r| r + 1);
+        let lo = self.round_cursor.map_or(0, |r| r.wrapping_add(1));
         let mut best = 0;
         let mut best_d = cands[0].rank.wrapping_sub(lo);
         for (i, c) in cands.iter().enumerate().skip(1) {
@@ -411,24 +437,41 @@ mod tests {
     #[test]
     fn ordering_policies_choose_as_the_tuple_keys_did() {
         let mut rng = SmallRng::seed_from_u64(5);
-        // A pass's inputs: sequence numbers of every magnitude, a few repeated (equal keys
-        // share a rank), depths colliding often (FarFirst's ties).
-        let mut inputs: Vec<FragInput> = (0..400)
-            .map(|_| {
-                let seq = rng.gen::<u64>() >> rng.gen_range(0..64);
-                FragInput {
-                    seq,
-                    depth: [0.25f32, 0.5, -0.0, 0.0, 1.0, f32::NAN][(seq % 6) as usize],
-                    ..FragInput::default()
-                }
-            })
-            .collect();
-        for i in 0..20 {
-            inputs[i * 7] = inputs[i * 11];
+        // A pass's inputs: sequence numbers of every magnitude (FarFirst ranks them by
+        // sorting), or a pass's own (their offsets fit in 32 bits), both ends of the range
+        // included; a few repeated (equal keys, equal ranks); depths colliding often
+        // (FarFirst's ties).
+        let mut universes = Vec::new();
+        for wide in [true, false] {
+            let mut inputs: Vec<FragInput> = (0..400)
+                .map(|_| {
+                    let seq = if wide {
+                        rng.gen::<u64>() >> rng.gen_range(0..64)
+                    } else {
+                        (1 << 40) + rng.gen_range(0..1000)
+                    };
+                    FragInput {
+                        seq,
+                        depth: [0.25f32, 0.5, -0.0, 0.0, 1.0, f32::NAN][(seq % 6) as usize],
+                        ..FragInput::default()
+                    }
+                })
+                .collect();
+            if wide {
+                inputs[0].seq = 0;
+                inputs[1].seq = u64::MAX;
+            }
+            for i in 0..20 {
+                inputs[i * 7] = inputs[i * 11];
+            }
+            universes.push(inputs);
         }
-        for policy in [Policy::Fifo, Policy::Reverse, Policy::FarFirst] {
+        for (policy, inputs) in [Policy::Fifo, Policy::Reverse, Policy::FarFirst]
+            .into_iter()
+            .flat_map(|p| universes.iter().map(move |u| (p.clone(), u)))
+        {
             let mut chooser = Chooser::new(&policy, 1, 100);
-            chooser.rank_inputs(&inputs);
+            chooser.rank_inputs(inputs);
             let mut cursor = None;
             let mut live: Vec<usize> = Vec::new();
             for step in 0..4000 {
