@@ -1,13 +1,17 @@
 #!/usr/bin/env bash
-# Fuzz campaign throughput per algorithm: `fragrace fuzz --algo ALGO --time TIME` (one job,
-# the default scenes and sizes, nothing shrunk: --shrink-secs 0), and where the workers'
-# time went (the campaign's `phases`), as markdown table rows for docs/performance.md.
+# Fuzz campaign throughput per algorithm: `fragrace fuzz --algo ALGO --time TIME` (the
+# binary's default jobs unless JOBS is set, the default scenes and sizes, nothing shrunk:
+# --shrink-secs 0), and where the workers' time went (the campaign's `phases`), as markdown
+# table rows for docs/performance.md. Each row says how many jobs ran, their total rate and
+# the rate per job.
 # With BASE=PATH, each algorithm's campaign also runs under that binary just before this
 # tree's (alternated, on these noisy machines), and the row gives both rates and their ratio.
 # Usage: bash ci/fuzz_rate.sh [TIME] [ALGO...]   (defaults: 20s; kb-interlock ll kb-rmw
 # count fab)
 # Env: FRAGRACE=PATH runs that binary instead of this tree's release build; SCHEDULES=N
-# passes --schedules N (default: the binary's default); ITERATIONS=N runs N iterations
+# passes --schedules N (default: the binary's default); JOBS=N passes --jobs N to both
+# binaries (default: each binary's default: 1 before 2026-11-28, the available parallelism
+# since); ITERATIONS=N runs N iterations
 # (scenes) instead of TIME, the same work for both binaries. Each rate is also given per
 # second of CPU time (user + system, GNU time), which a loaded machine disturbs less than
 # the wall clock (its other jobs take the wall time, not the CPU time).
@@ -25,6 +29,8 @@ else
 fi
 extra=()
 [ -n "${SCHEDULES:-}" ] && extra=(--schedules "$SCHEDULES")
+jobs=()
+[ -n "${JOBS:-}" ] && jobs=(--jobs "$JOBS")
 budget=(--time "$time")
 [ -n "${ITERATIONS:-}" ] && budget=(--iterations "$ITERATIONS")
 out=$(mktemp -d)
@@ -34,7 +40,7 @@ campaign() {
     local bin=$1 dir=$2
     shift 2
     rm -rf "$dir"
-    /usr/bin/time -f '%U %S' -o "$out/cpu" "$bin" fuzz --algo "$a" "${budget[@]}" --shrink-secs 0 "$@" --json --out "$dir" > "$out/state.json"
+    /usr/bin/time -f '%U %S' -o "$out/cpu" "$bin" fuzz --algo "$a" "${budget[@]}" --shrink-secs 0 "${jobs[@]}" "$@" --json --out "$dir" > "$out/state.json"
     python3 -c '
 import json, sys
 d = json.load(open(sys.argv[1]))
@@ -43,7 +49,8 @@ print(json.dumps(d))
 ' "$out/state.json" "$out/cpu"
 }
 rate() {
-    # Prints "EXECUTIONS/S|PER CPU S|SCHEDULES|PHASES" from a campaign's JSON state.
+    # Prints "JOBS|EXECUTIONS/S|PER JOB|PER CPU S|SCHEDULES|PHASES" from a campaign's JSON
+    # state (a state without `jobs` is from a binary that ran one job by default).
     python3 -c '
 import json, sys
 d = json.load(sys.stdin)
@@ -55,21 +62,22 @@ names = [("generate_s", "generation"), ("load_s", "load"), ("truth_s", "truth"),
 total = sum(p.get(k, 0) for k, _ in names)
 parts = ", ".join(f"{n} {100 * p.get(k, 0) / total:.0f} %" for k, n in names) if total else "-"
 schedules = d.get("schedules", 1)
-print(f"{rate:.1f}|{cpu:.1f}|{schedules}|{parts}")
+jobs = d.get("jobs", 1)
+print(f"{jobs}|{rate:.1f}|{rate / jobs:.1f}|{cpu:.1f}|{schedules}|{parts}")
 '
 }
-echo "| algorithm | executions/s | per CPU second | schedules per scene | where the time goes |$([ -n "${BASE:-}" ] && echo " before (BASE) | per CPU second | ratio (CPU) |")"
-echo "|---|---|---|---|---|$([ -n "${BASE:-}" ] && echo "---|---|---|")"
+echo "| algorithm | jobs | executions/s | per job | per CPU second | schedules per scene | where the time goes |$([ -n "${BASE:-}" ] && echo " before (BASE): jobs | executions/s | per CPU second | ratio (CPU) |")"
+echo "|---|---|---|---|---|---|---|$([ -n "${BASE:-}" ] && echo "---|---|---|---|")"
 for a in "${algos[@]}"; do
     before=
     if [ -n "${BASE:-}" ]; then
-        IFS='|' read -r before before_cpu _ _ < <(rate <<< "$(campaign "$BASE" "$out/b")")
+        IFS='|' read -r before_jobs before _ before_cpu _ _ < <(rate <<< "$(campaign "$BASE" "$out/b")")
     fi
-    IFS='|' read -r ours ours_cpu schedules phases < <(rate <<< "$(campaign "$F" "$out/a" "${extra[@]}")")
+    IFS='|' read -r ours_jobs ours per_job ours_cpu schedules phases < <(rate <<< "$(campaign "$F" "$out/a" "${extra[@]}")")
     if [ -n "$before" ]; then
-        ratio=$(python3 -c "print(f'{$ours / $before:.1f}x ({float(\"$ours_cpu\") / float(\"$before_cpu\"):.1f}x)')")
-        echo "| $a | $ours | $ours_cpu | $schedules | $phases | $before | $before_cpu | $ratio |"
+        ratio=$(python3 -c "print(f'{$ours / $before:.2f}x ({float(\"$ours_cpu\") / float(\"$before_cpu\"):.2f}x)')")
+        echo "| $a | $ours_jobs | $ours | $per_job | $ours_cpu | $schedules | $phases | $before_jobs | $before | $before_cpu | $ratio |"
     else
-        echo "| $a | $ours | $ours_cpu | $schedules | $phases |"
+        echo "| $a | $ours_jobs | $ours | $per_job | $ours_cpu | $schedules | $phases |"
     fi
 done

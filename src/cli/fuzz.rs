@@ -20,9 +20,13 @@ pub struct FuzzOptions {
     /// Algorithms to fuzz (repeat or comma-separate; default: all but truth).
     #[arg(long, value_delimiter = ',')]
     pub algo: Vec<String>,
-    /// Parallel workers.
-    #[arg(long, default_value_t = 1)]
-    pub jobs: usize,
+    /// Parallel workers, each running one iteration at a time (default: one per available
+    /// CPU, fewer if the campaign's memory estimate for them passes --memory-limit). With
+    /// several, which run of a signature is shrunk into its case file depends on which
+    /// worker gets there first; `--jobs 1` runs the iterations in order, the same every
+    /// time.
+    #[arg(long)]
+    pub jobs: Option<usize>,
     #[arg(long, default_value = "fuzz-out")]
     pub out: PathBuf,
     #[arg(long, default_value_t = 0)]
@@ -138,7 +142,8 @@ pub fn cmd_fuzz(a: &FuzzOptions) -> Result<(), CliError> {
         time: a.time.as_deref().map(parse_duration).transpose()?,
         iterations: a.iterations,
         algos: a.algo.clone(),
-        jobs: a.jobs,
+        // (Set below, once the memory limit is known.)
+        jobs: a.jobs.unwrap_or(1),
         seed: a.seed,
         resume: a.resume,
         meshes: a.meshes.clone(),
@@ -161,8 +166,12 @@ pub fn cmd_fuzz(a: &FuzzOptions) -> Result<(), CliError> {
         }
         .into());
     }
-    cfg.validate()?;
     let (limit, source) = crate::budget::limit(a.memory_limit.as_deref())?;
+    let cfg = crate::fuzz::FuzzConfig {
+        jobs: a.jobs.unwrap_or_else(|| cfg.default_jobs(limit)),
+        ..cfg
+    };
+    cfg.validate()?;
     crate::budget::check_campaign(&cfg.memory_estimate(), limit, &source)?;
     let stop = Arc::new(AtomicBool::new(false));
     {
@@ -227,8 +236,13 @@ fn print_summary(a: &FuzzOptions, state: &CampaignState) -> Result<(), CliError>
             }
         );
     }
+    let jobs = match state.jobs {
+        0 => String::new(),
+        1 => ", 1 job".to_string(),
+        j => format!(", {j} jobs"),
+    };
     println!(
-        "{} executions in {:.1} s ({:.1}/s): {} violations, {} expected findings, {} case files in {}",
+        "{} executions in {:.1} s ({:.1}/s{jobs}): {} violations, {} expected findings, {} case files in {}",
         state.executions,
         state.elapsed_s,
         state.executions as f64 / state.elapsed_s.max(1e-3),

@@ -139,6 +139,15 @@ pub struct CampaignState {
     /// Where the time went ([`Phases`]; zero in campaigns saved before it was measured).
     #[serde(default)]
     pub phases: Phases,
+    /// Workers of the run that saved this state (`--jobs`; 0: not recorded, as in
+    /// campaigns saved before it was, and merged ones). Executions per second of
+    /// `elapsed_s` are all the workers' together.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub jobs: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// Why a campaign cannot run.
@@ -222,6 +231,22 @@ impl FuzzConfig {
                 worst.bytes.saturating_mul(jobs),
             )],
         }
+    }
+
+    /// Workers when `--jobs` is not given: one per CPU the process may use
+    /// (`std::thread::available_parallelism`, as `cargo test` runs its tests), as many as
+    /// the campaign's memory estimate allows within `limit` (bytes), and at least one (a
+    /// campaign too large for one is then refused by its estimate, as before).
+    pub fn default_jobs(&self, limit: u64) -> usize {
+        let one = FuzzConfig {
+            jobs: 1,
+            ..self.clone()
+        }
+        .memory_estimate()
+        .bytes
+        .max(1);
+        let fit = usize::try_from(limit / one).unwrap_or(usize::MAX);
+        fragrace_emu::exec::default_threads().min(fit).max(1)
     }
 
     /// Checks the workers and the viewport size against their ranges (never clamped).
@@ -330,6 +355,10 @@ pub fn campaign(
         seed: state.seed,
         schedules: state.schedules.max(1),
         ..cfg.clone()
+    };
+    let state = CampaignState {
+        jobs: cfg.jobs,
+        ..state
     };
     let meshes: Vec<PathBuf> = match &cfg.meshes {
         Some(dir) => std::fs::read_dir(dir)

@@ -93,7 +93,14 @@ fn run_direct<K: FragmentKernel>(
             ));
         }
         let mut left = n;
+        // Rounds in which no lane stepped or finished back off, then yield the core: every
+        // lane left waits on another worker (interlock), which on a loaded machine may be
+        // descheduled, and spinning the time slice away kept it from running.
+        let backoff = crate::sync::Backoff::new();
+        let lane_steps =
+            |lanes: &[Invocation]| -> u64 { lanes.iter().map(|s| s.steps.get()).sum() };
         while left > 0 {
+            let (left_before, steps_before) = (left, lane_steps(&slots[..n]));
             for lane in 0..n {
                 if futs[lane].is_none() {
                     continue;
@@ -123,6 +130,11 @@ fn run_direct<K: FragmentKernel>(
             if left > 0 && n < width {
                 // Everyone left is waiting on another worker: don't burn the core.
                 std::hint::spin_loop();
+            }
+            if left == left_before && lane_steps(&slots[..n]) == steps_before {
+                backoff.snooze();
+            } else {
+                backoff.reset();
             }
         }
         base += n;

@@ -6,6 +6,8 @@ use std::str::FromStr;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
+use crate::kernel::FragInput;
+
 /// How the `scheduled` executor picks the next invocation to step.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Policy {
@@ -143,7 +145,9 @@ impl Policy {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Candidate {
     pub seq: u64,
-    pub depth: f32,
+    /// The invocation's place in the round-robin order of an ordering policy (see
+    /// [`Chooser::rank_inputs`]; 0 under the other policies).
+    pub rank: u64,
     /// The executor's slot of the invocation (unique among those in flight): per-invocation
     /// policy state is indexed by it, not hashed by `seq`.
     pub slot: u32,
@@ -159,8 +163,12 @@ pub(crate) struct Chooser {
     next_low: u64,
     /// Warp: last chosen seq.
     cursor: Option<u64>,
-    /// Ordering policies: key of the last chosen (round robin).
-    round_cursor: Option<u128>,
+    /// Ordering policies: rank of the last chosen (round robin).
+    round_cursor: Option<u64>,
+    /// Ordering policies: per input of the pass (by index), its rank in the policy's order
+    /// ([`Chooser::rank_inputs`]), and the sort's scratch.
+    ranks: Vec<u64>,
+    order: Vec<(u128, usize)>,
     /// Bytes: position.
     pos: usize,
 }
@@ -184,6 +192,8 @@ impl Chooser {
             next_low: 0,
             cursor: None,
             round_cursor: None,
+            ranks: Vec::new(),
+            order: Vec::new(),
             pos: 0,
         }
     }
@@ -209,34 +219,96 @@ impl Chooser {
         self.pos = 0;
     }
 
-    /// Round robin in the order of `key` (smallest first): the first candidate after the
-    /// last one chosen, wrapping around. Keys are distinct (they end with the sequence
-    /// number) and packed into one integer (see the calls), which orders them as the
-    /// tuples they pack: one comparison per candidate, where comparing tuples of `Option`s
-    /// and `i128`s was a sixth of a `kb-interlock` campaign (docs/performance.md).
-    #[inline]
-    fn round(&mut self, cands: &[Candidate], key: impl Fn(&Candidate) -> u128) -> usize {
-        // Above the last chosen (everyone the first time). No key is `u128::MAX` (the
-        // packed keys use at most 96 bits), so `+ 1` cannot overflow.
-        let lo = self.round_cursor.map_or(0, |a| a + 1);
-        let (mut first, mut first_key) = (0, u128::MAX);
-        let (mut best, mut best_key) = (usize::MAX, u128::MAX);
-        for (i, c) in cands.iter().enumerate() {
-            let kc = key(c);
-            if kc < first_key {
-                (first, first_key) = (i, kc);
+    /// The key of an input in an ordering policy's round-robin order (smallest first),
+    /// packed into one integer that orders as the tuple it packs: ascending sequence
+    /// numbers (`Fifo`), descending ones (`Reverse`: `u64::MAX - seq` orders as `-seq`), the
+    /// farthest depth first, then ascending sequence numbers (`FarFirst`). `None` for the
+    /// policies that take no turns.
+    fn round_key(&self) -> Option<fn(&FragInput) -> u128> {
+        match self.policy {
+            Policy::Fifo => Some(|f| u128::from(f.seq)),
+            Policy::Reverse => Some(|f| u128::from(u64::MAX - f.seq)),
+            Policy::FarFirst => Some(|f| {
+                (u128::from(crate::memory::f32_order_key(-f.depth)) << 64) | u128::from(f.seq)
+            }),
+            _ => None,
+        }
+    }
+
+    /// Ranks the pass's `inputs` in the ordering policy's order, once per pass: a candidate
+    /// then carries its rank, and the round robin compares one integer per candidate instead
+    /// of computing and comparing its key at every step (the scan over the candidates with
+    /// their keys was a fifth of a `kb-interlock` campaign's instructions,
+    /// docs/performance.md). A rank is any `u64` that orders as the key does (equal keys,
+    /// equal ranks): the sequence number itself (`Fifo`), its complement (`Reverse`), and
+    /// for `FarFirst` the depth's order key above the sequence number's offset from the
+    /// pass's first when those offsets fit in 32 bits (always, but for passes of more than
+    /// 2^32 fragments), else the key's place among the pass's sorted keys. Nothing for the
+    /// other policies.
+    pub fn rank_inputs(&mut self, inputs: &[FragInput]) {
+        self.ranks.clear();
+        match self.policy {
+            Policy::Fifo => self.ranks.extend(inputs.iter().map(|f| f.seq)),
+            Policy::Reverse => self.ranks.extend(inputs.iter().map(|f| u64::MAX - f.seq)),
+            Policy::FarFirst => {
+                let lo = inputs.iter().map(|f| f.seq).min().unwrap_or(0);
+                let hi = inputs.iter().map(|f| f.seq).max().unwrap_or(0);
+                if hi - lo <= u64::from(u32::MAX) {
+                    self.ranks.extend(inputs.iter().map(|f| {
+                        u64::from(crate::memory::f32_order_key(-f.depth)) << 32 | (f.seq - lo)
+                    }));
+                } else {
+                    self.rank_by_sorting(inputs);
+                }
             }
-            if kc >= lo && kc < best_key {
-                (best, best_key) = (i, kc);
+            _ => {}
+        }
+    }
+
+    /// [`Chooser::rank_inputs`] by sorting the keys ([`Chooser::round_key`]): dense ranks.
+    fn rank_by_sorting(&mut self, inputs: &[FragInput]) {
+        let Some(key) = self.round_key() else { return };
+        self.order.clear();
+        self.order
+            .extend(inputs.iter().enumerate().map(|(i, f)| (key(f), i)));
+        // (The index makes the pairs distinct: an unstable sort gives one order.)
+        self.order.sort_unstable();
+        self.ranks.resize(inputs.len(), 0);
+        let mut rank = 0u64;
+        for (r, &(k, i)) in self.order.iter().enumerate() {
+            if r > 0 && k != self.order[r - 1].0 {
+                rank += 1;
+            }
+            self.ranks[i] = rank;
+        }
+    }
+
+    /// The rank of input `i` of the pass (see [`Chooser::rank_inputs`]; 0 under the policies
+    /// that take no turns).
+    #[inline]
+    pub fn rank(&self, i: usize) -> u64 {
+        self.ranks.get(i).copied().unwrap_or(0)
+    }
+
+    /// Round robin in rank order: the first candidate after the last one chosen, wrapping
+    /// around. One pass, one integer per candidate: with `lo` one above the last chosen
+    /// rank, `rank - lo` (wrapping) is at most `u64::MAX - lo` for the ranks from `lo` up
+    /// and more for the others, in rank order within each group: its smallest is the
+    /// smallest rank from `lo` up when there is one, and otherwise the smallest rank of all.
+    /// (After the rank `u64::MAX`, `lo` wraps to 0: the smallest of all, as nothing is above.)
+    #[inline]
+    fn round(&mut self, cands: &[Candidate]) -> usize {
+        let lo = self.round_cursor.map_or(0, |r| r.wrapping_add(1));
+        let mut best = 0;
+        let mut best_d = cands[0].rank.wrapping_sub(lo);
+        for (i, c) in cands.iter().enumerate().skip(1) {
+            let d = c.rank.wrapping_sub(lo);
+            if d < best_d {
+                (best, best_d) = (i, d);
             }
         }
-        let (i, kc) = if best == usize::MAX {
-            (first, first_key)
-        } else {
-            (best, best_key)
-        };
-        self.round_cursor = Some(kc);
-        i
+        self.round_cursor = Some(cands[best].rank);
+        best
     }
 
     /// Bytes of a [`Policy::Bytes`] schedule consumed so far.
@@ -277,14 +349,8 @@ impl Chooser {
             // The ordering policies take turns like a GPU's resident warps do: every
             // runnable invocation takes one step per round, the round in the policy's order.
             // (Run-to-completion in that order is the same policy with a window of 1.)
-            // (Keys packed into a u128 as (first part) << 64 | (second part): ascending
-            // sequence numbers, descending ones (`u64::MAX - seq` orders as `-seq`), and
-            // the farthest depth first, then ascending sequence numbers.)
-            Policy::Fifo => self.round(cands, |c| u128::from(c.seq)),
-            Policy::Reverse => self.round(cands, |c| u128::from(u64::MAX - c.seq)),
-            Policy::FarFirst => self.round(cands, |c| {
-                (u128::from(crate::memory::f32_order_key(-c.depth)) << 64) | u128::from(c.seq)
-            }),
+            // (In the order of `round_key`, by the candidates' ranks.)
+            Policy::Fifo | Policy::Reverse | Policy::FarFirst => self.round(cands),
             Policy::Pct { .. } => {
                 // The first of the highest priority (every candidate was admitted).
                 let pick = |prio: &[u64]| {
@@ -341,8 +407,8 @@ impl Chooser {
 mod tests {
     use super::*;
 
-    /// The round robin as it was before its keys were packed: tuples of an order key and
-    /// an `i128`, compared as `Option`s.
+    /// The round robin as it was before its keys were packed and ranked: tuples of an
+    /// order key and an `i128`, compared as `Option`s at every step.
     fn round_tuples(
         cursor: &mut Option<(u32, i128)>,
         cands: &[Candidate],
@@ -371,34 +437,72 @@ mod tests {
     #[test]
     fn ordering_policies_choose_as_the_tuple_keys_did() {
         let mut rng = SmallRng::seed_from_u64(5);
-        for policy in [Policy::Fifo, Policy::Reverse, Policy::FarFirst] {
-            let mut chooser = Chooser::new(&policy, 1, 100);
-            let mut cursor = None;
-            let mut seqs: Vec<u64> = Vec::new();
-            for step in 0..2000 {
-                // Candidates come and go; depths collide often (FarFirst's ties).
-                if seqs.is_empty() || rng.gen_bool(0.3) {
-                    seqs.push(rng.gen::<u64>() >> rng.gen_range(0..64));
-                }
-                if seqs.len() > 1 && rng.gen_bool(0.2) {
-                    seqs.swap_remove(rng.gen_range(0..seqs.len()));
-                }
-                seqs.sort_unstable();
-                seqs.dedup();
-                let cands: Vec<Candidate> = seqs
-                    .iter()
-                    .map(|&seq| Candidate {
+        // A pass's inputs: sequence numbers of every magnitude (FarFirst ranks them by
+        // sorting), or a pass's own (their offsets fit in 32 bits), both ends of the range
+        // included; a few repeated (equal keys, equal ranks); depths colliding often
+        // (FarFirst's ties).
+        let mut universes = Vec::new();
+        for wide in [true, false] {
+            let mut inputs: Vec<FragInput> = (0..400)
+                .map(|_| {
+                    let seq = if wide {
+                        rng.gen::<u64>() >> rng.gen_range(0..64)
+                    } else {
+                        (1 << 40) + rng.gen_range(0..1000)
+                    };
+                    FragInput {
                         seq,
-                        depth: [0.25f32, 0.5, -0.0, 0.0, 1.0][(seq % 5) as usize],
+                        depth: [0.25f32, 0.5, -0.0, 0.0, 1.0, f32::NAN][(seq % 6) as usize],
+                        ..FragInput::default()
+                    }
+                })
+                .collect();
+            if wide {
+                inputs[0].seq = 0;
+                inputs[1].seq = u64::MAX;
+            }
+            for i in 0..20 {
+                inputs[i * 7] = inputs[i * 11];
+            }
+            universes.push(inputs);
+        }
+        for (policy, inputs) in [Policy::Fifo, Policy::Reverse, Policy::FarFirst]
+            .into_iter()
+            .flat_map(|p| universes.iter().map(move |u| (p.clone(), u)))
+        {
+            let mut chooser = Chooser::new(&policy, 1, 100);
+            chooser.rank_inputs(inputs);
+            let mut cursor = None;
+            let mut live: Vec<usize> = Vec::new();
+            for step in 0..4000 {
+                // Candidates come and go, in any order.
+                if live.is_empty() || rng.gen_bool(0.3) {
+                    let i = rng.gen_range(0..inputs.len());
+                    if !live.contains(&i) {
+                        live.push(i);
+                    }
+                }
+                if live.len() > 1 && rng.gen_bool(0.2) {
+                    live.swap_remove(rng.gen_range(0..live.len()));
+                }
+                let cands: Vec<Candidate> = live
+                    .iter()
+                    .map(|&i| Candidate {
+                        seq: inputs[i].seq,
+                        rank: chooser.rank(i),
                         slot: 0,
                     })
                     .collect();
+                let depth = |c: &Candidate| {
+                    let i = live[cands.iter().position(|x| std::ptr::eq(x, c)).expect("in")];
+                    inputs[i].depth
+                };
                 let want = match policy {
                     Policy::Fifo => round_tuples(&mut cursor, &cands, |c| (0.0, c.seq as i128)),
                     Policy::Reverse => {
                         round_tuples(&mut cursor, &cands, |c| (0.0, -(c.seq as i128)))
                     }
-                    _ => round_tuples(&mut cursor, &cands, |c| (-c.depth, c.seq as i128)),
+                    _ => round_tuples(&mut cursor, &cands, |c| (-depth(c), c.seq as i128)),
                 };
                 assert_eq!(
                     chooser.choose(&cands, step),

@@ -93,11 +93,12 @@ fn runnable(inv: &Invocation, claim: Option<&Claim>, env: &PassEnv<'_>) -> bool 
     }
 }
 
-fn candidate(inv: &Invocation, slot: usize) -> Candidate {
-    let i = inv.input.get();
+/// The candidate of the invocation in `slot`, input `i` of the pass.
+#[inline]
+fn candidate(inputs: &[FragInput], chooser: &Chooser, i: usize, slot: usize) -> Candidate {
     Candidate {
-        seq: i.seq,
-        depth: i.depth,
+        seq: inputs[i].seq,
+        rank: chooser.rank(i),
         slot: slot as u32,
     }
 }
@@ -210,6 +211,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         None => *chooser = Some(Chooser::new(&sc.policy, sc.seed, inputs.len() as u64 * 4)),
     }
     let chooser = chooser.as_mut().expect("set above");
+    chooser.rank_inputs(inputs);
     record.clear();
     which.clear();
     which.resize(width, 0);
@@ -283,7 +285,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             if let Polled::Done = poll_slot(&mut futs[s], &slots[s], &mut cx) {
                 retire!(s);
             } else if simple && slots[s].pending.get().is_some() {
-                cands.push(candidate(&slots[s], s));
+                cands.push(candidate(inputs, chooser, which[s], s));
             }
         }
         if !deferred.is_empty() {
@@ -298,7 +300,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             for &s in inflight.iter() {
                 // (`Frag::claim` is `None` without interlock, and so is the slot's.)
                 if runnable(&slots[s], claims[s].as_ref(), env) {
-                    cands.push(candidate(&slots[s], s));
+                    cands.push(candidate(inputs, chooser, which[s], s));
                 }
             }
             stale = false;

@@ -19,5 +19,10 @@ pub use loom::thread;
 /// pairs lines): crossbeam's, under loom too (it is only alignment).
 pub use crossbeam_utils::CachePadded;
 
+/// Exponential backoff for spin-waits, yielding the thread once spinning has gone on long
+/// enough: crossbeam's (under loom too: it spins and calls `std::thread::yield_now`, which
+/// the direct executors' waits use outside any model).
+pub use crossbeam_utils::Backoff;
+
 pub mod pool;
 pub mod split;
