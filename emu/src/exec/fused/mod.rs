@@ -262,22 +262,15 @@ pub(crate) fn run_fused<K: FragmentKernel>(
         None => {
             let count = tiles.len();
             let threads = threads.min(count.max(1));
-            // Each tile is handed out once (`SplitRange`), so its lock is never contended:
-            // it only moves the `&mut` to the thread that took the index.
-            let slots: Vec<pool::Mutex<Option<&mut TileMemory>>> = tiles
-                .iter_mut()
-                .map(|t| pool::Mutex::new(Some(t)))
-                .collect();
+            let slots = TileSlots::new(tiles);
             let queue = SplitRange::new(count, threads);
             let work = |me: usize| {
                 let mut w = Worker::new(kernel, env, pass);
                 let mut segs = Vec::new();
                 while let Some(index) = queue.next(me) {
-                    let taken = slots[index]
-                        .lock()
-                        .unwrap_or_else(|e| e.into_inner())
-                        .take();
-                    let Some(tile) = taken else { continue };
+                    let Some(tile) = slots.take(index) else {
+                        continue;
+                    };
                     segs.clear();
                     // Several units in turn, in API order: each unit's spans are gathered
                     // before shading (see `Worker::run_unit`).
@@ -332,19 +325,14 @@ pub(crate) fn run_fullscreen<K: FragmentKernel>(
     let count = tiles.len();
     let threads = pass.threads.max(1).min(count.max(1));
     let coverage = all_samples(env.samples);
-    let slots: Vec<pool::Mutex<Option<&mut TileMemory>>> = tiles
-        .iter_mut()
-        .map(|t| pool::Mutex::new(Some(t)))
-        .collect();
+    let slots = TileSlots::new(tiles);
     let queue = SplitRange::new(count, threads);
     let work = |me: usize| {
         let mut w = Worker::new(kernel, env, pass);
         while let Some(index) = queue.next(me) {
-            let taken = slots[index]
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .take();
-            let Some(tile) = taken else { continue };
+            let Some(tile) = slots.take(index) else {
+                continue;
+            };
             fullscreen_tile(&mut w, tile, env, coverage);
         }
         w.finish()
@@ -426,10 +414,7 @@ pub(crate) fn run_by_region<G: FragmentKernel, R: FragmentKernel>(
     let count = tiles.len();
     let threads = geo.pass.threads.max(1).min(count.max(1));
     let coverage = all_samples(fs.env.samples);
-    let slots: Vec<pool::Mutex<Option<&mut TileMemory>>> = tiles
-        .iter_mut()
-        .map(|t| pool::Mutex::new(Some(t)))
-        .collect();
+    let slots = TileSlots::new(tiles);
     let queue = SplitRange::new(count, threads);
     let work = |me: usize| {
         let mut g = Worker::new(geo.kernel, geo.env, geo.pass);
@@ -437,11 +422,9 @@ pub(crate) fn run_by_region<G: FragmentKernel, R: FragmentKernel>(
         let mut segs = Vec::new();
         let (mut g_busy, mut r_busy) = (Duration::ZERO, Duration::ZERO);
         while let Some(index) = queue.next(me) {
-            let taken = slots[index]
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .take();
-            let Some(tile) = taken else { continue };
+            let Some(tile) = slots.take(index) else {
+                continue;
+            };
             let start = Instant::now();
             segs.clear();
             binned.tile_segments(index, EXCLUSIVE_UNIT, &mut segs);
@@ -746,3 +729,27 @@ impl Row<'_> {
 mod worker;
 
 use worker::Worker;
+
+/// The tiles of an exclusive pass, each handed out once to the worker that takes its
+/// index (`SplitRange`): a tile's lock is never contended, it only moves the `&mut` to
+/// that worker's thread.
+struct TileSlots<'t>(Vec<pool::Mutex<Option<&'t mut TileMemory>>>);
+
+impl<'t> TileSlots<'t> {
+    fn new(tiles: &'t mut [TileMemory]) -> Self {
+        TileSlots(
+            tiles
+                .iter_mut()
+                .map(|t| pool::Mutex::new(Some(t)))
+                .collect(),
+        )
+    }
+
+    /// Tile `index`, the first time it is asked for.
+    fn take(&self, index: usize) -> Option<&'t mut TileMemory> {
+        self.0[index]
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take()
+    }
+}
