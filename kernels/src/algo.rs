@@ -417,6 +417,8 @@ mod tests {
             "skb-ofm",
             "skb-ofm-unordered",
             "kb-ofm",
+            "dfb-sfm",
+            "wboit",
         ] {
             let algo = crate::algorithm(name).unwrap();
             let whole = algo.run(&f, &params, &exec).unwrap();

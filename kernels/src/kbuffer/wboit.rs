@@ -34,7 +34,7 @@ use fragrace_emu::{
 };
 
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Deferred, Frame, HazardClass, Params,
 };
 use crate::common::{
     self, capture_state, framebuffer, geometry_pass, pixels, prim_color_packed, unpack_color,
@@ -184,57 +184,64 @@ impl Algorithm for Wboit {
             background: params.background,
         };
         report.merge(&resolve::pass(&device, &mut out_fb, &kernel, exec)?);
-        let image = resolve::read_image(&out_fb);
+        // The image and the targets are read back and checked after the frame
+        // ([`AlgoResult::deferred`]).
+        let alpha = params.alpha;
+        let deferred = Deferred::new(move |r: &mut AlgoResult| {
+            let image = resolve::read_image(&out_fb);
 
-        let acc: Vec<[f32; 4]> = accum.texels.iter().map(|t| t.map(f32::from_bits)).collect();
-        let rev: Vec<f32> = revealage
-            .texels
-            .iter()
-            .map(|t| f32::from_bits(t[0]))
-            .collect();
-        let first = |bad: &dyn Fn(usize) -> bool| (0..n).find(|&p| bad(p));
-        let acc_bad = first(&|p| acc[p].iter().any(|v| !v.is_finite() || *v < 0.0));
-        let rev_bad = first(&|p| !(0.0..=1.0).contains(&rev[p]));
-        let cov_bad = first(&|p| (acc[p][3] > 0.0) != (rev[p] < 1.0) && params.alpha > 0.0);
-        let img_bad = first(&|p| image[p].iter().any(|v| !v.is_finite()));
-        let f16 = (0..n)
-            .filter(|&p| acc[p].iter().any(|v| *v > F16_MAX))
-            .count();
-        let detail = |bad: Option<usize>, what: &str| match bad {
-            Some(p) => format!("pixel {p}: {what} accum {:?}, revealage {}", acc[p], rev[p]),
-            None => format!("{n} pixels"),
-        };
-        let checks = vec![
-            Check::new(
-                "accumulator finite and non-negative",
-                acc_bad.is_none(),
-                detail(acc_bad, ""),
-            ),
-            Check::new(
-                "revealage in [0, 1]",
-                rev_bad.is_none(),
-                detail(rev_bad, ""),
-            ),
-            Check::new(
-                "coverage consistent: accumulated weight exactly where revealage < 1",
-                cov_bad.is_none(),
-                detail(cov_bad, ""),
-            ),
-            Check::new(
-                "composite finite everywhere",
-                img_bad.is_none(),
-                detail(img_bad, "image non-finite;"),
-            ),
-            Check::new(
-                "pixels whose accumulator would overflow RGBA16F (informational)",
-                true,
-                format!("{f16} pixels above {F16_MAX}"),
-            ),
-        ];
+            let acc: Vec<[f32; 4]> = accum.texels.iter().map(|t| t.map(f32::from_bits)).collect();
+            let rev: Vec<f32> = revealage
+                .texels
+                .iter()
+                .map(|t| f32::from_bits(t[0]))
+                .collect();
+            let first = |bad: &dyn Fn(usize) -> bool| (0..n).find(|&p| bad(p));
+            let acc_bad = first(&|p| acc[p].iter().any(|v| !v.is_finite() || *v < 0.0));
+            let rev_bad = first(&|p| !(0.0..=1.0).contains(&rev[p]));
+            let cov_bad = first(&|p| (acc[p][3] > 0.0) != (rev[p] < 1.0) && alpha > 0.0);
+            let img_bad = first(&|p| image[p].iter().any(|v| !v.is_finite()));
+            let f16 = (0..n)
+                .filter(|&p| acc[p].iter().any(|v| *v > F16_MAX))
+                .count();
+            let detail = |bad: Option<usize>, what: &str| match bad {
+                Some(p) => format!("pixel {p}: {what} accum {:?}, revealage {}", acc[p], rev[p]),
+                None => format!("{n} pixels"),
+            };
+            let checks = vec![
+                Check::new(
+                    "accumulator finite and non-negative",
+                    acc_bad.is_none(),
+                    detail(acc_bad, ""),
+                ),
+                Check::new(
+                    "revealage in [0, 1]",
+                    rev_bad.is_none(),
+                    detail(rev_bad, ""),
+                ),
+                Check::new(
+                    "coverage consistent: accumulated weight exactly where revealage < 1",
+                    cov_bad.is_none(),
+                    detail(cov_bad, ""),
+                ),
+                Check::new(
+                    "composite finite everywhere",
+                    img_bad.is_none(),
+                    detail(img_bad, "image non-finite;"),
+                ),
+                Check::new(
+                    "pixels whose accumulator would overflow RGBA16F (informational)",
+                    true,
+                    format!("{f16} pixels above {F16_MAX}"),
+                ),
+            ];
+            r.image = Some(image);
+            r.checks.extend(checks);
+            Ok(())
+        });
         Ok(AlgoResult {
-            image: Some(image),
             report,
-            checks,
+            deferred: Some(deferred),
             // Accumulation targets (RGBA32F + R32F) and the resolve target.
             storage_bytes: n as u64 * (16 + 4 + resolve::TARGET_BYTES),
             ..Default::default()

@@ -21,8 +21,8 @@ use super::record::{composite, ZFrag};
 use super::thickness::ZModel;
 use crate::abuffer::dfb::{AddRowBase, DfbStore, RowScan, RowTotalsScan};
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, CapturedFrag, Check, Frame, HazardClass,
-    Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, CapturedFrag, Check, Deferred, Frame,
+    HazardClass, Params,
 };
 use crate::basic::CountKernel;
 use crate::common::{self, capture_state, geometry_pass, pixels, sort_fragments};
@@ -187,61 +187,67 @@ impl Algorithm for DfbSfm {
             past_n,
         };
         report.merge(&resolve::pass(&device, &mut fb, &resolve_kernel, exec)?);
-        let image = resolve::read_image(&fb);
-
-        let memory = &device.memory;
-        let (counts, fill) = (memory.read(counts)?, memory.read(fill)?);
-        let (out_count, merged) = (memory.read(out_count)?, memory.read(merged)?);
-        let past_n = memory.read(past_n)?;
-        let lost = u64::from(memory.read(overflow)?[0]);
-        let beyond_n: u64 = past_n.iter().map(|&c| u64::from(c)).sum();
-        let first = |bad: &dyn Fn(usize) -> bool| (0..counts.len()).find(|&p| bad(p));
-        let fill_bad = first(&|p| fill[p] != counts[p]);
-        let m_bad = first(&|p| out_count[p] > params.k || (counts[p] > 0) != (out_count[p] > 0));
-        let merged_bad = first(&|p| merged[p] + past_n[p] != counts[p]);
-        let img_bad = first(&|p| image[p].iter().any(|v| !v.is_finite()));
-        let at = |bad: Option<usize>| match bad {
-            Some(p) => format!(
-                "pixel {p}: counted {}, stored {}, out {}, merged {}, past N {}",
-                counts[p], fill[p], out_count[p], merged[p], past_n[p]
-            ),
-            None => format!("{} pixels", counts.len()),
-        };
-        let stats = &store_report.stats;
-        let checks = vec![
-            Check::new(
-                "every fragment shaded, none faulted",
-                stats.shaded == stats.fragments_generated && report.faults.is_empty(),
-                format!(
-                    "generated {}, shaded {}, faults {}",
-                    stats.fragments_generated,
-                    stats.shaded,
-                    report.faults.len()
+        let storage_bytes = device.memory.bytes() + n * resolve::TARGET_BYTES;
+        let stats = store_report.stats.clone();
+        let m_max = params.k;
+        // The buffers are read back and checked after the frame ([`AlgoResult::deferred`]).
+        let deferred = Deferred::new(move |r: &mut AlgoResult| {
+            let image = resolve::read_image(&fb);
+            let memory = &device.memory;
+            let (counts, fill) = (memory.read(counts)?, memory.read(fill)?);
+            let (out_count, merged) = (memory.read(out_count)?, memory.read(merged)?);
+            let past_n = memory.read(past_n)?;
+            let lost = u64::from(memory.read(overflow)?[0]);
+            let beyond_n: u64 = past_n.iter().map(|&c| u64::from(c)).sum();
+            let first = |bad: &dyn Fn(usize) -> bool| (0..counts.len()).find(|&p| bad(p));
+            let fill_bad = first(&|p| fill[p] != counts[p]);
+            let m_bad = first(&|p| out_count[p] > m_max || (counts[p] > 0) != (out_count[p] > 0));
+            let merged_bad = first(&|p| merged[p] + past_n[p] != counts[p]);
+            let img_bad = first(&|p| image[p].iter().any(|v| !v.is_finite()));
+            let at = |bad: Option<usize>| match bad {
+                Some(p) => format!(
+                    "pixel {p}: counted {}, stored {}, out {}, merged {}, past N {}",
+                    counts[p], fill[p], out_count[p], merged[p], past_n[p]
                 ),
-            ),
-            Check::new(
-                "store pass filled what the count pass counted",
-                fill_bad.is_none() && lost == 0,
-                at(fill_bad),
-            ),
-            Check::new(
-                "1 <= M' <= M = k fragments out of every covered pixel",
-                m_bad.is_none(),
-                at(m_bad),
-            ),
-            Check::new(
-                "every stored fragment merged into exactly one output fragment (or past N)",
-                merged_bad.is_none(),
-                at(merged_bad),
-            ),
-            Check::new("image finite", img_bad.is_none(), at(img_bad)),
-        ];
+                None => format!("{} pixels", counts.len()),
+            };
+            let checks = vec![
+                Check::new(
+                    "every fragment shaded, none faulted",
+                    stats.shaded == stats.fragments_generated && r.report.faults.is_empty(),
+                    format!(
+                        "generated {}, shaded {}, faults {}",
+                        stats.fragments_generated,
+                        stats.shaded,
+                        r.report.faults.len()
+                    ),
+                ),
+                Check::new(
+                    "store pass filled what the count pass counted",
+                    fill_bad.is_none() && lost == 0,
+                    at(fill_bad),
+                ),
+                Check::new(
+                    "1 <= M' <= M = k fragments out of every covered pixel",
+                    m_bad.is_none(),
+                    at(m_bad),
+                ),
+                Check::new(
+                    "every stored fragment merged into exactly one output fragment (or past N)",
+                    merged_bad.is_none(),
+                    at(merged_bad),
+                ),
+                Check::new("image finite", img_bad.is_none(), at(img_bad)),
+            ];
+            r.image = Some(image);
+            r.checks.extend(checks);
+            r.dropped = lost + beyond_n;
+            Ok(())
+        });
         Ok(AlgoResult {
-            image: Some(image),
-            storage_bytes: device.memory.bytes() + n * resolve::TARGET_BYTES,
+            storage_bytes,
             report,
-            checks,
-            dropped: lost + beyond_n,
+            deferred: Some(deferred),
             ..Default::default()
         })
     }
