@@ -419,6 +419,7 @@ mod tests {
             "kb-ofm",
             "dfb-sfm",
             "wboit",
+            "srab",
         ] {
             let algo = crate::algorithm(name).unwrap();
             let whole = algo.run(&f, &params, &exec).unwrap();

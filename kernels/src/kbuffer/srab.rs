@@ -60,8 +60,8 @@ use fragrace_emu::{
 };
 
 use crate::algo::{
-    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Frame,
-    HazardClass, Params,
+    AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture, CapturedFrag, Check, Deferred,
+    Frame, HazardClass, Params,
 };
 use crate::basic::CountKernel;
 use crate::common::{
@@ -288,7 +288,6 @@ fn run(
         &CountKernel { counts },
         exec,
     )?;
-    let frag_counts = device.memory.read(counts)?;
 
     // 2. Stencil initialisation: sample s <- ROUTE + s, one sample-masked full-screen pass each.
     let mut fb = framebuffer(frame, SampleCount::X8, &[Format::RG32F])?;
@@ -348,7 +347,6 @@ fn run(
     )?;
     report.merge(&capture);
     let image = fb.image(0);
-    let routed = device.memory.read(routed)?;
     let culled = match cull {
         Some(c) => device.memory.read(c.culled)?,
         None => vec![0; n],
@@ -368,127 +366,137 @@ fn run(
         composite: Composite::of(params),
     };
     report.merge(&resolve::pass(&device, &mut out_fb, &kernel, exec)?);
-    let resolved = resolve::read_image(&out_fb);
+    let storage_bytes = fb_bytes(&fb) + n as u64 * resolve::TARGET_BYTES + device.memory.bytes();
+    let stats = capture.stats.clone();
+    let culls = culling.is_some();
+    // What the samples hold is read back and checked after the frame
+    // ([`AlgoResult::deferred`]).
+    let deferred = Deferred::new(move |r: &mut AlgoResult| {
+        let frag_counts = device.memory.read(counts)?;
+        let routed = device.memory.read(routed)?;
+        let resolved = resolve::read_image(&out_fb);
 
-    // Read back what the samples hold, and check the routing.
-    let mut lists = Vec::with_capacity(n);
-    let mut dropped = 0u64;
-    let mut shallow_dropped = 0u64;
-    // Fragments within the bound (all of them without culling) that found no sample.
-    let mut lost_within = 0u64;
-    let mut stencil_bad: Option<String> = None;
-    let mut order_bad: Option<String> = None;
-    let mut overcount: Option<String> = None;
-    for (p, ((&nf, &r), &cp)) in frag_counts.iter().zip(&routed).zip(&culled).enumerate() {
-        let (x, y) = (p as u32 % w, p as u32 / w);
-        for s in 0..SAMPLES as u8 {
-            let want = routing.predict(ROUTE + s, r);
-            let got = fb.stencil(x, y, s as u32);
-            if stencil_bad.is_none() && got != want {
-                stencil_bad = Some(format!(
-                    "pixel ({x}, {y}) sample {s}: stencil {got}, expected {want} after {r} routed fragments"
+        // Read back what the samples hold, and check the routing.
+        let mut lists = Vec::with_capacity(n);
+        let mut dropped = 0u64;
+        let mut shallow_dropped = 0u64;
+        // Fragments within the bound (all of them without culling) that found no sample.
+        let mut lost_within = 0u64;
+        let mut stencil_bad: Option<String> = None;
+        let mut order_bad: Option<String> = None;
+        let mut overcount: Option<String> = None;
+        for (p, ((&nf, &r), &cp)) in frag_counts.iter().zip(&routed).zip(&culled).enumerate() {
+            let (x, y) = (p as u32 % w, p as u32 / w);
+            for s in 0..SAMPLES as u8 {
+                let want = routing.predict(ROUTE + s, r);
+                let got = fb.stencil(x, y, s as u32);
+                if stencil_bad.is_none() && got != want {
+                    stencil_bad = Some(format!(
+                        "pixel ({x}, {y}) sample {s}: stencil {got}, expected {want} after {r} routed fragments"
+                    ));
+                }
+            }
+            let samples: Vec<Option<CapturedFrag>> = (0..SAMPLES)
+                .map(|s| {
+                    let t = image.texels[p * SAMPLES + s];
+                    (t[1] != EMPTY).then(|| CapturedFrag::from_bits(t[0], t[1]))
+                })
+                .collect();
+            let stored: Vec<CapturedFrag> = samples.iter().flatten().copied().collect();
+            // Samples 0..min(routed, 8) hold the first routed fragments in API order (primitive
+            // order within one draw), one each; the rest are empty.
+            let m = (r as usize).min(SAMPLES);
+            let prefix =
+                samples[..m].iter().all(Option::is_some) && samples[m..].iter().all(Option::is_none);
+            let ordered = stored.windows(2).all(|v| v[0].prim < v[1].prim);
+            if order_bad.is_none() && !(prefix && ordered) {
+                let prims: Vec<Option<u32>> = samples.iter().map(|s| s.map(|f| f.prim)).collect();
+                order_bad = Some(format!(
+                    "pixel ({x}, {y}), {r} routed fragments: samples hold {prims:?}"
                 ));
             }
+            let kept = stored.len() as u64;
+            if kept > nf as u64 || r + cp > nf {
+                if overcount.is_none() {
+                    overcount = Some(format!(
+                        "pixel ({x}, {y}): {kept} stored, {r} routed, {cp} culled, of {nf} fragments"
+                    ));
+                }
+            } else {
+                dropped += nf as u64 - kept;
+                lost_within += (nf - cp) as u64 - kept;
+                if nf as usize <= SAMPLES {
+                    shallow_dropped += nf as u64 - kept;
+                }
+            }
+            let mut list = stored;
+            sort_fragments(&mut list);
+            lists.push(list);
         }
-        let samples: Vec<Option<CapturedFrag>> = (0..SAMPLES)
-            .map(|s| {
-                let t = image.texels[p * SAMPLES + s];
-                (t[1] != EMPTY).then(|| CapturedFrag::from_bits(t[0], t[1]))
-            })
-            .collect();
-        let stored: Vec<CapturedFrag> = samples.iter().flatten().copied().collect();
-        // Samples 0..min(routed, 8) hold the first routed fragments in API order (primitive
-        // order within one draw), one each; the rest are empty.
-        let m = (r as usize).min(SAMPLES);
-        let prefix =
-            samples[..m].iter().all(Option::is_some) && samples[m..].iter().all(Option::is_none);
-        let ordered = stored.windows(2).all(|v| v[0].prim < v[1].prim);
-        if order_bad.is_none() && !(prefix && ordered) {
-            let prims: Vec<Option<u32>> = samples.iter().map(|s| s.map(|f| f.prim)).collect();
-            order_bad = Some(format!(
-                "pixel ({x}, {y}), {r} routed fragments: samples hold {prims:?}"
+        let counted: u64 = frag_counts.iter().map(|&c| c as u64).sum();
+        let routed_total: u64 = routed.iter().map(|&c| c as u64).sum();
+        let cs = &stats;
+        let ok = |v: &Option<String>| v.is_none();
+        let partial = cs.discarded - culled_total.min(cs.discarded);
+        let mut checks = vec![
+            Check::new(
+                "capture: every fragment routed, culled or dropped for partial coverage, none faulted",
+                routed_total + cs.discarded == cs.fragments_generated
+                    && culled_total <= cs.discarded
+                    && cs.shaded == cs.fragments_generated
+                    && cs.faulted == 0,
+                format!(
+                    "routed {routed_total} + culled {culled_total} + partial {partial} of {} \
+                     generated, {} shaded, {} faulted",
+                    cs.fragments_generated, cs.shaded, cs.faulted
+                ),
+            ),
+            Check::new(
+                "stencil counters = initial - routed fragments, never wrapped",
+                ok(&stencil_bad),
+                stencil_bad.clone().unwrap_or_else(|| format!("{} samples", n * SAMPLES)),
+            ),
+            Check::new(
+                "routing: first min(routed, 8) fragments in API order, one per sample",
+                ok(&order_bad),
+                order_bad.clone().unwrap_or_else(|| format!("{n} pixels")),
+            ),
+            Check::new(
+                "stored and routed never exceed the pixel's fragments; losses counted",
+                ok(&overcount),
+                overcount.clone().unwrap_or_else(|| format!("dropped {dropped} of {counted}")),
+            ),
+            Check::new(
+                "fragments dropped for partial MSAA coverage (informational)",
+                true,
+                format!(
+                    "{partial} partially covering fragments dropped; {shallow_dropped} fragments lost on pixels \
+                     with <= 8 fragments (none with multisample-off rasterization)"
+                ),
+            ),
+        ];
+        if culls {
+            checks.push(Check::new(
+                "fragments within the bound that found no sample (informational)",
+                true,
+                format!(
+                    "{lost_within} of the {} fragments within their pixel's bound \
+                     ({culled_total} culled beyond it)",
+                    counted - culled_total
+                ),
             ));
         }
-        let kept = stored.len() as u64;
-        if kept > nf as u64 || r + cp > nf {
-            if overcount.is_none() {
-                overcount = Some(format!(
-                    "pixel ({x}, {y}): {kept} stored, {r} routed, {cp} culled, of {nf} fragments"
-                ));
-            }
-        } else {
-            dropped += nf as u64 - kept;
-            lost_within += (nf - cp) as u64 - kept;
-            if nf as usize <= SAMPLES {
-                shallow_dropped += nf as u64 - kept;
-            }
-        }
-        let mut list = stored;
-        sort_fragments(&mut list);
-        lists.push(list);
-    }
-    let counted: u64 = frag_counts.iter().map(|&c| c as u64).sum();
-    let routed_total: u64 = routed.iter().map(|&c| c as u64).sum();
-    let cs = &capture.stats;
-    let ok = |v: &Option<String>| v.is_none();
-    let partial = cs.discarded - culled_total.min(cs.discarded);
-    let mut checks = vec![
-        Check::new(
-            "capture: every fragment routed, culled or dropped for partial coverage, none faulted",
-            routed_total + cs.discarded == cs.fragments_generated
-                && culled_total <= cs.discarded
-                && cs.shaded == cs.fragments_generated
-                && cs.faulted == 0,
-            format!(
-                "routed {routed_total} + culled {culled_total} + partial {partial} of {} \
-                 generated, {} shaded, {} faulted",
-                cs.fragments_generated, cs.shaded, cs.faulted
-            ),
-        ),
-        Check::new(
-            "stencil counters = initial - routed fragments, never wrapped",
-            ok(&stencil_bad),
-            stencil_bad.clone().unwrap_or_else(|| format!("{} samples", n * SAMPLES)),
-        ),
-        Check::new(
-            "routing: first min(routed, 8) fragments in API order, one per sample",
-            ok(&order_bad),
-            order_bad.clone().unwrap_or_else(|| format!("{n} pixels")),
-        ),
-        Check::new(
-            "stored and routed never exceed the pixel's fragments; losses counted",
-            ok(&overcount),
-            overcount.clone().unwrap_or_else(|| format!("dropped {dropped} of {counted}")),
-        ),
-        Check::new(
-            "fragments dropped for partial MSAA coverage (informational)",
-            true,
-            format!(
-                "{partial} partially covering fragments dropped; {shallow_dropped} fragments lost on pixels \
-                 with <= 8 fragments (none with multisample-off rasterization)"
-            ),
-        ),
-    ];
-    if culling.is_some() {
-        checks.push(Check::new(
-            "fragments within the bound that found no sample (informational)",
-            true,
-            format!(
-                "{lost_within} of the {} fragments within their pixel's bound \
-                 ({culled_total} culled beyond it)",
-                counted - culled_total
-            ),
-        ));
-    }
-    let storage_bytes = fb_bytes(&fb) + n as u64 * resolve::TARGET_BYTES + device.memory.bytes();
+        r.capture = Some(Capture::from_lists(w, h, lists));
+        r.image = Some(resolved);
+        r.checks.extend(checks);
+        r.dropped = dropped;
+        Ok(())
+    });
     Ok(AlgoResult {
-        capture: Some(Capture::from_lists(w, h, lists)),
-        image: Some(resolved),
         report,
-        checks,
-        dropped,
         storage_bytes,
         culling,
+        deferred: Some(deferred),
         ..Default::default()
     })
 }
@@ -665,6 +673,15 @@ mod tests {
         assert!(err.to_string().contains("--k 9"), "{err}");
     }
 
+    /// The frame with `routing` and then its deferred checks (what `Algorithm::run` does).
+    fn run_checked(frame: &Frame<'_>, params: &Params, exec: &ExecConfig, routing: Routing) -> AlgoResult {
+        let mut r = run(frame, params, exec, routing).unwrap();
+        if let Some(work) = r.deferred.take() {
+            work.run(&mut r);
+        }
+        r
+    }
+
     #[test]
     fn wrapping_decrement_overwrites_after_256_fragments_and_is_caught() {
         let mut mesh = Mesh::default();
@@ -674,10 +691,10 @@ mod tests {
         let frame = frame_sized(&mesh, 4, 4);
         let params = Params::default();
         let exec = ExecConfig::ordered();
-        let good = run(&frame, &params, &exec, Routing::Saturate).unwrap();
+        let good = run_checked(&frame, &params, &exec, Routing::Saturate);
         assert_checks(&good, "saturating");
         assert_eq!(good.dropped, 16 * 252);
-        let bad = run(&frame, &params, &exec, Routing::Wrap).unwrap();
+        let bad = run_checked(&frame, &params, &exec, Routing::Wrap);
         // Fragments 257..260 came back to samples 0..3 and overwrote fragments 1..4.
         let cap = bad.capture.as_ref().unwrap();
         let mut prims: Vec<u32> = cap.pixel(0).iter().map(|f| f.prim).collect();
