@@ -215,6 +215,29 @@ impl Check {
             detail: detail.into(),
         }
     }
+
+    /// "every fragment shaded, none faulted": a pass shaded each of the fragments it
+    /// generated and the run reported no fault.
+    pub fn all_shaded(stats: &fragrace_emu::Stats, faults: usize) -> Check {
+        Check::new(
+            "every fragment shaded, none faulted",
+            stats.shaded == stats.fragments_generated && faults == 0,
+            format!(
+                "generated {}, shaded {}, faults {faults}",
+                stats.fragments_generated, stats.shaded
+            ),
+        )
+    }
+
+    /// "image finite": no channel of a resolved image is NaN or infinite.
+    pub fn image_finite(image: &[[f32; 4]]) -> Check {
+        let bad = image.iter().position(|v| v.iter().any(|c| !c.is_finite()));
+        Check::new(
+            "image finite",
+            bad.is_none(),
+            format!("first non-finite pixel {bad:?}"),
+        )
+    }
 }
 
 /// What one run of an algorithm produced.

@@ -203,7 +203,6 @@ impl Algorithm for DfbSfm {
             let fill_bad = first(&|p| fill[p] != counts[p]);
             let m_bad = first(&|p| out_count[p] > m_max || (counts[p] > 0) != (out_count[p] > 0));
             let merged_bad = first(&|p| merged[p] + past_n[p] != counts[p]);
-            let img_bad = first(&|p| image[p].iter().any(|v| !v.is_finite()));
             let at = |bad: Option<usize>| match bad {
                 Some(p) => format!(
                     "pixel {p}: counted {}, stored {}, out {}, merged {}, past N {}",
@@ -212,16 +211,7 @@ impl Algorithm for DfbSfm {
                 None => format!("{} pixels", counts.len()),
             };
             let checks = vec![
-                Check::new(
-                    "every fragment shaded, none faulted",
-                    stats.shaded == stats.fragments_generated && r.report.faults.is_empty(),
-                    format!(
-                        "generated {}, shaded {}, faults {}",
-                        stats.fragments_generated,
-                        stats.shaded,
-                        r.report.faults.len()
-                    ),
-                ),
+                Check::all_shaded(&stats, r.report.faults.len()),
                 Check::new(
                     "store pass filled what the count pass counted",
                     fill_bad.is_none() && lost == 0,
@@ -237,7 +227,7 @@ impl Algorithm for DfbSfm {
                     merged_bad.is_none(),
                     at(merged_bad),
                 ),
-                Check::new("image finite", img_bad.is_none(), at(img_bad)),
+                Check::image_finite(&image),
             ];
             r.image = Some(image);
             r.checks.extend(checks);

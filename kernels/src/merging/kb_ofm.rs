@@ -175,27 +175,14 @@ impl Algorithm for KbOfm {
                 .map(|w| f64::from(ZFrag::from_words(w).n))
                 .sum();
             let generated = stats.fragments_generated;
-            let img_bad = image.iter().position(|v| v.iter().any(|c| !c.is_finite()));
             let checks = vec![
-                Check::new(
-                    "every fragment shaded, none faulted",
-                    stats.shaded == generated && r.report.faults.is_empty(),
-                    format!(
-                        "generated {generated}, shaded {}, faults {}",
-                        stats.shaded,
-                        r.report.faults.len()
-                    ),
-                ),
+                Check::all_shaded(&stats, r.report.faults.len()),
                 Check::new(
                     "fragments held by the records (informational: overflow and lost updates drop them)",
                     true,
                     format!("{held} of {generated}"),
                 ),
-                Check::new(
-                    "image finite",
-                    img_bad.is_none(),
-                    format!("first non-finite pixel {img_bad:?}"),
-                ),
+                Check::image_finite(&image),
             ];
             r.image = Some(image);
             r.checks.extend(checks);

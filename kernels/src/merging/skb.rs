@@ -340,7 +340,6 @@ impl Algorithm for SkbOfm {
                 }
             }
             let generated = stats.fragments_generated;
-            let img_bad = image.iter().position(|v| v.iter().any(|c| !c.is_finite()));
             let synced = sync != Sync::Unsynchronized;
             let label = |name: &str| {
                 if synced {
@@ -350,11 +349,7 @@ impl Algorithm for SkbOfm {
                 }
             };
             let checks = vec![
-                Check::new(
-                    "every fragment shaded, none faulted",
-                    stats.shaded == generated && r.report.faults.is_empty(),
-                    format!("generated {generated}, shaded {}, faults {}", stats.shaded, r.report.faults.len()),
-                ),
+                Check::all_shaded(&stats, r.report.faults.len()),
                 Check::new(
                     label("every fragment merged into exactly one record (core or tail)"),
                     !synced || kept == generated as f64,
@@ -365,11 +360,7 @@ impl Algorithm for SkbOfm {
                     !synced || shape_bad.is_none(),
                     shape_bad.unwrap_or_else(|| format!("{n} pixels")),
                 ),
-                Check::new(
-                    "image finite",
-                    img_bad.is_none(),
-                    format!("first non-finite pixel {img_bad:?}"),
-                ),
+                Check::image_finite(&image),
             ];
             r.image = Some(image);
             r.checks.extend(checks);
