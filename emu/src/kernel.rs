@@ -52,6 +52,9 @@ pub struct KernelInfo {
     pub interpolants: bool,
     /// The per-pixel array the kernel accesses (see [`KernelInfo::with_pixel_array`]).
     pub pixel_array: Option<PixelArray>,
+    /// The per-pixel array is the pixel's own: no invocation accesses another pixel's slot
+    /// (see [`KernelInfo::with_own_pixel_array`]).
+    pub pixel_array_own: bool,
     /// What a full-screen invocation does at a pixel no geometry pass of the device
     /// rasterized (see [`KernelInfo::with_untouched_output`]).
     pub untouched_output: Option<[u32; 4]>,
@@ -69,6 +72,7 @@ impl KernelInfo {
             interlock: None,
             interpolants: true,
             pixel_array: None,
+            pixel_array_own: false,
             untouched_output: None,
             by_region: false,
         }
@@ -110,6 +114,26 @@ impl KernelInfo {
             stride,
         });
         self
+    }
+    /// [`KernelInfo::with_pixel_array`], and a promise, checked: in this pass, every access
+    /// to `buf` is to the invocation's own pixel's slot (words `pixel_index * stride ..
+    /// pixel_index * stride + stride`), so a slot belongs to its pixel's fragments (a list
+    /// head, a per-pixel counter), as tile memory belongs to its pixel on a tiled GPU.
+    ///
+    /// Where the `ordered` and `parallel` executors give a tile to one worker for the whole
+    /// pass (a binned pass without segments: the `ordered` executor, a geometry pass run by
+    /// region with its resolve) and the worker shades one fragment at a time (no lockstep)
+    /// in a pass that neither tests nor writes targets (a capture pass, a count), only that
+    /// worker reaches the tile's slots, so it performs the kernel's atomics on them as a
+    /// plain load and store (no locked instruction, no full barrier): the same results,
+    /// since nothing else accesses the word during the pass and the passes before and after
+    /// are ordered by the pass barrier. There, an access to another pixel's slot of `buf` is a
+    /// [`FaultKind::Misuse`] (not performed); elsewhere the atomics stay atomic and nothing
+    /// is checked, so a wrong declaration shows as a difference between executors.
+    pub const fn with_own_pixel_array<T: Word>(self, buf: Buf<T>, stride: u32) -> KernelInfo {
+        let mut info = self.with_pixel_array(buf, stride);
+        info.pixel_array_own = true;
+        info
     }
 }
 

@@ -26,7 +26,8 @@ impl FragmentKernel for CountKernel {
         // Reads no depth or barycentrics: the draw skips their planes.
         KernelInfo::new("count")
             .without_interpolants()
-            .with_pixel_array(self.counts, 1)
+            // Each fragment counts at its own pixel only.
+            .with_own_pixel_array(self.counts, 1)
     }
     async fn shade(&self, f: impl Fragment) {
         f.atomic_add(self.counts, f.pixel_index(), 1).await;

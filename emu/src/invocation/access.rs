@@ -21,6 +21,10 @@ pub(crate) enum Route<'s, 'a> {
     /// Through a [`DirectState`]'s cache of buffer words (the fused path, which never keeps
     /// the contention table).
     Cached(&'s WordCache<'a>),
+    /// Through a [`DirectState`]'s cache, to a word only this thread accesses during the
+    /// pass (its pixel's own slot in an owned tile, `KernelInfo::with_own_pixel_array`):
+    /// the operation as a plain load and store.
+    Owned(&'s WordCache<'a>),
 }
 
 /// The future of one step: completes at once in direct mode, suspends until granted in

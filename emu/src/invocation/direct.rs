@@ -15,8 +15,14 @@ use crate::memory::{Buf, MemOp, Word};
 /// discard flag, depth output and operation counters are a `DirectState` (crate-private)
 /// the executor keeps in a local (in registers, once the kernel is inlined); colour outputs
 /// and faults go to the invocation's slot, as under [`Frag`].
+///
+/// `OWN`: the worker owns the fragment's tile for the whole pass, so the fragment's slot of
+/// an array the kernel declared its pixels' own is reached by no other thread
+/// ([`KernelInfo::with_own_pixel_array`](crate::KernelInfo::with_own_pixel_array)). A
+/// constant, so that a context without it carries no code for it (the kernel's state
+/// machine is then small enough to be inlined into the shading loop).
 #[derive(Clone, Copy)]
-pub struct DirectFrag<'a> {
+pub struct DirectFrag<'a, const OWN: bool = false> {
     frag: Frag<'a>,
     state: &'a DirectState<'a>,
 }
@@ -34,7 +40,7 @@ impl<T: Copy> Future for Performed<T> {
     }
 }
 
-impl<'a> DirectFrag<'a> {
+impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
     /// The context of the invocation in `frag`'s slot, whose per-fragment state is `state`.
     #[inline(always)]
     pub(crate) fn new(frag: Frag<'a>, state: &'a DirectState<'a>) -> Self {
@@ -63,8 +69,24 @@ impl<'a> DirectFrag<'a> {
     fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
         let st = self.state;
         // The fused path never keeps the contention table (`shade_direct` checks).
+        let route = match st.own {
+            Some(own) if OWN && own.buffer == buf.id => {
+                // The tile is this worker's for the pass: the fragment's own slot is
+                // reached by no other thread (`DirectState::owning`).
+                let input = st.input.get();
+                let first = (input.y as u64 * self.frag.env.width as u64 + input.x as u64)
+                    * own.stride as u64;
+                // Out of bounds is reported as such, below.
+                if (index as u64).wrapping_sub(first) >= own.stride as u64 && index < buf.len {
+                    self.frag.not_own_slot(buf.id, index, (input.x, input.y));
+                    return Poll::Pending;
+                }
+                Route::Owned(&st.words)
+            }
+            _ => Route::Cached(&st.words),
+        };
         self.frag
-            .perform_counted::<T>(&st.steps, &st.ops, Route::Cached(&st.words), buf, index, op)
+            .perform_counted::<T>(&st.steps, &st.ops, route, buf, index, op)
     }
     #[inline(always)]
     fn op<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Performed<T> {
@@ -76,7 +98,7 @@ impl<'a> DirectFrag<'a> {
     }
 }
 
-impl Fragment for DirectFrag<'_> {
+impl<const OWN: bool> Fragment for DirectFrag<'_, OWN> {
     getters!();
     word_accesses!(op, unit);
 
@@ -167,4 +189,4 @@ impl Fragment for DirectFrag<'_> {
     }
 }
 
-impl sealed::Sealed for DirectFrag<'_> {}
+impl<const OWN: bool> sealed::Sealed for DirectFrag<'_, OWN> {}

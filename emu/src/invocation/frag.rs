@@ -141,6 +141,21 @@ impl<'a> Frag<'a> {
         });
     }
 
+    /// An access to another pixel's slot of an array declared the pixels' own
+    /// (`KernelInfo::with_own_pixel_array`), on a path that relies on the declaration.
+    #[cold]
+    #[inline(never)]
+    pub(crate) fn not_own_slot(&self, buffer: u32, index: u32, (x, y): (u32, u32)) {
+        let name = self.env.memory.buffer_name(buffer);
+        self.inv.set_fault(FaultKind::Misuse {
+            message: format!(
+                "the invocation at pixel ({x}, {y}) accessed word {index} of `{name}`, outside \
+                 its own slot of the per-pixel array the kernel declared with \
+                 `with_own_pixel_array`"
+            ),
+        });
+    }
+
     /// Writes colour output `target` as floats (float and RGBA8 targets).
     #[inline]
     pub fn output(&self, target: usize, value: [f32; 4]) {
@@ -282,6 +297,7 @@ impl<'a> Frag<'a> {
         let bits = match route {
             Route::Table => env.memory.apply::<T>(addr, op, ordering),
             Route::Cached(words) => words.apply::<T>(env.memory, addr, op, ordering),
+            Route::Owned(words) => words.apply_owned::<T>(env.memory, addr, op),
             Route::Contended(table) => {
                 let guard = enter_contended(table, addr);
                 let bits = env.memory.apply::<T>(addr, op, ordering);

@@ -5,7 +5,7 @@ use std::cell::{Cell, RefCell};
 
 use super::StepKind;
 use crate::kernel::{FaultKind, FragInput};
-use crate::memory::{OpKind, WordCache};
+use crate::memory::{OpKind, PixelArray, WordCache};
 
 /// Per-invocation mutable state, owned by the executor (one per in-flight slot) and shared
 /// with the invocation's future through [`Frag`]. Single-threaded (`Cell`s).
@@ -68,6 +68,9 @@ pub(crate) struct DirectState<'m> {
     pub ops: [Cell<u32>; OP_KINDS],
     /// The words of the buffers last accessed (kept across fragments, as the counters).
     pub words: WordCache<'m>,
+    /// The kernel's own per-pixel array when this worker owns the tile for the pass
+    /// ([`DirectState::owning`]): its atomics at the fragment's slot are plain.
+    pub own: Option<PixelArray>,
 }
 
 impl DirectState<'_> {
@@ -80,7 +83,19 @@ impl DirectState<'_> {
             depth_out: Cell::new(None),
             ops: Default::default(),
             words: WordCache::new(),
+            own: None,
         }
+    }
+
+    /// [`DirectState::new`] for a worker that owns its tiles for the whole pass and shades
+    /// one fragment at a time: `array` is the kernel's per-pixel array if it declared it its
+    /// pixels' own (`KernelInfo::with_own_pixel_array`). Only that worker then reaches a
+    /// slot of its tile during the pass, so an operation on it needs no atomic instruction.
+    #[inline(always)]
+    pub fn owning(array: Option<PixelArray>) -> Self {
+        let mut state = Self::new();
+        state.own = array;
+        state
     }
 
     /// A new fragment: its input, and no results yet.

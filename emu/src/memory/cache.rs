@@ -4,7 +4,7 @@
 use std::cell::Cell;
 use std::marker::PhantomData;
 
-use super::ops::{apply32, apply64, MemOp};
+use super::ops::{apply32, apply32_owned, apply64, apply64_owned, MemOp};
 use super::word::{Addr, PixelArray, Word};
 use super::{Memory, Words};
 use crate::sync::{AtomicU32, AtomicU64, Ordering};
@@ -92,6 +92,28 @@ impl<'m> WordCache<'m> {
                 self.w32.set((b, words));
             }
             apply32::<T>(&words[i], op, ordering) as u64
+        }
+    }
+
+    /// [`WordCache::apply`] on a word only this thread accesses during the pass (an own
+    /// pixel's slot in an owned tile): the operation as a plain load and store.
+    #[inline(always)]
+    pub fn apply_owned<T: Word>(&self, memory: &'m Memory, addr: Addr, op: MemOp) -> u64 {
+        let (b, i) = (addr.buffer(), addr.index() as usize);
+        if T::WIDE {
+            let (id, mut words) = self.w64.get();
+            if id != b {
+                words = memory.words64(b);
+                self.w64.set((b, words));
+            }
+            apply64_owned(&words[i], op)
+        } else {
+            let (id, mut words) = self.w32.get();
+            if id != b {
+                words = memory.words32(b);
+                self.w32.set((b, words));
+            }
+            apply32_owned::<T>(&words[i], op) as u64
         }
     }
 }

@@ -224,6 +224,29 @@ pub(super) fn apply32<T: Word>(a: &AtomicU32, op: MemOp, ord: Ordering) -> u32 {
     }
 }
 
+/// [`apply32`] on a word no other thread accesses while the operation runs (a slot of a
+/// pixel's own array in a tile one worker owns: `KernelInfo::with_own_pixel_array`): the
+/// same result as a plain load and store, with no locked instruction. Not atomic: a
+/// concurrent access from another thread would lose an update.
+#[inline(always)]
+pub(super) fn apply32_owned<T: Word>(a: &AtomicU32, op: MemOp) -> u32 {
+    let (ret, new) = op32::<T>(a.load(Ordering::Relaxed), op);
+    if let Some(v) = new {
+        a.store(v, Ordering::Relaxed);
+    }
+    ret
+}
+
+/// [`apply32_owned`] for 64-bit words: [`apply64`] on a word only this thread accesses.
+#[inline(always)]
+pub(super) fn apply64_owned(a: &AtomicU64, op: MemOp) -> u64 {
+    let (ret, new) = op64(a.load(Ordering::Relaxed), op);
+    if let Some(v) = new {
+        a.store(v, Ordering::Relaxed);
+    }
+    ret
+}
+
 /// One operation on a 32-bit word holding `old`, as a pure function: (the value returned to
 /// the kernel, the new value if the word is written). The semantics of [`apply32`].
 #[inline]

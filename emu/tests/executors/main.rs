@@ -7,4 +7,5 @@ mod common;
 mod draws;
 mod faults;
 mod memory_ops;
+mod own_array;
 mod schedules;

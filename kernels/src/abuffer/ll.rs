@@ -422,8 +422,9 @@ impl FragmentKernel for LlInsert {
         } else {
             "ll-insert"
         })
-        // Each fragment exchanges its pixel's head: prefetched ahead of shading.
-        .with_pixel_array(self.pool.heads, 1)
+        // Each fragment exchanges its pixel's head (prefetched ahead of shading), and only
+        // its pixel's: a tile's heads belong to the tile, as on a tiled GPU.
+        .with_own_pixel_array(self.pool.heads, 1)
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();

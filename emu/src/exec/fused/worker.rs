@@ -34,6 +34,10 @@ pub(super) struct Worker<'a, K> {
     pub(super) pixels: u64,
     /// The kernel's per-pixel array, prefetched ahead of shading.
     pixel_array: Option<PixelArray>,
+    /// The same array when the kernel declared it its pixels' own
+    /// (`KernelInfo::with_own_pixel_array`): on a tile this worker owns, its atomics there
+    /// are plain (`DirectState::owning`).
+    own_array: Option<PixelArray>,
 }
 
 /// Covered runs ahead of the one being shaded whose per-pixel slots are prefetched: far
@@ -63,6 +67,9 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             },
             pixels: env.width as u64 * env.height as u64,
             pixel_array: kernel.info().pixel_array,
+            own_array: Some(kernel.info())
+                .filter(|info| info.pixel_array_own)
+                .and_then(|info| info.pixel_array),
         }
     }
 
@@ -102,7 +109,14 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         // Without lockstep (or with one lane) nothing interleaves inside a worker.
         let tile = if !self.pass.lockstep || self.slots.len() == 1 {
             if self.pass.counting() {
-                self.run_unit_counting(spans, env);
+                // A tile held exclusively is this worker's for the whole pass (segments
+                // share tiles; unbinned chunks have none).
+                let owned = matches!(tile, Some(TileAccess::Exclusive(_)));
+                if owned && self.own_array.is_some() {
+                    self.run_unit_counting::<true>(spans, env);
+                } else {
+                    self.run_unit_counting::<false>(spans, env);
+                }
                 tile
             } else {
                 self.run_unit_direct(spans, env, tile)
@@ -168,7 +182,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 if !count_only {
                     slot.clear_outputs();
                 }
-                shade_direct(kernel, slot, &state, env);
+                shade_direct::<K, false>(kernel, slot, &state, env);
                 if count_only && !slot.faulted() {
                     tally.add_direct(&state, samples_of(cov));
                 } else {
@@ -197,10 +211,15 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
     /// epilogue repeat [`Self::run_unit_direct`]'s on purpose: with the epilogue in a shared
     /// inlined helper, LLVM allocated registers differently and the bunny's loop took 13 %
     /// more instructions (callgrind, 83.3 against 94.4 M).
+    ///
+    /// `OWN`: the worker owns the unit's tile for the whole pass, and the kernel declared
+    /// its per-pixel array its pixels' own: atomics on the fragment's slot are plain
+    /// (`DirectState::owning`). A constant, so that without it the loop stays as it was.
     #[inline(never)]
-    fn run_unit_counting(&mut self, spans: &[Span], env: &PassEnv<'_>) {
+    fn run_unit_counting<const OWN: bool>(&mut self, spans: &[Span], env: &PassEnv<'_>) {
         let rows = RowSetup::new(self, env);
         let ahead = self.prefetcher(env);
+        let own = self.own_array;
         let Worker {
             kernel,
             slots,
@@ -210,7 +229,11 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         } = self;
         let kernel = *kernel;
         let slot = &slots[0];
-        let state = DirectState::new();
+        let state = if OWN {
+            DirectState::owning(own)
+        } else {
+            DirectState::new()
+        };
         // The unit's tally, kept per span where it can be: per fragment only what the
         // kernel decides (steps, discard), so that the loop's state fits in registers.
         let mut tally = Tally::default();
@@ -229,7 +252,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             let mut faulted = 0u64;
             for x in span.x0..span.x1 {
                 state.next_pixel(row.seq(x), x);
-                shade_direct(kernel, slot, &state, env);
+                shade_direct::<K, OWN>(kernel, slot, &state, env);
                 if slot.faulted() {
                     // Counted by the slot's path. The input is rebuilt rather than copied
                     // from the state, so that what the kernel does not read of it need not
@@ -341,7 +364,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                     let x = x0 + lx;
                     state.next_pixel(row_seq.wrapping_add(x as u64), x);
                     slot.clear_outputs();
-                    shade_direct(kernel, slot, &state, env);
+                    shade_direct::<K, false>(kernel, slot, &state, env);
                     if slot.faulted() {
                         // Counted (and its fault kept) by the slot's path; nothing is written.
                         state.spill(slot);
@@ -533,7 +556,7 @@ fn shade_lockstep<K: FragmentKernel>(kernel: &K, slots: &[Invocation], env: &Pas
 /// Shades one invocation to its end through [`DirectFrag`] (no lockstep: an access never
 /// suspends, so the kernel's state machine folds into this loop). A panic ends it.
 #[inline(always)]
-fn shade_direct<'a, K: FragmentKernel>(
+fn shade_direct<'a, K: FragmentKernel, const OWN: bool>(
     kernel: &K,
     inv: &'a Invocation,
     state: &'a DirectState<'a>,
@@ -549,7 +572,7 @@ fn shade_direct<'a, K: FragmentKernel>(
         let mut cx = Context::from_waker(Waker::noop());
         // Interlock here is by ownership (no lock to leave, no turn to pass: `PassEnv::
         // interlock`), so the kernel is the whole invocation.
-        let frag = DirectFrag::new(Frag { inv, env }, state);
+        let frag = DirectFrag::<OWN>::new(Frag { inv, env }, state);
         // One poll: under `DirectFrag` nothing suspends, and an invocation is pending
         // only once it has faulted (it is then dropped).
         let pending = std::pin::pin!(kernel.shade(frag))

@@ -1,0 +1,134 @@
+//! Per-pixel arrays declared the pixels' own (`KernelInfo::with_own_pixel_array`): where a
+//! worker owns its tiles for the pass, the kernel's atomics on its fragments' slots are plain
+//! loads and stores, with the same results as everywhere else; an access to another
+//! pixel's slot is a misuse there.
+
+use fragrace_emu::{
+    Buf, Device, ExecConfig, FaultKind, Fragment, FragmentKernel, Framebuffer, KernelInfo,
+    PassReport, PassState, SampleCount,
+};
+
+use super::common::*;
+
+/// Three words a pixel, each read-modify-written by every fragment of the pixel: a count, a
+/// hash chained through exchanges (the order of a pixel's fragments shows), and a maximum.
+struct Slots {
+    slots: Buf<u32>,
+    own: bool,
+}
+
+impl FragmentKernel for Slots {
+    fn info(&self) -> KernelInfo {
+        let info = KernelInfo::new("own-slots");
+        if self.own {
+            info.with_own_pixel_array(self.slots, 3)
+        } else {
+            info
+        }
+    }
+    async fn shade(&self, f: impl Fragment) {
+        let p = f.pixel_index() * 3;
+        let n = f.atomic_add(self.slots, p, 1).await;
+        let id = f.primitive_id().wrapping_mul(2_654_435_761) ^ n;
+        let prev = f.atomic_exchange(self.slots, p + 1, id).await;
+        f.atomic_xor(self.slots, p + 1, prev.rotate_left(9)).await;
+        f.atomic_max(self.slots, p + 2, f.primitive_id() + 1).await;
+    }
+}
+
+/// Reaches past its slot at column 3 (the next pixel's word).
+struct Neighbour {
+    counts: Buf<u32>,
+}
+
+impl FragmentKernel for Neighbour {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("own-slot-neighbour").with_own_pixel_array(self.counts, 1)
+    }
+    async fn shade(&self, f: impl Fragment) {
+        let p = f.pixel_index();
+        let at = if f.x() == 3 { p + 1 } else { p };
+        f.atomic_add(self.counts, at, 1).await;
+    }
+}
+
+fn draw<K: FragmentKernel>(dev: &Device, kernel: &K, e: &ExecConfig) -> PassReport {
+    let mesh = two_layers();
+    let mut fb = Framebuffer::new(16, 8, SampleCount::X1, 8, &[]).unwrap();
+    let draw = fragrace_emu::Draw::new(&mesh, glam::Mat4::IDENTITY);
+    dev.draw(&mut fb, &draw, &PassState::default(), kernel, e)
+        .unwrap()
+}
+
+/// The ordered executor (one lane, no lockstep) gives each tile to its one worker for the
+/// whole pass: the path that performs atomics on own slots plainly.
+fn owning() -> ExecConfig {
+    ExecConfig {
+        lockstep: false,
+        max_steps: 10_000,
+        ..ExecConfig::ordered()
+    }
+}
+
+#[test]
+fn own_slots_hold_what_atomics_leave_under_every_executor() {
+    let run = |e: &ExecConfig, own: bool| {
+        let mut dev = Device::new();
+        let slots = dev.buffer::<u32>("slots", 16 * 8 * 3).unwrap();
+        let r = draw(&dev, &Slots { slots, own }, e);
+        assert!(r.faults.is_empty(), "{e:?}: {:?}", r.faults);
+        assert_eq!(r.stats.shaded, 256, "{e:?}");
+        dev.memory.read(slots).unwrap()
+    };
+    let want = run(&ExecConfig::ordered(), false);
+    // Two fragments a pixel, one of each layer (primitives 0-1 and 2-3).
+    assert!(want
+        .chunks(3)
+        .all(|s| s[0] == 2 && (s[2] == 3 || s[2] == 4)));
+    // In API order per pixel (one worker a tile, one fragment at a time) every word is as
+    // the atomic path leaves it, the exchanged one too.
+    assert_eq!(run(&owning(), true), want);
+    // Elsewhere a pixel's fragments may interleave: the count and the maximum commute.
+    let commuting = |v: &[u32]| v.chunks(3).map(|s| (s[0], s[2])).collect::<Vec<_>>();
+    for e in direct_execs().iter().chain(&all_execs()) {
+        assert_eq!(commuting(&run(e, true)), commuting(&want), "{e:?}");
+    }
+}
+
+#[test]
+fn another_pixels_slot_is_misuse_where_tiles_are_owned_and_unchecked_elsewhere() {
+    let run = |e: &ExecConfig| {
+        let mut dev = Device::new();
+        let counts = dev.buffer::<u32>("counts", 16 * 8).unwrap();
+        let r = draw(&dev, &Neighbour { counts }, e);
+        (r, dev.memory.read(counts).unwrap())
+    };
+    let (r, counts) = run(&owning());
+    // Column 3, eight rows, two layers: faulted before their access.
+    assert_eq!(r.stats.faulted, 16);
+    for f in &r.faults {
+        assert_eq!(f.invocation.x, 3);
+        assert!(
+            matches!(&f.kind, FaultKind::Misuse { message }
+                if message.contains("with_own_pixel_array") && message.contains("`counts`")),
+            "{:?}",
+            f.kind
+        );
+    }
+    assert_eq!(counts.iter().sum::<u32>(), 256 - 16);
+    // Segments share tiles between threads: the atomics stay atomic and nothing is checked.
+    let segmented = ExecConfig {
+        lockstep: false,
+        segment: 1,
+        max_steps: 10_000,
+        ..ExecConfig::parallel(2)
+    };
+    let (r, counts) = run(&segmented);
+    assert!(r.faults.is_empty(), "{:?}", r.faults);
+    assert_eq!(counts.iter().sum::<u32>(), 256);
+    assert_eq!(
+        counts[4 + 16],
+        4,
+        "column 4 counts column 3's fragments too"
+    );
+}
