@@ -316,6 +316,31 @@ fn truncated_or_altered_files_are_refused_and_writes_are_atomic() {
 }
 
 #[test]
+fn gzip_files_are_written_and_read_and_a_corrupt_one_is_refused() {
+    let (pos, idx) = torus(8, 4);
+    let mesh = loaded_mesh(&scene_of(&pos, &idx));
+    let lists = presorted::presort(&mesh, &PresortConfig::default(), &Silent).unwrap();
+    let f = tmp("lists.presort.gz");
+    file::save(&lists, &f).unwrap();
+    let stored = std::fs::read(&f).unwrap();
+    assert_eq!(&stored[..2], &[0x1f, 0x8b], "a .gz name is compressed");
+    assert!(stored.len() < file::encode(&lists).len());
+    assert_eq!(file::load(&f, &mesh).unwrap().segments, lists.segments);
+    // A cut gzip stream, and one whose expanded bytes were altered: refused, not trusted.
+    std::fs::write(&f, &stored[..stored.len() / 2]).unwrap();
+    let e = file::load(&f, &mesh).unwrap_err();
+    assert!(e.to_string().contains("gzip"), "{e}");
+    let mut bytes = file::encode(&lists);
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 1;
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut gz, &bytes).unwrap();
+    std::fs::write(&f, gz.finish().unwrap()).unwrap();
+    let e = file::load(&f, &mesh).unwrap_err();
+    assert!(e.to_string().contains("corrupted"), "{e}");
+}
+
+#[test]
 fn degenerate_and_duplicate_triangles_are_refused() {
     let (pos, idx) = torus(8, 4);
     // A degenerate triangle.
@@ -446,6 +471,41 @@ fn teapot_spout_is_exact_from_random_viewpoints() {
     assert!((100..200).contains(&idx.len()), "{} triangles", idx.len());
     let lists = presort_and_check("spout", &pos, &idx, 3);
     assert!(lists.split.crossings > 0, "the spout crosses the body");
+}
+
+/// The shipped lists of a shipped mesh (`assets/NAME.presort.gz`, made by `fragrace presort
+/// assets/NAME.obj.gz --partitions 6`) and 256 random viewpoints, each under ordered,
+/// parallel (lockstep and not) and every scheduled policy at 40 x 40: exact within 1/255,
+/// every check of the run passed (each input triangle's front or back copy rasterized
+/// exactly once among them), no hazard.
+fn shipped_lists_are_exact(mesh: &str, views: usize) {
+    let scene = asset(&format!("{mesh}.obj.gz"));
+    let f = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("assets")
+        .join(format!("{mesh}.presort.gz"));
+    let lists = file::load(&f, &loaded_mesh(&scene)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(lists.dirs.len(), 6, "{mesh}: 6 partitions");
+    let inside = exact_from_random_views(&scene, &f, &["presorted"], views);
+    assert_eq!(inside, 0, "{mesh}: views inside the bounding cube");
+}
+
+/// The acceptance on the teapot (992 triangles) with its shipped lists. Fails today: at
+/// azimuth 87.6, elevation 50.0 the ordered executor's image differs from the truth by
+/// 0.031 (8/255), so the lists of the cells method are not exact from every viewpoint
+/// (docs/algorithms.md, presorted lists, "What is left").
+#[test]
+#[ignore = "fails: teapot lists not exact at azimuth 87.6, elevation 50.0 (off by 8/255)"]
+fn acceptance_presorted_teapot_shipped_lists_256_views() {
+    shipped_lists_are_exact("teapot", 256);
+}
+
+/// The same acceptance on the bunny (3,674 triangles) with its shipped lists. Fails today:
+/// at azimuth 27.9, elevation -38.5 one fragment of the input is not blended (679 of 680:
+/// some triangle's copies miss the viewpoint's cell).
+#[test]
+#[ignore = "fails: bunny lists blend 679 of 680 fragments at azimuth 27.9, elevation -38.5"]
+fn acceptance_presorted_bunny_shipped_lists_256_views() {
+    shipped_lists_are_exact("bunny", 256);
 }
 
 /// The acceptance of "Depth-Presorted Triangle Lists" on the shipped meshes: 256 random

@@ -33,6 +33,8 @@ pub enum OptionError {
     OccupancyPartWithoutD,
     #[error("--shade, --color and --opacity change only the picture: add --out PATH")]
     PictureWithoutOut,
+    #[error("presort --dedupe-to rewrites an OBJ mesh; `{mesh}` is not an .obj file")]
+    DedupeNeedsObj { mesh: String },
     #[error("--turntable 0: the number of views must be at least 1")]
     TurntableZero,
     #[error("--raw-out needs a counting algorithm (count, count-plain), not `{algo}`")]

@@ -29,6 +29,13 @@ pub struct PresortOptions {
     /// scan of section 4.1, whose copies can multiply without bound on curved meshes).
     #[arg(long, default_value = "cells", value_parser = super::parse::parse_method)]
     pub method: fragrace_kernels::presorted::Method,
+    /// Remove duplicate triangles (the same three points, in either winding; the first in
+    /// file order is kept) and write the mesh without them to this OBJ file (gzip if it ends
+    /// in `.gz`): the lists are made for that mesh, so render it (`render --obj PATH
+    /// --presorted OUT`); the original mesh is refused by the lists' mesh hash. Without
+    /// it, a mesh with duplicate triangles is refused, naming them. OBJ meshes only.
+    #[arg(long, value_name = "PATH")]
+    pub dedupe_to: Option<PathBuf>,
     /// Print one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -95,21 +102,40 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     presorted::partition::directions(a.partitions).map_err(CliError::Partitions)?;
-    let scene = if a.mesh.contains(".obj") {
-        crate::run::SceneSpec::Obj {
-            path: a.mesh.clone().into(),
-            sha256: None,
-        }
-    } else {
-        crate::run::SceneSpec::Builtin(a.mesh.clone())
+    let mesh_error = |source| CliError::Mesh {
+        mesh: a.mesh.clone(),
+        source,
     };
-    let mesh = scene
-        .load()
-        .map_err(|source| CliError::Mesh {
-            mesh: a.mesh.clone(),
-            source,
-        })?
-        .mesh;
+    let (scene, removed) = match &a.dedupe_to {
+        Some(to) => {
+            if !a.mesh.contains(".obj") {
+                return Err(OptionError::DedupeNeedsObj {
+                    mesh: a.mesh.clone(),
+                }
+                .into());
+            }
+            let raw = crate::scene::obj::load_obj(&a.mesh)
+                .map_err(|e| mesh_error(crate::run::RunError::from(Box::new(e))))?;
+            let d = presorted::input::dedupe(&raw);
+            write_obj(&d.mesh, to).map_err(CliError::write(to))?;
+            let spec = crate::run::SceneSpec::Obj {
+                path: to.clone(),
+                sha256: None,
+            };
+            (spec, Some(d.removed.len()))
+        }
+        None if a.mesh.contains(".obj") => (
+            crate::run::SceneSpec::Obj {
+                path: a.mesh.clone().into(),
+                sha256: None,
+            },
+            None,
+        ),
+        None => (crate::run::SceneSpec::Builtin(a.mesh.clone()), None),
+    };
+    // With --dedupe-to, the written file read back the way `render` reads it: the lists are
+    // made from exactly the mesh that is rendered and that the truth is computed from.
+    let mesh = scene.load().map_err(mesh_error)?.mesh;
     let bar = Bar {
         bar: progress(
             u64::from(a.partitions) * 1000,
@@ -164,6 +190,8 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
         "mesh": a.mesh,
         "triangles": lists.triangles,
         "non_manifold_edges": presorted::input::non_manifold_edges(&mesh),
+        "duplicates_removed": removed,
+        "mesh_written": a.dedupe_to,
         "partitions": a.partitions,
         "threads": threads,
         "seconds": secs,
@@ -176,6 +204,14 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
     if a.json {
         println!("{summary}");
     } else {
+        if let (Some(n), Some(to)) = (removed, &a.dedupe_to) {
+            println!(
+                "{}: {n} duplicate triangles removed; the mesh presorted (render this one) \
+                 written to {}",
+                a.mesh,
+                to.display()
+            );
+        }
         println!(
             "{} ({} triangles): {} partitions in {:.1} s on {} threads; {} instances, \
              duplication ratio {:.3}, average segment {:.3} of the input; written to {}",
@@ -191,4 +227,30 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
         );
     }
     Ok(())
+}
+
+/// Writes `mesh` as OBJ (`v` and `f` lines, gzip if `path` ends in `.gz`). Every vertex is
+/// kept in order, used or not (loading normalises over all of them), and coordinates are
+/// printed in the shortest form that reads back to the same `f32`.
+fn write_obj(mesh: &fragrace_emu::Mesh, path: &std::path::Path) -> std::io::Result<()> {
+    use std::fmt::Write as _;
+    use std::io::Write as _;
+    let mut text = String::from("# written by fragrace presort --dedupe-to\n");
+    for p in &mesh.positions {
+        let _ = writeln!(text, "v {} {} {}", p.x, p.y, p.z);
+    }
+    for t in &mesh.indices {
+        let _ = writeln!(text, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    let bytes = if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gz"))
+    {
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+        gz.write_all(text.as_bytes())?;
+        gz.finish()?
+    } else {
+        text.into_bytes()
+    };
+    std::fs::write(path, bytes)
 }

@@ -105,7 +105,47 @@ pub fn encode(p: &Presorted) -> Vec<u8> {
     b
 }
 
-/// Writes `p` to `path` atomically (temporary file, sync, rename).
+/// Whether `path` names a gzip file (ends in `.gz`): [`save`] compresses it.
+fn is_gz_name(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gz"))
+}
+
+/// The most bytes a gzip-compressed file may expand to (1 GiB): far above any mesh this
+/// tool presorts (the 4K-triangle bunny's lists take 1.1 MB), and a bound on what a corrupt
+/// or hostile file can make [`load`] allocate.
+pub const MAX_EXPANDED: u64 = 1 << 30;
+
+/// The file's bytes: as stored, or expanded when they start with gzip's magic number.
+fn read_bytes(path: &Path) -> Result<Vec<u8>, FileError> {
+    use std::io::Read as _;
+    let io = |source| FileError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let stored = std::fs::read(path).map_err(io)?;
+    if !stored.starts_with(&[0x1f, 0x8b]) {
+        return Ok(stored);
+    }
+    let mut bytes = Vec::new();
+    flate2::read::GzDecoder::new(stored.as_slice())
+        .take(MAX_EXPANDED + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| FileError::Corrupt {
+            path: path.to_path_buf(),
+            what: format!("gzip: {e}"),
+        })?;
+    if bytes.len() as u64 > MAX_EXPANDED {
+        return Err(FileError::Corrupt {
+            path: path.to_path_buf(),
+            what: format!("expands past {MAX_EXPANDED} bytes"),
+        });
+    }
+    Ok(bytes)
+}
+
+/// Writes `p` to `path` atomically (temporary file, sync, rename), gzip-compressed when
+/// `path` ends in `.gz` ([`load`] reads both).
 pub fn save(p: &Presorted, path: &Path) -> Result<(), FileError> {
     let io = |source| FileError::Io {
         path: path.to_path_buf(),
@@ -116,7 +156,13 @@ pub fn save(p: &Presorted, path: &Path) -> Result<(), FileError> {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-    let bytes = encode(p);
+    let bytes = if is_gz_name(path) {
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+        gz.write_all(&encode(p)).map_err(io)?;
+        gz.finish().map_err(io)?
+    } else {
+        encode(p)
+    };
     let write = || -> std::io::Result<()> {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(&bytes)?;
@@ -265,12 +311,10 @@ pub fn decode(bytes: &[u8], path: &Path) -> Result<Presorted, FileError> {
     })
 }
 
-/// Reads `path` and checks that it was made from `mesh`.
+/// Reads `path` (plain or gzip-compressed, up to [`MAX_EXPANDED`] bytes expanded) and
+/// checks that it was made from `mesh`.
 pub fn load(path: &Path, mesh: &Mesh) -> Result<Presorted, FileError> {
-    let bytes = std::fs::read(path).map_err(|source| FileError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = read_bytes(path)?;
     let p = decode(&bytes, path)?;
     let actual = mesh_hash(mesh);
     if p.mesh_hash != actual || p.triangles as usize != mesh.indices.len() {

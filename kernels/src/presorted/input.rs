@@ -5,7 +5,9 @@
 //! indices out of range ([`Mesh::validate`]), degenerate triangles (no plane, so no facing
 //! and no occlusion region) and duplicate triangles (the same three points, whatever the
 //! order: two coplanar copies occlude each other from every viewpoint, a cycle no order
-//! can break).
+//! can break). [`dedupe`] removes them for those who ask (`fragrace presort --dedupe-to
+//! MESH`, which writes the mesh without them: the lists are that mesh's, and the truth is
+//! computed from it).
 //!
 //! Accepted: non-manifold edges (one edge shared by three or more triangles) and unwelded
 //! vertices. The method treats every triangle on its own (section 4: the occlusion graph
@@ -68,6 +70,55 @@ pub fn check(mesh: &Mesh) -> Result<(), InputError> {
         seen.insert(key, tri);
     }
     Ok(())
+}
+
+/// A mesh without its duplicate triangles ([`dedupe`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Deduped {
+    /// The mesh: the same positions (and normals), the triangles that are not a later copy
+    /// of an earlier one, in their order.
+    pub mesh: Mesh,
+    /// Each removed triangle `(kept, removed)` as indices of the input: `removed` has the
+    /// three points of the earlier triangle `kept` (in any order, so the other winding too).
+    pub removed: Vec<(usize, usize)>,
+}
+
+/// Removes every triangle whose three points (by their bits, in any order) are those of an
+/// earlier triangle; the first in index order is kept. Triangle ids after a removed one
+/// shift down, so a renderer that colours by primitive id must draw the returned mesh, and
+/// so must the truth it is compared with.
+pub fn dedupe(mesh: &Mesh) -> Deduped {
+    let mut seen: HashMap<[[u32; 3]; 3], usize> = HashMap::new();
+    let mut indices = Vec::with_capacity(mesh.indices.len());
+    let mut removed = Vec::new();
+    for (tri, t) in mesh.indices.iter().enumerate() {
+        let Some(p) = t
+            .iter()
+            .map(|&i| mesh.positions.get(i as usize))
+            .collect::<Option<Vec<_>>>()
+        else {
+            // Out of range: kept for `check` to refuse with its message.
+            indices.push(*t);
+            continue;
+        };
+        let mut key = [p[0], p[1], p[2]].map(|q| [q.x.to_bits(), q.y.to_bits(), q.z.to_bits()]);
+        key.sort();
+        match seen.get(&key) {
+            Some(&first) => removed.push((first, tri)),
+            None => {
+                seen.insert(key, tri);
+                indices.push(*t);
+            }
+        }
+    }
+    Deduped {
+        mesh: Mesh {
+            positions: mesh.positions.clone(),
+            normals: mesh.normals.clone(),
+            indices,
+        },
+        removed,
+    }
 }
 
 /// Edges shared by more than two triangles (edges by their end points' bits, so that
@@ -164,6 +215,22 @@ mod tests {
         assert_eq!(check(&m), Ok(()));
         assert_eq!(non_manifold_edges(&m), 1);
         assert_eq!(non_manifold_edges(&quad()), 0);
+    }
+
+    #[test]
+    fn dedupe_keeps_the_first_copy_of_each_triangle() {
+        let mut m = quad();
+        m.indices.push([2, 1, 0]); // triangle 0, other winding
+        m.indices.push([0, 1, 3]);
+        m.positions.push(Vec3::new(0.0, 1.0, 0.0)); // vertex 4: vertex 3's point
+        m.indices.push([4, 0, 2]); // triangle 1 through another index
+        let d = dedupe(&m);
+        assert_eq!(d.removed, vec![(0, 2), (1, 4)]);
+        assert_eq!(d.mesh.indices, vec![[0, 1, 2], [0, 2, 3], [0, 1, 3]]);
+        assert_eq!(d.mesh.positions, m.positions);
+        assert_eq!(check(&d.mesh), Ok(()));
+        assert_eq!(dedupe(&quad()).mesh, quad());
+        assert!(dedupe(&quad()).removed.is_empty());
     }
 
     #[test]
