@@ -363,6 +363,10 @@ fn degenerate_and_duplicate_triangles_are_refused() {
     )
     .unwrap_err();
     assert!(e.to_string().contains("same three vertices"), "{e}");
+    assert!(
+        e.to_string().contains("--dedupe-to"),
+        "the way out named: {e}"
+    );
     // Bad partition counts.
     let e = presorted::presort(
         &loaded_mesh(&scene_of(&pos, &idx)),

@@ -38,7 +38,9 @@ pub enum InputError {
     Degenerate { tri: usize, area: f64, min: f64 },
     #[error(
         "triangles {first} and {second} have the same three vertices: remove the duplicate \
-         before presorting (coplanar copies occlude each other from every viewpoint)"
+         before presorting (coplanar copies occlude each other from every viewpoint); \
+         `fragrace presort MESH --dedupe-to NEW.obj` removes every such copy and writes the \
+         mesh to render"
     )]
     Duplicate { first: usize, second: usize },
 }
