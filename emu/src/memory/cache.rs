@@ -68,6 +68,28 @@ impl<'m> WordCache<'m> {
         }
     }
 
+    /// The 64-bit words of buffer `b`: the cached slice, or the buffer's (then cached).
+    #[inline(always)]
+    fn words64(&self, memory: &'m Memory, b: u32) -> &'m [AtomicU64] {
+        let (id, mut words) = self.w64.get();
+        if id != b {
+            words = memory.words64(b);
+            self.w64.set((b, words));
+        }
+        words
+    }
+
+    /// The 32-bit words of buffer `b`: the cached slice, or the buffer's (then cached).
+    #[inline(always)]
+    fn words32(&self, memory: &'m Memory, b: u32) -> &'m [AtomicU32] {
+        let (id, mut words) = self.w32.get();
+        if id != b {
+            words = memory.words32(b);
+            self.w32.set((b, words));
+        }
+        words
+    }
+
     /// [`Memory::apply`] through the cache: the same operation on the same word.
     #[inline(always)]
     pub fn apply<T: Word>(
@@ -79,19 +101,9 @@ impl<'m> WordCache<'m> {
     ) -> u64 {
         let (b, i) = (addr.buffer(), addr.index() as usize);
         if T::WIDE {
-            let (id, mut words) = self.w64.get();
-            if id != b {
-                words = memory.words64(b);
-                self.w64.set((b, words));
-            }
-            apply64(&words[i], op, ordering)
+            apply64(&self.words64(memory, b)[i], op, ordering)
         } else {
-            let (id, mut words) = self.w32.get();
-            if id != b {
-                words = memory.words32(b);
-                self.w32.set((b, words));
-            }
-            apply32::<T>(&words[i], op, ordering) as u64
+            apply32::<T>(&self.words32(memory, b)[i], op, ordering) as u64
         }
     }
 
@@ -101,19 +113,9 @@ impl<'m> WordCache<'m> {
     pub fn apply_owned<T: Word>(&self, memory: &'m Memory, addr: Addr, op: MemOp) -> u64 {
         let (b, i) = (addr.buffer(), addr.index() as usize);
         if T::WIDE {
-            let (id, mut words) = self.w64.get();
-            if id != b {
-                words = memory.words64(b);
-                self.w64.set((b, words));
-            }
-            apply64_owned(&words[i], op)
+            apply64_owned(&self.words64(memory, b)[i], op)
         } else {
-            let (id, mut words) = self.w32.get();
-            if id != b {
-                words = memory.words32(b);
-                self.w32.set((b, words));
-            }
-            apply32_owned::<T>(&words[i], op) as u64
+            apply32_owned::<T>(&self.words32(memory, b)[i], op) as u64
         }
     }
 }
