@@ -229,19 +229,13 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
     Ok(())
 }
 
-/// Writes `mesh` as OBJ (`v` and `f` lines, gzip if `path` ends in `.gz`). Every vertex is
-/// kept in order, used or not (loading normalises over all of them), and coordinates are
-/// printed in the shortest form that reads back to the same `f32`.
+/// Writes `mesh` as OBJ ([`crate::scene::obj::obj_text`]), gzip if `path` ends in `.gz`.
 fn write_obj(mesh: &fragrace_emu::Mesh, path: &std::path::Path) -> std::io::Result<()> {
-    use std::fmt::Write as _;
     use std::io::Write as _;
-    let mut text = String::from("# written by fragrace presort --dedupe-to\n");
-    for p in &mesh.positions {
-        let _ = writeln!(text, "v {} {} {}", p.x, p.y, p.z);
-    }
-    for t in &mesh.indices {
-        let _ = writeln!(text, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
-    }
+    let text = format!(
+        "# written by fragrace presort --dedupe-to\n{}",
+        crate::scene::obj::obj_text(mesh)
+    );
     let bytes = if path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("gz"))

@@ -36,6 +36,20 @@ const GZIP_MAGIC: [u8; 2] = [0x1f, 0x8b];
 /// The "path" in the errors of [`parse_obj_bytes`], which has no file.
 const MEMORY: &str = "<memory>";
 
+/// The mesh as OBJ text: `v` lines in order (every vertex, used or not: loading normalises
+/// over all of them) with the shortest floats that read back to the same `f32`, then 1-based
+/// `f` lines. [`parse_obj_bytes`] reads it back to the same mesh.
+pub fn obj_text(mesh: &Mesh) -> String {
+    let mut s = String::new();
+    for p in &mesh.positions {
+        let _ = writeln!(s, "v {} {} {}", p.x, p.y, p.z);
+    }
+    for t in &mesh.indices {
+        let _ = writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    s
+}
+
 /// Whether `bytes` start like gzip data. Detection is by content, not by file name, so that
 /// a gzip file without `.gz` (or fetched to a temporary name) still loads.
 pub fn is_gzip(bytes: &[u8]) -> bool {

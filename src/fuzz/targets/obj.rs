@@ -15,17 +15,9 @@ pub enum ObjOutcome {
     },
 }
 
-/// The mesh as OBJ text (`v` lines with shortest round-trip floats, 1-based `f` lines).
+/// The mesh as OBJ text ([`crate::scene::obj::obj_text`]).
 pub fn write_obj(mesh: &Mesh) -> String {
-    use std::fmt::Write;
-    let mut s = String::new();
-    for p in &mesh.positions {
-        let _ = writeln!(s, "v {} {} {}", p.x, p.y, p.z);
-    }
-    for t in &mesh.indices {
-        let _ = writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
-    }
-    s
+    crate::scene::obj::obj_text(mesh)
 }
 
 /// The OBJ target: never panics; an accepted mesh is valid, has triangles, and parses back
