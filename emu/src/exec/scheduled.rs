@@ -185,6 +185,8 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     // them over every invocation in flight at every step was a tenth of a `kb-interlock`
     // campaign (docs/performance.md).
     let mut stale = true;
+    // The version of `cands` (see `Chooser::choose`): bumped whenever they change.
+    let mut version: u64 = 0;
     let SchedScratch {
         detector,
         chooser,
@@ -243,6 +245,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             );
             detector.finish(seq, step);
             stale = true;
+            version += 1;
             if let Some(p) = inflight.iter().position(|&x| x == s) {
                 inflight.remove(p);
             }
@@ -286,6 +289,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 retire!(s);
             } else if simple && slots[s].pending.get().is_some() {
                 cands.push(candidate(inputs, chooser, which[s], s));
+                version += 1;
             }
         }
         if !deferred.is_empty() {
@@ -304,6 +308,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 }
             }
             stale = false;
+            version += 1;
             if let Some(m) = simt.as_mut() {
                 m.filter(cands, slots, which);
                 if m.deadlocked(cands) {
@@ -350,10 +355,10 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             } else {
                 sub_cands.clear();
                 sub_cands.extend(conflicting.iter().map(|&ci| cands[ci]));
-                conflicting[chooser.choose(sub_cands, step)]
+                conflicting[chooser.choose(sub_cands, None, step)]
             }
         } else {
-            chooser.choose(cands, step)
+            chooser.choose(cands, Some(version), step)
         };
         if sc.record {
             record.push(k as u8);
@@ -439,11 +444,13 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         } else if simple && inv.pending.get().is_none() {
             // Suspended on something other than a step: it will never be granted one.
             cands.remove(k);
+            version += 1;
         } else if !simple && !stale {
             if !lock_kept {
                 stale = true;
             } else if !runnable(inv, claims[s].as_ref(), env) {
                 cands.remove(k);
+                version += 1;
             }
         }
     }

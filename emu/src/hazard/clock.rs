@@ -85,7 +85,7 @@ impl Clocks {
         if lane < self.stride || self.stride >= MAX_CLOCK_LANES {
             return;
         }
-        let stride = (lane + 1).next_power_of_two().clamp(8, MAX_CLOCK_LANES);
+        let stride = (lane + 1).next_power_of_two().clamp(4, MAX_CLOCK_LANES);
         let widen = |v: &[u32], old: usize, n: usize| -> Vec<u32> {
             let mut w = vec![0; n * stride];
             for i in 0..n {
