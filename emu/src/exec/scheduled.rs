@@ -390,13 +390,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 _ => None,
             };
             inv.cas_failed.set(false);
-            // What an atomic load or a compare-exchange reads (the detector's ABA rule).
-            let read = if matches!(op, OpKind::AtomicLoad | OpKind::CompareExchange) {
-                env.memory.bits(addr)
-            } else {
-                0
-            };
-            Some((input.seq, addr, op, read, lock, rec))
+            Some((input.seq, addr, op, lock, rec))
         } else {
             None
         };
@@ -413,7 +407,14 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         inv.granted.set(true);
         step += 1;
         let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
-        if let Some((seq, addr, op, read, lock, rec)) = mem_step {
+        if let Some((seq, addr, op, lock, rec)) = mem_step {
+            // What an atomic load or a compare-exchange read (the detector's ABA rule): the
+            // word before the step, as the access saw it.
+            let read = if matches!(op, OpKind::AtomicLoad | OpKind::CompareExchange) {
+                inv.read.get()
+            } else {
+                0
+            };
             // A compare-exchange that failed only read the word: an atomic load.
             let op = if op == OpKind::CompareExchange && inv.cas_failed.get() {
                 OpKind::AtomicLoad
