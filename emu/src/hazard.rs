@@ -500,10 +500,12 @@ impl Detector {
 
     /// An invocation finished (or was dropped after a fault) at `step`.
     pub fn finish(&mut self, seq: u64, step: u64) {
-        let lane = self.invs.lane(seq);
-        if let Some(s) = self.invs.get_mut(seq) {
+        // (One lookup: its lane, if it was in flight, and its end.)
+        let lane = self.invs.get_mut(seq).and_then(|s| {
+            let lane = s.end.is_none().then_some(s.lane);
             s.end = Some(step);
-        }
+            lane
+        });
         if let Some(l) = lane {
             self.clear_lane(l);
         }

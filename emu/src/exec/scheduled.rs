@@ -133,9 +133,11 @@ pub(super) fn run_scheduled<K: FragmentKernel>(
         sc,
         max_steps,
         inputs,
-        outs,
-        colors,
-        targets,
+        Harvest::Full {
+            outs,
+            colors,
+            targets,
+        },
         &mut scratch,
         &mut acc,
     );
@@ -154,6 +156,19 @@ pub(super) fn run_scheduled<K: FragmentKernel>(
     }
 }
 
+/// What an execution keeps of its invocations as they finish.
+pub(crate) enum Harvest<'o> {
+    /// Everything, for a pass: `outs[i]` and `colors[i * targets .. (i + 1) * targets]` of
+    /// input `i`, and the statistics and faults in the accumulator.
+    Full {
+        outs: &'o mut [FragOut],
+        colors: &'o mut [[u32; 4]],
+        targets: usize,
+    },
+    /// Only the count of faults, in the accumulator's statistics (an exploration).
+    Faults,
+}
+
 /// One scheduled execution of `inputs` on the given slots and future array (reset here).
 /// Returns the number of steps.
 #[allow(clippy::too_many_arguments)] // the executor's whole state, borrowed apart
@@ -165,9 +180,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     sc: &ScheduleConfig,
     max_steps: u64,
     inputs: &[FragInput],
-    outs: &mut [FragOut],
-    colors: &mut [[u32; 4]],
-    targets: usize,
+    mut harvest: Harvest<'_>,
     scratch: &mut SchedScratch,
     acc: &mut Acc,
 ) -> u64 {
@@ -238,11 +251,17 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             deferred.extend(abandon(&slots[s], env));
             let i = which[s];
             let seq = inputs[i].seq;
-            acc.harvest(
-                &slots[s],
-                &mut outs[i],
-                &mut colors[i * targets..(i + 1) * targets],
-            );
+            match &mut harvest {
+                Harvest::Full {
+                    outs,
+                    colors,
+                    targets,
+                } => {
+                    let t = *targets;
+                    acc.harvest(&slots[s], &mut outs[i], &mut colors[i * t..(i + 1) * t]);
+                }
+                Harvest::Faults => acc.count_fault(&slots[s]),
+            }
             detector.finish(seq, step);
             stale = true;
             version += 1;
@@ -488,10 +507,6 @@ pub(crate) fn explore<K: FragmentKernel>(
     let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
     futs.resize_with(width, || None);
     let mut scratch = SchedScratch::new(env.width, env.height);
-    let mut outs = vec![FragOut::default(); inputs.len()];
-    // No colour targets: an execution shows its callback the memory, never colours, so
-    // harvesting copies none (it copied all eight outputs of every invocation).
-    let mut colors: Vec<[u32; 4]> = Vec::new();
     let mut sc = sc.clone();
     let mut n = 0;
     for seed in seeds {
@@ -508,9 +523,10 @@ pub(crate) fn explore<K: FragmentKernel>(
             &sc,
             max_steps,
             inputs,
-            &mut outs,
-            &mut colors,
-            0,
+            // An execution shows its callback the memory and its count of faults, never
+            // outputs or statistics: harvesting them (eight colour outputs, then the
+            // operation counters, of every invocation) was work thrown away.
+            Harvest::Faults,
             &mut scratch,
             &mut acc,
         );
