@@ -472,7 +472,10 @@ impl Detector {
             self.lanes.resize_with(lane + 1, Lane::default);
         }
         // (Normally empty: it was cleared when its last invocation finished.)
-        self.clear_lane(lane as u32);
+        let l = &self.lanes[lane];
+        if !l.touched.is_empty() || !l.loads.is_empty() || l.record.is_some() {
+            self.clear_lane(lane as u32);
+        }
         self.clocks.ensure(lane);
         if self.clocks.tracked(Some(lane as u32)).is_some() {
             self.clocks.start(lane);
@@ -488,6 +491,7 @@ impl Detector {
 
     /// Forgets what a lane holds (its loads, open record, and its place in the toucher
     /// sets of the addresses it touched).
+    #[inline]
     fn clear_lane(&mut self, lane: u32) {
         let l = &mut self.lanes[lane as usize];
         for &a in &l.touched {

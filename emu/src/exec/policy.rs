@@ -153,9 +153,30 @@ pub(crate) struct Candidate {
     pub slot: u32,
 }
 
+/// Which policy a [`Chooser`] runs, as the choice at every step dispatches on it: a plain
+/// tag, where matching the [`Policy`] itself first decoded its discriminant from the
+/// capacity of `Bytes`'s vector (a dozen instructions a step).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Random,
+    Pct,
+    Other,
+}
+
+impl Kind {
+    fn of(policy: &Policy) -> Kind {
+        match policy {
+            Policy::Random => Kind::Random,
+            Policy::Pct { .. } => Kind::Pct,
+            _ => Kind::Other,
+        }
+    }
+}
+
 /// The running state of a policy during one scheduled pass.
 pub(crate) struct Chooser {
     policy: Policy,
+    kind: Kind,
     rng: SmallRng,
     /// PCT: priority per in-flight slot (higher runs first), change points.
     priorities: Vec<u64>,
@@ -192,6 +213,7 @@ impl Chooser {
         }
         Chooser {
             policy: policy.clone(),
+            kind: Kind::of(policy),
             rng,
             priorities: Vec::new(),
             change_points,
@@ -210,6 +232,7 @@ impl Chooser {
     pub fn reset(&mut self, policy: &Policy, seed: u64, steps_estimate: u64) {
         if &self.policy != policy {
             self.policy = policy.clone();
+            self.kind = Kind::of(policy);
         }
         self.rng = SmallRng::seed_from_u64(seed ^ 0x6672_6167_7261_6365);
         self.change_points.clear();
@@ -352,9 +375,9 @@ impl Chooser {
         // whole match cost a few dozen instructions per step in saved registers alone.
         // PCT inline too when nothing changed since its last choice: the same candidates,
         // no admission since (priorities), and no change point due.
-        match &self.policy {
-            Policy::Random => self.rng.gen_range(0..cands.len()),
-            Policy::Pct { .. }
+        match self.kind {
+            Kind::Random => self.rng.gen_range(0..cands.len()),
+            Kind::Pct
                 if version.is_some()
                     && self.pct_version == version
                     && self.change_points.first().is_none_or(|&c| c > step) =>
