@@ -460,6 +460,7 @@ impl Detector {
     /// An invocation was admitted at `step` (its `seq` at least the base, see
     /// [`Detector::set_base`]; without a base, the first admitted sets it) into `lane`:
     /// the executor's slot, which no other invocation in flight holds.
+    #[inline]
     pub fn start(&mut self, id: InvocationId, step: u64, lane: usize) {
         let base = *self.invs.base.get_or_insert(id.seq);
         let Some(i) = id.seq.checked_sub(base).map(|i| i as usize) else {
@@ -503,6 +504,7 @@ impl Detector {
     }
 
     /// An invocation finished (or was dropped after a fault) at `step`.
+    #[inline]
     pub fn finish(&mut self, seq: u64, step: u64) {
         // (One lookup: its lane, if it was in flight, and its end.)
         let lane = self.invs.get_mut(seq).and_then(|s| {

@@ -241,7 +241,10 @@ impl Chooser {
                 self.change_points
                     .push(self.rng.gen_range(0..steps_estimate.max(1)));
             }
-            self.change_points.sort_unstable();
+            // (One change point under `pct:2`, and nothing to sort.)
+            if self.change_points.len() > 1 {
+                self.change_points.sort_unstable();
+            }
         }
         // (Priorities are written at admission: no need to clear them.)
         self.next_low = 0;
@@ -349,6 +352,7 @@ impl Chooser {
     }
 
     /// A new invocation entered the window in slot `slot`.
+    #[inline]
     pub fn admit(&mut self, slot: u32) {
         if let Policy::Pct { depth } = self.policy {
             // Initial priorities sit above the `depth` low values used at change points.

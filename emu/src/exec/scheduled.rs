@@ -248,7 +248,10 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         ($slot:expr) => {{
             let s = $slot;
             futs[s] = None;
-            deferred.extend(abandon(&slots[s], env));
+            // (Only a faulted invocation has anything to abandon.)
+            if slots[s].faulted() {
+                deferred.extend(abandon(&slots[s], env));
+            }
             let i = which[s];
             let seq = inputs[i].seq;
             match &mut harvest {
@@ -509,12 +512,15 @@ pub(crate) fn explore<K: FragmentKernel>(
     let mut scratch = SchedScratch::new(env.width, env.height);
     let mut sc = sc.clone();
     let mut n = 0;
+    // One accumulator for every execution: each counts only its faults (`Harvest::Faults`),
+    // from zero.
+    let mut acc = Acc::default();
     for seed in seeds {
         sc.seed = seed;
         if let Some(l) = env.interlock {
             l.reset();
         }
-        let mut acc = Acc::default();
+        acc.stats.faulted = 0;
         let steps = schedule_once(
             &slots,
             &mut futs,
