@@ -492,7 +492,7 @@ impl Detector {
 
     /// Forgets what a lane holds (its loads, open record, and its place in the toucher
     /// sets of the addresses it touched).
-    #[inline]
+    #[inline(always)]
     fn clear_lane(&mut self, lane: u32) {
         let l = &mut self.lanes[lane as usize];
         for &a in &l.touched {

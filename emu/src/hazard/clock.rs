@@ -107,10 +107,17 @@ impl Clocks {
     }
 
     /// Makes room for lanes `0..=lane` (up to [`MAX_CLOCK_LANES`]), keeping every clock.
+    #[inline]
     pub fn ensure(&mut self, lane: usize) {
         if lane < self.stride || self.stride >= MAX_CLOCK_LANES {
             return;
         }
+        self.widen(lane);
+    }
+
+    /// [`Clocks::ensure`] past the current stride.
+    #[cold]
+    fn widen(&mut self, lane: usize) {
         let stride = (lane + 1).next_power_of_two().clamp(4, MAX_CLOCK_LANES);
         let widen = |v: &[u32], old: usize, n: usize| -> Vec<u32> {
             let mut w = vec![0; n * stride];
@@ -130,6 +137,7 @@ impl Clocks {
     }
 
     /// An invocation starts in lane `l`: it knows what every finished one knew.
+    #[inline]
     pub fn start(&mut self, l: usize) {
         let s = self.stride;
         copy(&mut self.lane[l * s..(l + 1) * s], &self.done);
@@ -138,6 +146,7 @@ impl Clocks {
 
     /// The invocation in lane `l` finished: its successors in the lane start past its
     /// epochs, and every invocation started from now on knows what it knew.
+    #[inline]
     pub fn finish(&mut self, l: usize) {
         let s = self.stride;
         self.next[l] = self.lane[l * s + l] + 1;
