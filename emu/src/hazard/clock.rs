@@ -43,7 +43,7 @@ pub(super) const NO_LANE: u16 = u16::MAX;
 /// where one of a length known only at run time was a call to `memcpy`.
 #[inline(always)]
 fn copy(dst: &mut [u32], src: &[u32]) {
-    debug_assert!(dst.len() == src.len() && dst.len() % 4 == 0);
+    debug_assert!(dst.len() == src.len() && dst.len().is_multiple_of(4));
     let (d, _) = dst.as_chunks_mut::<4>();
     let (s, _) = src.as_chunks::<4>();
     for (d, s) in d.iter_mut().zip(s) {
@@ -54,7 +54,7 @@ fn copy(dst: &mut [u32], src: &[u32]) {
 /// Joins clock `src` into `dst` (entrywise maximum; lengths as in [`copy`]).
 #[inline(always)]
 fn join(dst: &mut [u32], src: &[u32]) {
-    debug_assert!(dst.len() == src.len() && dst.len() % 4 == 0);
+    debug_assert!(dst.len() == src.len() && dst.len().is_multiple_of(4));
     let (d, _) = dst.as_chunks_mut::<4>();
     let (s, _) = src.as_chunks::<4>();
     for (d, s) in d.iter_mut().zip(s) {
