@@ -460,6 +460,7 @@ impl Detector {
     /// An invocation was admitted at `step` (its `seq` at least the base, see
     /// [`Detector::set_base`]; without a base, the first admitted sets it) into `lane`:
     /// the executor's slot, which no other invocation in flight holds.
+    #[inline]
     pub fn start(&mut self, id: InvocationId, step: u64, lane: usize) {
         let base = *self.invs.base.get_or_insert(id.seq);
         let Some(i) = id.seq.checked_sub(base).map(|i| i as usize) else {
@@ -472,7 +473,10 @@ impl Detector {
             self.lanes.resize_with(lane + 1, Lane::default);
         }
         // (Normally empty: it was cleared when its last invocation finished.)
-        self.clear_lane(lane as u32);
+        let l = &self.lanes[lane];
+        if !l.touched.is_empty() || !l.loads.is_empty() || l.record.is_some() {
+            self.clear_lane(lane as u32);
+        }
         self.clocks.ensure(lane);
         if self.clocks.tracked(Some(lane as u32)).is_some() {
             self.clocks.start(lane);
@@ -488,6 +492,7 @@ impl Detector {
 
     /// Forgets what a lane holds (its loads, open record, and its place in the toucher
     /// sets of the addresses it touched).
+    #[inline(always)]
     fn clear_lane(&mut self, lane: u32) {
         let l = &mut self.lanes[lane as usize];
         for &a in &l.touched {
@@ -499,11 +504,14 @@ impl Detector {
     }
 
     /// An invocation finished (or was dropped after a fault) at `step`.
+    #[inline]
     pub fn finish(&mut self, seq: u64, step: u64) {
-        let lane = self.invs.lane(seq);
-        if let Some(s) = self.invs.get_mut(seq) {
+        // (One lookup: its lane, if it was in flight, and its end.)
+        let lane = self.invs.get_mut(seq).and_then(|s| {
+            let lane = s.end.is_none().then_some(s.lane);
             s.end = Some(step);
-        }
+            lane
+        });
         if let Some(l) = lane {
             self.clear_lane(l);
         }

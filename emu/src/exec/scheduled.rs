@@ -133,9 +133,11 @@ pub(super) fn run_scheduled<K: FragmentKernel>(
         sc,
         max_steps,
         inputs,
-        outs,
-        colors,
-        targets,
+        Harvest::Full {
+            outs,
+            colors,
+            targets,
+        },
         &mut scratch,
         &mut acc,
     );
@@ -154,6 +156,19 @@ pub(super) fn run_scheduled<K: FragmentKernel>(
     }
 }
 
+/// What an execution keeps of its invocations as they finish.
+pub(crate) enum Harvest<'o> {
+    /// Everything, for a pass: `outs[i]` and `colors[i * targets .. (i + 1) * targets]` of
+    /// input `i`, and the statistics and faults in the accumulator.
+    Full {
+        outs: &'o mut [FragOut],
+        colors: &'o mut [[u32; 4]],
+        targets: usize,
+    },
+    /// Only the count of faults, in the accumulator's statistics (an exploration).
+    Faults,
+}
+
 /// One scheduled execution of `inputs` on the given slots and future array (reset here).
 /// Returns the number of steps.
 #[allow(clippy::too_many_arguments)] // the executor's whole state, borrowed apart
@@ -165,9 +180,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     sc: &ScheduleConfig,
     max_steps: u64,
     inputs: &[FragInput],
-    outs: &mut [FragOut],
-    colors: &mut [[u32; 4]],
-    targets: usize,
+    mut harvest: Harvest<'_>,
     scratch: &mut SchedScratch,
     acc: &mut Acc,
 ) -> u64 {
@@ -185,6 +198,8 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
     // them over every invocation in flight at every step was a tenth of a `kb-interlock`
     // campaign (docs/performance.md).
     let mut stale = true;
+    // The version of `cands` (see `Chooser::choose`): bumped whenever they change.
+    let mut version: u64 = 0;
     let SchedScratch {
         detector,
         chooser,
@@ -233,16 +248,26 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         ($slot:expr) => {{
             let s = $slot;
             futs[s] = None;
-            deferred.extend(abandon(&slots[s], env));
+            // (Only a faulted invocation has anything to abandon.)
+            if slots[s].faulted() {
+                deferred.extend(abandon(&slots[s], env));
+            }
             let i = which[s];
             let seq = inputs[i].seq;
-            acc.harvest(
-                &slots[s],
-                &mut outs[i],
-                &mut colors[i * targets..(i + 1) * targets],
-            );
+            match &mut harvest {
+                Harvest::Full {
+                    outs,
+                    colors,
+                    targets,
+                } => {
+                    let t = *targets;
+                    acc.harvest(&slots[s], &mut outs[i], &mut colors[i * t..(i + 1) * t]);
+                }
+                Harvest::Faults => acc.count_fault(&slots[s]),
+            }
             detector.finish(seq, step);
             stale = true;
+            version += 1;
             if let Some(p) = inflight.iter().position(|&x| x == s) {
                 inflight.remove(p);
             }
@@ -286,6 +311,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 retire!(s);
             } else if simple && slots[s].pending.get().is_some() {
                 cands.push(candidate(inputs, chooser, which[s], s));
+                version += 1;
             }
         }
         if !deferred.is_empty() {
@@ -304,6 +330,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 }
             }
             stale = false;
+            version += 1;
             if let Some(m) = simt.as_mut() {
                 m.filter(cands, slots, which);
                 if m.deadlocked(cands) {
@@ -350,10 +377,10 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             } else {
                 sub_cands.clear();
                 sub_cands.extend(conflicting.iter().map(|&ci| cands[ci]));
-                conflicting[chooser.choose(sub_cands, step)]
+                conflicting[chooser.choose(sub_cands, None, step)]
             }
         } else {
-            chooser.choose(cands, step)
+            chooser.choose(cands, Some(version), step)
         };
         if sc.record {
             record.push(k as u8);
@@ -385,13 +412,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
                 _ => None,
             };
             inv.cas_failed.set(false);
-            // What an atomic load or a compare-exchange reads (the detector's ABA rule).
-            let read = if matches!(op, OpKind::AtomicLoad | OpKind::CompareExchange) {
-                env.memory.bits(addr)
-            } else {
-                0
-            };
-            Some((input.seq, addr, op, read, lock, rec))
+            Some((input.seq, addr, op, lock, rec))
         } else {
             None
         };
@@ -408,7 +429,14 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         inv.granted.set(true);
         step += 1;
         let done = matches!(poll_slot(&mut futs[s], inv, &mut cx), Polled::Done);
-        if let Some((seq, addr, op, read, lock, rec)) = mem_step {
+        if let Some((seq, addr, op, lock, rec)) = mem_step {
+            // What an atomic load or a compare-exchange read (the detector's ABA rule): the
+            // word before the step, as the access saw it.
+            let read = if matches!(op, OpKind::AtomicLoad | OpKind::CompareExchange) {
+                inv.read.get()
+            } else {
+                0
+            };
             // A compare-exchange that failed only read the word: an atomic load.
             let op = if op == OpKind::CompareExchange && inv.cas_failed.get() {
                 OpKind::AtomicLoad
@@ -439,11 +467,13 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
         } else if simple && inv.pending.get().is_none() {
             // Suspended on something other than a step: it will never be granted one.
             cands.remove(k);
+            version += 1;
         } else if !simple && !stale {
             if !lock_kept {
                 stale = true;
             } else if !runnable(inv, claims[s].as_ref(), env) {
                 cands.remove(k);
+                version += 1;
             }
         }
     }
@@ -480,18 +510,17 @@ pub(crate) fn explore<K: FragmentKernel>(
     let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
     futs.resize_with(width, || None);
     let mut scratch = SchedScratch::new(env.width, env.height);
-    let mut outs = vec![FragOut::default(); inputs.len()];
-    // No colour targets: an execution shows its callback the memory, never colours, so
-    // harvesting copies none (it copied all eight outputs of every invocation).
-    let mut colors: Vec<[u32; 4]> = Vec::new();
     let mut sc = sc.clone();
     let mut n = 0;
+    // One accumulator for every execution: each counts only its faults (`Harvest::Faults`),
+    // from zero.
+    let mut acc = Acc::default();
     for seed in seeds {
         sc.seed = seed;
         if let Some(l) = env.interlock {
             l.reset();
         }
-        let mut acc = Acc::default();
+        acc.stats.faulted = 0;
         let steps = schedule_once(
             &slots,
             &mut futs,
@@ -500,9 +529,10 @@ pub(crate) fn explore<K: FragmentKernel>(
             &sc,
             max_steps,
             inputs,
-            &mut outs,
-            &mut colors,
-            0,
+            // An execution shows its callback the memory and its count of faults, never
+            // outputs or statistics: harvesting them (eight colour outputs, then the
+            // operation counters, of every invocation) was work thrown away.
+            Harvest::Faults,
             &mut scratch,
             &mut acc,
         );

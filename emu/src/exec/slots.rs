@@ -208,6 +208,14 @@ impl Acc {
         }
     }
 
+    /// Counts a finished invocation's fault only (and takes it, so the slot can be reused).
+    #[inline]
+    pub(crate) fn count_fault(&mut self, inv: &Invocation) {
+        if inv.take_fault().is_some() {
+            self.stats.faulted += 1;
+        }
+    }
+
     /// Counts a finished invocation (steps, waits, discard, fault) and takes its
     /// fault; returns whether it faulted. Its outputs stay in the slot.
     pub(crate) fn count(&mut self, inv: &Invocation) -> bool {

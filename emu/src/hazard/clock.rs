@@ -38,10 +38,36 @@ pub(super) const UNTRACKED: u32 = u32::MAX;
 /// The lane of an access made outside the clocks.
 pub(super) const NO_LANE: u16 = u16::MAX;
 
+/// Copies clock `src` into `dst` (of one length, a multiple of 4, as every clock's: the
+/// stride is a power of two from 4 up). In chunks of 4, a copy is a vector move or two,
+/// where one of a length known only at run time was a call to `memcpy`.
+#[inline(always)]
+fn copy(dst: &mut [u32], src: &[u32]) {
+    debug_assert!(dst.len() == src.len() && dst.len().is_multiple_of(4));
+    let (d, _) = dst.as_chunks_mut::<4>();
+    let (s, _) = src.as_chunks::<4>();
+    for (d, s) in d.iter_mut().zip(s) {
+        *d = *s;
+    }
+}
+
+/// Joins clock `src` into `dst` (entrywise maximum; lengths as in [`copy`]).
+#[inline(always)]
+fn join(dst: &mut [u32], src: &[u32]) {
+    debug_assert!(dst.len() == src.len() && dst.len().is_multiple_of(4));
+    let (d, _) = dst.as_chunks_mut::<4>();
+    let (s, _) = src.as_chunks::<4>();
+    for (d, s) in d.iter_mut().zip(s) {
+        for (d, &s) in d.iter_mut().zip(s) {
+            *d = (*d).max(s);
+        }
+    }
+}
+
 /// The vector clocks of one pass (see the module's documentation).
 pub(super) struct Clocks {
-    /// Entries per clock: a power of two, at least the lanes in use (at most
-    /// [`MAX_CLOCK_LANES`]).
+    /// Entries per clock: a power of two, at least 4 and at least the lanes in use (at
+    /// most [`MAX_CLOCK_LANES`]).
     stride: usize,
     /// Lane `l`'s clock at `lane[l * stride ..][.. stride]`.
     lane: Vec<u32>,
@@ -81,11 +107,18 @@ impl Clocks {
     }
 
     /// Makes room for lanes `0..=lane` (up to [`MAX_CLOCK_LANES`]), keeping every clock.
+    #[inline]
     pub fn ensure(&mut self, lane: usize) {
         if lane < self.stride || self.stride >= MAX_CLOCK_LANES {
             return;
         }
-        let stride = (lane + 1).next_power_of_two().clamp(8, MAX_CLOCK_LANES);
+        self.widen(lane);
+    }
+
+    /// [`Clocks::ensure`] past the current stride.
+    #[cold]
+    fn widen(&mut self, lane: usize) {
+        let stride = (lane + 1).next_power_of_two().clamp(4, MAX_CLOCK_LANES);
         let widen = |v: &[u32], old: usize, n: usize| -> Vec<u32> {
             let mut w = vec![0; n * stride];
             for i in 0..n {
@@ -104,21 +137,20 @@ impl Clocks {
     }
 
     /// An invocation starts in lane `l`: it knows what every finished one knew.
+    #[inline]
     pub fn start(&mut self, l: usize) {
         let s = self.stride;
-        self.lane[l * s..(l + 1) * s].copy_from_slice(&self.done);
+        copy(&mut self.lane[l * s..(l + 1) * s], &self.done);
         self.lane[l * s + l] = self.next[l];
     }
 
     /// The invocation in lane `l` finished: its successors in the lane start past its
     /// epochs, and every invocation started from now on knows what it knew.
+    #[inline]
     pub fn finish(&mut self, l: usize) {
         let s = self.stride;
         self.next[l] = self.lane[l * s + l] + 1;
-        let (done, lane) = (&mut self.done, &self.lane[l * s..(l + 1) * s]);
-        for (d, &c) in done.iter_mut().zip(lane) {
-            *d = (*d).max(c);
-        }
+        join(&mut self.done, &self.lane[l * s..(l + 1) * s]);
     }
 
     /// The current epoch of the invocation in lane `l` (that of its next access).
@@ -146,10 +178,7 @@ impl Clocks {
         let s = self.stride;
         let w = (word - 1) as usize;
         let w = &self.words[w * s..(w + 1) * s];
-        let mine = &mut self.lane[l * s..(l + 1) * s];
-        for (m, &c) in mine.iter_mut().zip(w) {
-            *m = (*m).max(c);
-        }
+        join(&mut self.lane[l * s..(l + 1) * s], w);
     }
 
     /// Lane `l` releases into `word` (allocated here on a word's first release): the
@@ -169,7 +198,7 @@ impl Clocks {
         }
         let w = (*word - 1) as usize;
         let (words, lane) = (&mut self.words, &self.lane);
-        words[w * s..(w + 1) * s].copy_from_slice(&lane[l * s..(l + 1) * s]);
+        copy(&mut words[w * s..(w + 1) * s], &lane[l * s..(l + 1) * s]);
         self.lane[l * s + l] += 1;
     }
 }

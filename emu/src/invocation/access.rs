@@ -176,39 +176,42 @@ impl<T: Word> Future for Access<'_, T> {
 
 impl<T: Word> Request<'_, T> {
     /// The scheduled executor's path: suspend at a step until the scheduler grants it.
+    ///
+    /// What [`Frag::step`] and [`Step::poll`] do, written out for a memory access: at the
+    /// first poll, the bounds check and the step's announcement; at a later one, the grant.
+    /// (The address is not checked again: a first poll that found it out of range faulted
+    /// the invocation, which then never steps.)
     #[inline(never)]
-    fn poll_scheduled(&mut self, cx: &mut Context<'_>) -> Poll<T> {
+    fn poll_scheduled(&mut self, _cx: &mut Context<'_>) -> Poll<T> {
         let frag = self.frag;
         let (inv, env) = (frag.inv, frag.env);
-        let Some(addr) = frag.addr(self.buf, self.index) else {
-            return Poll::Pending;
-        };
         let kind = self.op.kind();
-        let record = self.record;
-        let step_kind = StepKind::Mem {
-            addr,
-            op: kind,
-            record,
-        };
-        let mut step = if self.stepped {
-            // The step was announced at the first poll; its future holds no other state
-            // in scheduled mode, so it is rebuilt rather than kept in the access.
-            Step {
-                frag,
-                kind: step_kind,
-                yielded: false,
-            }
+        let addr = if self.stepped {
+            Addr::new(self.buf.id, self.index)
         } else {
+            let Some(addr) = frag.addr(self.buf, self.index) else {
+                return Poll::Pending;
+            };
             self.stepped = true;
-            frag.step(step_kind)
+            inv.pending.set(Some(StepKind::Mem {
+                addr,
+                op: kind,
+                record: self.record,
+            }));
+            addr
         };
-        if Pin::new(&mut step).poll(cx).is_pending() {
+        if inv.faulted() || !inv.granted.get() {
             return Poll::Pending;
         }
+        inv.granted.set(false);
+        inv.pending.set(None);
+        inv.steps.set(inv.steps.get() + 1);
         let k = kind as usize;
         inv.ops[k].set(inv.ops[k].get() + 1);
         // One thread runs every invocation: no locked instruction needed.
         let bits = env.memory.apply_exclusive::<T>(addr, self.op);
+        // What the access read (the word before it), for the hazard detector.
+        inv.read.set(bits);
         if let MemOp::CompareExchange(expected, _) = self.op {
             let wide = T::WIDE;
             inv.cas_failed.set(if wide {

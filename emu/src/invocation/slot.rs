@@ -36,6 +36,10 @@ pub(crate) struct Invocation {
     /// Scheduled executor: the last compare-exchange performed failed (wrote nothing), for
     /// the hazard detector, which counts it as an atomic load.
     pub cas_failed: Cell<bool>,
+    /// Scheduled executor: what the last memory access performed read (the word's bits
+    /// before it; the loaded value of a load, the compared one of a compare-exchange), for
+    /// the hazard detector.
+    pub read: Cell<u64>,
     /// Why the invocation ended early; `None` while it runs. Read through [`Self::faulted`]
     /// (a flag, so the hot path never touches the `RefCell`).
     fault: RefCell<Option<FaultKind>>,
@@ -171,6 +175,7 @@ impl Invocation {
             depth_out: Cell::new(None),
             pending: Cell::new(None),
             cas_failed: Cell::new(false),
+            read: Cell::new(0),
             granted: Cell::new(false),
             steps: Cell::new(0),
             waits: Cell::new(0),
