@@ -116,13 +116,16 @@ impl ListPool {
                 "{prefix}: a pool of {nodes} nodes is larger than a buffer can hold"
             )));
         }
-        let heads = device.buffer::<u32>(&format!("{prefix}-heads"), lists)?;
-        device.memory.fill(heads, EMPTY)?;
-        let nodes =
-            device.buffer::<u32>(&format!("{prefix}-nodes"), nodes.max(1) * NODE_WORDS as u64)?;
-        if unwritten == Unwritten::Empty {
-            device.memory.fill(nodes, EMPTY)?;
-        }
+        let heads = device.buffer_filled::<u32>(&format!("{prefix}-heads"), lists, EMPTY)?;
+        let node_words = nodes.max(1) * NODE_WORDS as u64;
+        let nodes = device.buffer_filled::<u32>(
+            &format!("{prefix}-nodes"),
+            node_words,
+            match unwritten {
+                Unwritten::Empty => EMPTY,
+                Unwritten::Zero => 0,
+            },
+        )?;
         let counters = device.buffer::<u32>(&format!("{prefix}-counters"), regions)?;
         let dropped = device.buffer::<u32>(&format!("{prefix}-dropped"), regions)?;
         Ok(ListPool {

@@ -308,8 +308,12 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         // Every pixel's coverage: the span's of `run_unit_direct` (`RowSetup::row`).
         let cov = coverage & pass.state.sample_mask & *all_samples;
         if cov == 0 {
+            tile.clear_pending_color();
             return;
         }
+        // Planes an earlier framebuffer left uncleared are cleared row by row just ahead
+        // of the row's writes (`TileMemory::color_unclear`), by this thread, in cache.
+        let unclear = tile.take_pending_color();
         let samples = samples_of(cov);
         let targets = pass.targets.min(8);
         // One sample, every target written plainly (a resolve): the output's bits go
@@ -326,6 +330,9 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         // Blocks no geometry reached: their pixels get the kernel's declared output.
         let skip = pass.touched.zip(pass.untouched_output);
         for ly in 0..tile.h {
+            if unclear {
+                tile.clear_color_row(ly);
+            }
             let y = y0 + ly;
             // Full-screen ids are by pixel, row-major (`Row::row_seq` with source 0).
             let row_seq = pass.seq_base.wrapping_add(y as u64 * env.width as u64);
@@ -388,6 +395,12 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                     }
                     tile.write_outputs(pass.state, lx, ly, cov, &colors[..targets]);
                 }
+            }
+        }
+        if unclear {
+            // The padding rows of an edge tile (never written, but the planes' values).
+            for ly in tile.h..tile.tile_size {
+                tile.clear_color_row(ly);
             }
         }
         slot.clear_outputs();
@@ -690,6 +703,7 @@ impl Untouched<'_> {
         debug_assert_eq!(self.targets, 1);
         if tile.samples == 1 && self.cov == 1 && self.state.targets[0].plain_write() {
             // The bits go straight to the texels (what `write_outputs` computes).
+            tile.clear_pending_color();
             let row = (ly * tile.tile_size) as usize;
             tile.color[0][row + run.start as usize..row + run.end as usize].fill(self.bits);
             return;
