@@ -131,6 +131,22 @@ impl TileMemory {
         }
     }
 
+    /// Texel `i` (an [`TileMemory::index`]) of target `target`'s plane: 0 while the planes
+    /// await their clear (`color_unclear`).
+    pub fn color_at(&self, target: usize, i: usize) -> [u32; 4] {
+        let texel = self.color[target][i];
+        if self.color_unclear {
+            [0; 4]
+        } else {
+            texel
+        }
+    }
+
+    /// Texels of each colour plane (the full tile, padding included, every sample).
+    pub fn plane_len(&self) -> usize {
+        (self.tile_size * self.tile_size * self.samples) as usize
+    }
+
     /// Clears the colour planes if they still hold an earlier framebuffer's words
     /// (`color_unclear`): before anything reads or writes them as the tile's.
     #[inline]

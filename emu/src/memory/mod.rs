@@ -23,7 +23,7 @@ pub(crate) use cache::{PixelPrefetcher, WordCache};
 pub use ops::{f32_order_key, OpKind};
 pub(crate) use ops::{MemOp, WordRef};
 pub use values::{zeroed_u32, Values};
-pub use word::{Addr, Buf, PixelArray, Word, WordKind};
+pub use word::{Addr, BlockArray, Buf, PixelArray, Word, WordKind};
 
 use crate::sync::{AtomicU32, AtomicU64, Ordering};
 use ops::{apply32, apply64, op32, op64};
