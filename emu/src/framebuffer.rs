@@ -44,7 +44,16 @@ pub struct TileMemory {
     pub tile_size: u32,
     pub samples: u32,
     /// Raw channel words per target (f32 bits for float and RGBA8 formats, u32 otherwise).
-    pub color: Vec<Vec<[u32; 4]>>,
+    /// While `color_unclear` is set they are not the tile's values (see there).
+    pub(crate) color: Vec<Vec<[u32; 4]>>,
+    /// The colour planes still hold what an earlier framebuffer left in them (a new
+    /// framebuffer takes kept planes without clearing them: [`TilePlanes::take`]): every
+    /// texel's value is 0, the clear, and whoever first writes the tile clears it first
+    /// ([`TileMemory::clear_pending_color`], or row by row just ahead of the writes in the
+    /// fused full-screen path, which owns the tile: the clear is then done by the pass's
+    /// threads, each on rows it is about to write, instead of a 64 MiB `memset` on one
+    /// thread for a 2048x2048 RGBA32F target before the frame's passes).
+    pub(crate) color_unclear: bool,
     /// Depth per sample. Empty until a depth or stencil test first needs it (most
     /// multi-fragment passes never test): then all samples hold `depth_clear`.
     pub depth: Vec<f32>,
@@ -71,6 +80,7 @@ impl TileMemory {
     ) -> TileMemory {
         let mut t = TileMemory::lazy(x0, y0, w, h, tile_size, samples, targets);
         t.materialize();
+        t.clear_pending_color();
         t
     }
 
@@ -86,6 +96,14 @@ impl TileMemory {
         targets: usize,
     ) -> TileMemory {
         let n = (tile_size * tile_size * samples) as usize;
+        let mut color_unclear = false;
+        let color = (0..targets)
+            .map(|_| {
+                let (plane, unclear) = TILE_COLORS.take(n);
+                color_unclear |= unclear;
+                plane
+            })
+            .collect();
         TileMemory {
             x0,
             y0,
@@ -93,7 +111,8 @@ impl TileMemory {
             h,
             tile_size,
             samples,
-            color: (0..targets).map(|_| TILE_COLORS.zeroed(n)).collect(),
+            color,
+            color_unclear,
             depth: Vec::new(),
             stencil: Vec::new(),
             depth_clear: 1.0,
@@ -109,6 +128,58 @@ impl TileMemory {
         }
         if self.stencil.is_empty() {
             self.stencil = vec![self.stencil_clear; n];
+        }
+    }
+
+    /// Texel `i` (an [`TileMemory::index`]) of target `target`'s plane: 0 while the planes
+    /// await their clear (`color_unclear`).
+    pub fn color_at(&self, target: usize, i: usize) -> [u32; 4] {
+        let texel = self.color[target][i];
+        if self.color_unclear {
+            [0; 4]
+        } else {
+            texel
+        }
+    }
+
+    /// Texels of each colour plane (the full tile, padding included, every sample).
+    pub fn plane_len(&self) -> usize {
+        (self.tile_size * self.tile_size * self.samples) as usize
+    }
+
+    /// Clears the colour planes if they still hold an earlier framebuffer's words
+    /// (`color_unclear`): before anything reads or writes them as the tile's.
+    #[inline]
+    pub(crate) fn clear_pending_color(&mut self) {
+        if self.color_unclear {
+            self.clear_all_color();
+        }
+    }
+
+    #[cold]
+    fn clear_all_color(&mut self) {
+        for plane in &mut self.color {
+            plane.fill([0; 4]);
+        }
+        self.color_unclear = false;
+    }
+
+    /// Takes over the pending clear of the colour planes: true if they held an earlier
+    /// framebuffer's words, and the caller now clears every row of the tile
+    /// ([`TileMemory::clear_color_row`], padding rows included) before it reads or writes it.
+    #[inline]
+    pub(crate) fn take_pending_color(&mut self) -> bool {
+        std::mem::replace(&mut self.color_unclear, false)
+    }
+
+    /// Zeroes row `ly` of the tile (every column, padding included, every sample) in every
+    /// colour plane.
+    #[inline]
+    pub(crate) fn clear_color_row(&mut self, ly: u32) {
+        let per_row = (self.tile_size * self.samples) as usize;
+        let at = ly as usize * per_row;
+        for plane in &mut self.color {
+            plane[at..at + per_row].fill([0; 4]);
         }
     }
 
@@ -250,6 +321,7 @@ impl TileMemory {
     ) {
         let mask = mask & self.sample_bits();
         let base = self.index(lx, ly, 0);
+        self.clear_pending_color();
         for (i, (target, out)) in state.targets.iter().zip(outputs).enumerate() {
             let color = &mut self.color[i];
             let mut bits = mask;
@@ -308,7 +380,8 @@ pub struct Framebuffer {
 /// every frame (every run has its framebuffer). Freed, they went back to the OS (the top of
 /// `malloc`'s heap is trimmed), so each frame's resolve faulted them in again, a page fault
 /// per 4 KiB as it wrote its first pixel of each page. A tile here takes a kept plane of its
-/// size and zeroes it, as a fresh one is. Plain `std` mutex: bookkeeping.
+/// size as it is, and clears it when it is first written (`TileMemory::color_unclear`).
+/// Plain `std` mutex: bookkeeping.
 static TILE_COLORS: TilePlanes = TilePlanes {
     free: std::sync::Mutex::new(Vec::new()),
 };
@@ -321,8 +394,9 @@ struct TilePlanes {
 }
 
 impl TilePlanes {
-    /// `n` texels of zero: a kept plane of that length when there is one.
-    fn zeroed(&self, n: usize) -> Vec<[u32; 4]> {
+    /// A plane of `n` texels: a kept plane of that length, as an earlier framebuffer left
+    /// it, when there is one (`true`: it still needs its clear), else a new one of zeros.
+    fn take(&self, n: usize) -> (Vec<[u32; 4]>, bool) {
         let kept = {
             let mut free = self.free.lock().unwrap_or_else(|e| e.into_inner());
             match free.last() {
@@ -331,11 +405,8 @@ impl TilePlanes {
             }
         };
         match kept {
-            Some(mut v) => {
-                v.fill([0; 4]);
-                v
-            }
-            None => vec![[0u32; 4]; n],
+            Some(v) => (v, true),
+            None => (vec![[0u32; 4]; n], false),
         }
     }
 
@@ -464,6 +535,7 @@ impl Framebuffer {
     /// format's count should be 0, as `combine` keeps them).
     pub fn clear_color(&mut self, target: usize, value: [u32; 4]) {
         for t in &mut self.tiles {
+            t.clear_pending_color();
             t.color[target].fill(value);
         }
     }
@@ -484,7 +556,11 @@ impl Framebuffer {
     /// Raw words of one sample of a target, global pixel coordinates.
     pub fn color(&self, target: usize, x: u32, y: u32, sample: u32) -> [u32; 4] {
         let (t, i) = self.locate(x, y, sample);
-        self.tiles[t].color[target][i]
+        let t = &self.tiles[t];
+        if t.color_unclear {
+            return [0; 4];
+        }
+        t.color[target][i]
     }
     /// Depth of one sample, global pixel coordinates.
     pub fn depth(&self, x: u32, y: u32, sample: u32) -> f32 {
@@ -503,7 +579,8 @@ impl Framebuffer {
         let samples = self.samples.count();
         let mut texels = vec![[0u32; 4]; self.width as usize * self.height as usize * samples];
         let row = self.width as usize * samples;
-        for tile in &self.tiles {
+        // Tiles not yet cleared hold zeros: the texels are already.
+        for tile in self.tiles.iter().filter(|t| !t.color_unclear) {
             let src = &tile.color[target];
             // Each tile row is a contiguous run of `w * samples` texels in both layouts.
             let run = tile.w as usize * samples;

@@ -28,6 +28,7 @@ use crate::fragment::Fragment;
 use crate::interlock::InterlockMode;
 use crate::memory::{Buf, Word};
 
+use crate::memory::BlockArray;
 /// Moved to [`crate::memory`] (the layout of a buffer); kept here for older paths.
 pub use crate::memory::PixelArray;
 
@@ -55,6 +56,9 @@ pub struct KernelInfo {
     /// The per-pixel array is the pixel's own: no invocation accesses another pixel's slot
     /// (see [`KernelInfo::with_own_pixel_array`]).
     pub pixel_array_own: bool,
+    /// A per-block array whose blocks' slots are their pixels' own (see
+    /// [`KernelInfo::with_own_block_array`]).
+    pub own_block_array: Option<BlockArray>,
     /// What a full-screen invocation does at a pixel no geometry pass of the device
     /// rasterized (see [`KernelInfo::with_untouched_output`]).
     pub untouched_output: Option<[u32; 4]>,
@@ -73,6 +77,7 @@ impl KernelInfo {
             interpolants: true,
             pixel_array: None,
             pixel_array_own: false,
+            own_block_array: None,
             untouched_output: None,
             by_region: false,
         }
@@ -134,6 +139,28 @@ impl KernelInfo {
         let mut info = self.with_pixel_array(buf, stride);
         info.pixel_array_own = true;
         info
+    }
+    /// The promise of [`KernelInfo::with_own_pixel_array`] for a per-block array
+    /// ([`BlockArray`]: blocks of `2^shift` pixels a side, `stride` words each): in this
+    /// pass, every access to `buf` is to the slot of the invocation's own pixel's block (a
+    /// counter per screen block, as `ll`'s node allocation by blocks). Where a worker owns
+    /// a tile for the pass and the tiles are at least as large as the blocks (so that a
+    /// block lies in one tile), only that worker reaches the slots of the tile's blocks, and
+    /// it performs the kernel's atomics there as a plain load and store; an access to
+    /// another block's slot of `buf` is then a [`FaultKind::Misuse`]. Elsewhere the atomics
+    /// stay atomic and nothing is checked.
+    pub const fn with_own_block_array<T: Word>(
+        mut self,
+        buf: Buf<T>,
+        shift: u32,
+        stride: u32,
+    ) -> KernelInfo {
+        self.own_block_array = Some(BlockArray {
+            buffer: buf.id,
+            shift,
+            stride,
+        });
+        self
     }
 }
 

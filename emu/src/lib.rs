@@ -48,7 +48,7 @@ pub use hazard::{Hazard, HazardCounts, HazardKind};
 pub use interlock::InterlockMode;
 pub use invocation::{Access, CompareExchange, DirectFrag, Frag, Performed, Store};
 pub use kernel::{FaultKind, FragInput, FragmentKernel, KernelInfo};
-pub use memory::{Buf, Memory, PixelArray, Values, Word};
+pub use memory::{BlockArray, Buf, Memory, PixelArray, Values, Word};
 pub use pipeline::{
     Coverage, Device, Fault, OcclusionQuery, PassError, PassReport, PassState, PassTime,
 };

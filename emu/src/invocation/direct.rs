@@ -69,8 +69,8 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
     fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
         let st = self.state;
         // The fused path never keeps the contention table (`shade_direct` checks).
-        let route = match st.own {
-            Some(own) if OWN && own.buffer == buf.id => {
+        let route = match (st.own, st.own_block) {
+            (Some(own), _) if OWN && own.buffer == buf.id => {
                 // The tile is this worker's for the pass: the fragment's own slot is
                 // reached by no other thread (`DirectState::owning`).
                 let input = st.input.get();
@@ -78,7 +78,27 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
                     * own.stride as u64;
                 // Out of bounds is reported as such, below.
                 if (index as u64).wrapping_sub(first) >= own.stride as u64 && index < buf.len {
-                    self.frag.not_own_slot(buf.id, index, (input.x, input.y));
+                    self.frag.not_own_slot(
+                        buf.id,
+                        index,
+                        (input.x, input.y),
+                        "with_own_pixel_array",
+                    );
+                    return Poll::Pending;
+                }
+                Route::Owned(&st.words)
+            }
+            (_, Some(own)) if OWN && own.buffer == buf.id => {
+                // The same for the slot of the fragment's block, which lies in the tile.
+                let input = st.input.get();
+                let first = own.first_word(input.x, input.y, self.frag.env.width);
+                if (index as u64).wrapping_sub(first) >= own.stride as u64 && index < buf.len {
+                    self.frag.not_own_slot(
+                        buf.id,
+                        index,
+                        (input.x, input.y),
+                        "with_own_block_array",
+                    );
                     return Poll::Pending;
                 }
                 Route::Owned(&st.words)

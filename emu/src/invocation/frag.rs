@@ -145,13 +145,18 @@ impl<'a> Frag<'a> {
     /// (`KernelInfo::with_own_pixel_array`), on a path that relies on the declaration.
     #[cold]
     #[inline(never)]
-    pub(crate) fn not_own_slot(&self, buffer: u32, index: u32, (x, y): (u32, u32)) {
+    pub(crate) fn not_own_slot(
+        &self,
+        buffer: u32,
+        index: u32,
+        (x, y): (u32, u32),
+        declared_with: &str,
+    ) {
         let name = self.env.memory.buffer_name(buffer);
         self.inv.set_fault(FaultKind::Misuse {
             message: format!(
                 "the invocation at pixel ({x}, {y}) accessed word {index} of `{name}`, outside \
-                 its own slot of the per-pixel array the kernel declared with \
-                 `with_own_pixel_array`"
+                 its own slot of the array the kernel declared with `{declared_with}`"
             ),
         });
     }

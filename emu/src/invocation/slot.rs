@@ -5,7 +5,7 @@ use std::cell::{Cell, RefCell};
 
 use super::StepKind;
 use crate::kernel::{FaultKind, FragInput};
-use crate::memory::{OpKind, PixelArray, WordCache};
+use crate::memory::{BlockArray, OpKind, PixelArray, WordCache};
 
 /// Per-invocation mutable state, owned by the executor (one per in-flight slot) and shared
 /// with the invocation's future through [`Frag`]. Single-threaded (`Cell`s).
@@ -75,6 +75,8 @@ pub(crate) struct DirectState<'m> {
     /// The kernel's own per-pixel array when this worker owns the tile for the pass
     /// ([`DirectState::owning`]): its atomics at the fragment's slot are plain.
     pub own: Option<PixelArray>,
+    /// The kernel's own per-block array, likewise (its blocks lie in this worker's tiles).
+    pub own_block: Option<BlockArray>,
 }
 
 impl DirectState<'_> {
@@ -88,6 +90,7 @@ impl DirectState<'_> {
             ops: Default::default(),
             words: WordCache::new(),
             own: None,
+            own_block: None,
         }
     }
 
@@ -96,9 +99,10 @@ impl DirectState<'_> {
     /// pixels' own (`KernelInfo::with_own_pixel_array`). Only that worker then reaches a
     /// slot of its tile during the pass, so an operation on it needs no atomic instruction.
     #[inline(always)]
-    pub fn owning(array: Option<PixelArray>) -> Self {
+    pub fn owning(array: Option<PixelArray>, block: Option<BlockArray>) -> Self {
         let mut state = Self::new();
         state.own = array;
+        state.own_block = block;
         state
     }
 

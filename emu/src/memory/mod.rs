@@ -23,11 +23,11 @@ pub(crate) use cache::{PixelPrefetcher, WordCache};
 pub use ops::{f32_order_key, OpKind};
 pub(crate) use ops::{MemOp, WordRef};
 pub use values::{zeroed_u32, Values};
-pub use word::{Addr, Buf, PixelArray, Word, WordKind};
+pub use word::{Addr, BlockArray, Buf, PixelArray, Word, WordKind};
 
 use crate::sync::{AtomicU32, AtomicU64, Ordering};
 use ops::{apply32, apply64, op32, op64};
-use values::zeroed_words;
+use values::filled_words;
 
 /// Largest buffer, in words (4 GiB of 32-bit words would not be addressable by u32 indices).
 pub const MAX_BUFFER_WORDS: u64 = 1 << 31;
@@ -145,6 +145,17 @@ impl Memory {
 
     /// Creates a zero-filled buffer of `len` words of `T`.
     pub fn create<T: Word>(&mut self, name: &str, len: u64) -> Result<Buf<T>, MemoryError> {
+        self.create_filled(name, len, T::from_bits(0))
+    }
+
+    /// Creates a buffer of `len` words of `T`, each `value`: what [`Memory::create`] then
+    /// [`Memory::fill`] leave, written once.
+    pub fn create_filled<T: Word>(
+        &mut self,
+        name: &str,
+        len: u64,
+        value: T,
+    ) -> Result<Buf<T>, MemoryError> {
         if len > MAX_BUFFER_WORDS {
             return Err(MemoryError::BufferTooLarge {
                 name: name.into(),
@@ -158,11 +169,11 @@ impl Memory {
                 bytes,
             });
         }
-        let threads = self.clear_threads;
+        let (threads, bits) = (self.clear_threads, value.to_bits());
         let words = if T::WIDE {
-            Words::W64(zeroed_words(len as usize, threads))
+            Words::W64(filled_words(len as usize, threads, bits))
         } else {
-            Words::W32(zeroed_words(len as usize, threads))
+            Words::W32(filled_words(len as usize, threads, bits))
         };
         self.bytes += bytes;
         let id = self.buffers.len() as u32;

@@ -101,6 +101,18 @@ pub(super) fn zeroed_words<A: ZeroIsValid + Recyclable + Send>(
     len: usize,
     threads: usize,
 ) -> Values<A> {
+    filled_words(len, threads, 0)
+}
+
+/// [`zeroed_words`] with every word `bits` instead of zero (its low 32 bits for 32-bit
+/// words): a buffer that starts at another value is written once, not zeroed and then
+/// filled (`ll`'s list heads, `EMPTY`, 16 MiB at 2048x2048).
+#[cfg(not(loom))]
+pub(super) fn filled_words<A: ZeroIsValid + Recyclable + Send>(
+    len: usize,
+    threads: usize,
+    bits: u64,
+) -> Values<A> {
     /// Below this a thread costs more than it saves.
     const PER_THREAD_BYTES: usize = 1 << 20;
     let size = std::mem::size_of::<A>();
@@ -111,17 +123,19 @@ pub(super) fn zeroed_words<A: ZeroIsValid + Recyclable + Send>(
     if let Some(mut all) = A::recycled().take(total) {
         let spare = &mut all.spare_capacity_mut()[..total];
         let parts: Vec<_> = spare.chunks_mut(total.div_ceil(threads)).collect();
-        crate::sync::pool::broadcast_each(parts, |part| {
-            // SAFETY: `part` is a slice of `MaybeUninit<A>`, valid for writes of its
-            // length; any bytes are a valid `MaybeUninit`.
-            unsafe { std::ptr::write_bytes(part.as_mut_ptr(), 0, part.len()) };
-        });
+        crate::sync::pool::broadcast_each(parts, |part| fill_uninit(part, bits));
         // SAFETY: the first `total` elements (within the capacity, `take` checked it) were
-        // zeroed just above, and all-zero bytes are a valid `A` (see below).
+        // initialized just above (`fill_uninit` writes every element of its part).
         unsafe { all.set_len(total) };
         return aligned(all, len);
     }
-    let all = if threads == 1 {
+    let all = if threads == 1 && bits != 0 {
+        let mut words = Box::<[A]>::new_uninit_slice(total);
+        advise_huge_pages(&words);
+        fill_uninit(&mut words, bits);
+        // SAFETY: `fill_uninit` initialized every element.
+        unsafe { words.assume_init() }.into_vec()
+    } else if threads == 1 {
         // SAFETY: `A` is an atomic integer (`ZeroIsValid` is implemented for `AtomicU32`
         // and `AtomicU64` only), for which all-zero bytes are a valid value (zero).
         let words = unsafe { Box::<[A]>::new_zeroed_slice(total).assume_init() };
@@ -134,16 +148,29 @@ pub(super) fn zeroed_words<A: ZeroIsValid + Recyclable + Send>(
         // Before zeroing, so that fresh memory is faulted in as huge pages.
         advise_huge_pages(&words);
         let parts: Vec<_> = words.chunks_mut(total.div_ceil(threads)).collect();
-        crate::sync::pool::broadcast_each(parts, |part| {
-            // SAFETY: `part` is a slice of `MaybeUninit<A>`, valid for writes of its
-            // length; any bytes are a valid `MaybeUninit`.
-            unsafe { std::ptr::write_bytes(part.as_mut_ptr(), 0, part.len()) };
-        });
-        // SAFETY: every element was zeroed just above (the parts cover the slice), and
-        // all-zero bytes are a valid `A` (see the one-thread case).
+        crate::sync::pool::broadcast_each(parts, |part| fill_uninit(part, bits));
+        // SAFETY: every element was initialized just above (the parts cover the slice).
         unsafe { words.assume_init() }.into_vec()
     };
     aligned(all, len)
+}
+
+/// Writes the word `bits` to every element of `part`: by bytes when all of the word's
+/// bytes are equal (zero, `u32::MAX`: one `memset`), else word by word.
+#[cfg(not(loom))]
+fn fill_uninit<A: ZeroIsValid>(part: &mut [std::mem::MaybeUninit<A>], bits: u64) {
+    match A::repeated_byte(bits) {
+        // SAFETY: `part` is a slice of `MaybeUninit<A>`, valid for writes of its length; `A`
+        // is an atomic integer (`ZeroIsValid` is implemented for `AtomicU32` and
+        // `AtomicU64` only), for which every bit pattern is a valid value, here `bits`'s
+        // own (all of its bytes are `byte`).
+        Some(byte) => unsafe { std::ptr::write_bytes(part.as_mut_ptr(), byte, part.len()) },
+        None => {
+            for w in part {
+                w.write(A::of_bits(bits));
+            }
+        }
+    }
 }
 
 /// Asks the OS to back the 2 MiB pages that lie wholly inside `words` with huge pages, for
@@ -198,27 +225,42 @@ fn aligned<A>(mut all: Vec<A>, len: usize) -> Values<A> {
 }
 
 #[cfg(loom)]
-pub(super) fn zeroed_words<A: ZeroIsValid>(len: usize, _threads: usize) -> Values<A> {
+pub(super) fn zeroed_words<A: ZeroIsValid>(len: usize, threads: usize) -> Values<A> {
+    filled_words(len, threads, 0)
+}
+
+#[cfg(loom)]
+pub(super) fn filled_words<A: ZeroIsValid>(len: usize, _threads: usize, bits: u64) -> Values<A> {
     Values {
-        all: (0..len).map(|_| A::zero()).collect(),
+        all: (0..len).map(|_| A::of_bits(bits)).collect(),
         start: 0,
     }
 }
 
-/// Atomic words whose all-zero bit pattern is the value zero.
+/// Atomic words whose all-zero bit pattern is the value zero (and every bit pattern a
+/// value).
 pub(super) trait ZeroIsValid: Sized {
-    #[cfg(loom)]
-    fn zero() -> Self;
+    /// The word holding `bits` (the low 32 bits for a 32-bit word).
+    fn of_bits(bits: u64) -> Self;
+    /// The byte every byte of the word `bits` is, if they are all one.
+    #[cfg_attr(loom, allow(dead_code, reason = "loom's words are built one by one"))]
+    fn repeated_byte(bits: u64) -> Option<u8>;
 }
 impl ZeroIsValid for AtomicU32 {
-    #[cfg(loom)]
-    fn zero() -> Self {
-        AtomicU32::new(0)
+    fn of_bits(bits: u64) -> Self {
+        AtomicU32::new(bits as u32)
+    }
+    fn repeated_byte(bits: u64) -> Option<u8> {
+        let b = (bits as u32).to_le_bytes();
+        b.iter().all(|&x| x == b[0]).then_some(b[0])
     }
 }
 impl ZeroIsValid for AtomicU64 {
-    #[cfg(loom)]
-    fn zero() -> Self {
-        AtomicU64::new(0)
+    fn of_bits(bits: u64) -> Self {
+        AtomicU64::new(bits)
+    }
+    fn repeated_byte(bits: u64) -> Option<u8> {
+        let b = bits.to_le_bytes();
+        b.iter().all(|&x| x == b[0]).then_some(b[0])
     }
 }

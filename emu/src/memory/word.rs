@@ -160,3 +160,27 @@ pub struct PixelArray {
     /// Words per pixel.
     pub stride: u32,
 }
+
+/// A per-block array of a storage buffer: the screen is cut into square blocks of
+/// `2^shift` pixels a side, row-major from the top left (`width.div_ceil(2^shift)` blocks
+/// a row), and block `b`'s slot starts at word `b * stride` (a counter per screen block).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BlockArray {
+    /// The buffer's id ([`Buf::id`]).
+    pub buffer: u32,
+    /// log2 of a block's side in pixels.
+    pub shift: u32,
+    /// Words per block.
+    pub stride: u32,
+}
+
+impl BlockArray {
+    /// The first word of the slot of the block holding pixel `(x, y)` of a frame `width`
+    /// pixels wide.
+    #[inline(always)]
+    pub fn first_word(&self, x: u32, y: u32, width: u32) -> u64 {
+        let across = u64::from(width.div_ceil(1 << self.shift.min(31)));
+        (u64::from(y >> self.shift.min(31)) * across + u64::from(x >> self.shift.min(31)))
+            * u64::from(self.stride)
+    }
+}

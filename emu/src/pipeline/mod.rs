@@ -111,6 +111,16 @@ impl Device {
         self.memory.create(name, len)
     }
 
+    /// A buffer of `len` words of `T`, each `value` ([`Memory::create_filled`]).
+    pub fn buffer_filled<T: Word>(
+        &mut self,
+        name: &str,
+        len: u64,
+        value: T,
+    ) -> Result<Buf<T>, MemoryError> {
+        self.memory.create_filled(name, len, value)
+    }
+
     /// Runs a geometry pass: `draw` through `state` into `fb`, shading with `kernel`.
     ///
     /// A mesh whose triangles use a non-finite position or an index out of range is an

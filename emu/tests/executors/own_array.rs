@@ -132,3 +132,85 @@ fn another_pixels_slot_is_misuse_where_tiles_are_owned_and_unchecked_elsewhere()
         "column 4 counts column 3's fragments too"
     );
 }
+
+/// A counter per screen block of 2 x 2 pixels (`with_own_block_array`, 16 words a block so
+/// that blocks' counters are apart): every fragment takes a ticket from its block's counter
+/// and writes it to its own pixel's word; `wrong` also takes one from the block to the
+/// right at column 4 (another block's slot).
+struct BlockTickets {
+    counters: Buf<u32>,
+    tickets: Buf<u32>,
+    wrong: bool,
+}
+
+/// log2 of [`BlockTickets`]' block side, and its words per block.
+const SHIFT: u32 = 1;
+const STRIDE: u32 = 16;
+
+impl FragmentKernel for BlockTickets {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("own-block-tickets").with_own_block_array(self.counters, SHIFT, STRIDE)
+    }
+    async fn shade(&self, f: impl Fragment) {
+        let across = 16u32.div_ceil(1 << SHIFT);
+        let block = |x: u32| ((f.y() >> SHIFT) * across + (x >> SHIFT)) * STRIDE;
+        let n = f.atomic_add(self.counters, block(f.x()), 1).await;
+        f.atomic_max(self.tickets, f.pixel_index(), n + 1).await;
+        if self.wrong && f.x() == 4 {
+            f.atomic_add(self.counters, block(f.x() + 2), 1).await;
+        }
+    }
+}
+
+#[test]
+fn own_block_counters_count_their_blocks_under_every_executor_and_check_where_owned() {
+    let run = |e: &ExecConfig, wrong: bool| {
+        let mut dev = Device::new();
+        let counters = dev
+            .buffer::<u32>("counters", 8 * 4 * STRIDE as u64)
+            .unwrap();
+        let tickets = dev.buffer::<u32>("tickets", 16 * 8).unwrap();
+        let kernel = BlockTickets {
+            counters,
+            tickets,
+            wrong,
+        };
+        let r = draw(&dev, &kernel, e);
+        let m = &dev.memory;
+        (r, m.read(counters).unwrap(), m.read(tickets).unwrap())
+    };
+    // Two layers over every pixel: each block of 4 pixels counts 8 fragments, and every
+    // pixel's last ticket is one of its block's 8.
+    let check = |e: &ExecConfig, counters: &[u32], tickets: &[u32]| {
+        for (b, c) in counters.chunks(STRIDE as usize).enumerate() {
+            assert_eq!(c[0], 8, "{e:?}: block {b}");
+            assert!(c[1..].iter().all(|&w| w == 0), "{e:?}: block {b}");
+        }
+        assert!(
+            tickets.iter().all(|&t| (2..=8).contains(&t)),
+            "{e:?}: {tickets:?}"
+        );
+    };
+    for e in std::iter::once(owning())
+        .chain(direct_execs())
+        .chain(all_execs())
+    {
+        let (r, counters, tickets) = run(&e, false);
+        assert!(r.faults.is_empty(), "{e:?}: {:?}", r.faults);
+        check(&e, &counters, &tickets);
+    }
+    // Where the tiles (8 x 8) are owned, another block's counter is a misuse: column 4's
+    // fragments fault at that access (after their own block's ticket).
+    let (r, counters, _) = run(&owning(), true);
+    assert_eq!(r.stats.faulted, 16);
+    for f in &r.faults {
+        assert_eq!(f.invocation.x, 4);
+        assert!(
+            matches!(&f.kind, FaultKind::Misuse { message }
+                if message.contains("with_own_block_array") && message.contains("`counters`")),
+            "{:?}",
+            f.kind
+        );
+    }
+    assert_eq!(counters.iter().sum::<u32>(), 256);
+}

@@ -62,10 +62,10 @@ fn write_outputs_only_to_min_of_targets_and_outputs() {
     // Two outputs for three targets: the third target is untouched.
     t.write_outputs(&st, 1, 0, 0b10, &[[1, 0, 0, 0], [2, 3, 4, 5]]);
     let i = t.index(1, 0, 1);
-    assert_eq!(t.color[0][i], [1, 0, 0, 0]);
-    assert_eq!(t.color[1][i], [2, 3, 4, 5]);
-    assert_eq!(t.color[2][i], [0; 4]);
-    assert_eq!(t.color[0][i - 1], [0; 4], "sample 0 is not in the mask");
+    assert_eq!(t.color_at(0, i), [1, 0, 0, 0]);
+    assert_eq!(t.color_at(1, i), [2, 3, 4, 5]);
+    assert_eq!(t.color_at(2, i), [0; 4]);
+    assert_eq!(t.color_at(0, i - 1), [0; 4], "sample 0 is not in the mask");
 }
 
 // ---------------------------------------------------------------------------------------
@@ -159,7 +159,7 @@ fn framebuffer_layout_on_non_multiple_sizes() {
     }
     for t in fb.tiles() {
         // Edge tiles keep full-size buffers.
-        assert_eq!(t.color[0].len(), 64 * 64 * 4);
+        assert_eq!(t.plane_len(), 64 * 64 * 4);
         assert_eq!(t.depth.len(), 64 * 64 * 4);
         assert_eq!(t.stencil.len(), 64 * 64 * 4);
     }
@@ -242,4 +242,29 @@ fn readback_outside_the_framebuffer_panics_even_in_tile_padding() {
     let fb = Framebuffer::new(100, 37, SampleCount::X1, 64, &[Format::R32F]).unwrap();
     // (100, 0) lies in the padding of the edge tile, which is not a pixel.
     let _ = fb.color(0, 100, 0, 0);
+}
+
+/// A framebuffer takes the colour planes of dropped ones without clearing them, and clears
+/// a tile's when it is first written: whatever planes it got, every texel reads 0 until
+/// written, and a write to one texel leaves the rest of its tile at 0.
+#[test]
+fn kept_planes_read_as_cleared_until_written() {
+    let formats = [Format::RGBA32UI];
+    let mut old = Framebuffer::new(130, 70, SampleCount::X1, 64, &formats).unwrap();
+    old.clear_color(0, [9, 9, 9, 9]);
+    drop(old);
+    let mut fb = Framebuffer::new(130, 70, SampleCount::X1, 64, &formats).unwrap();
+    let image = fb.image(0);
+    assert!(image.texels.iter().all(|t| *t == [0; 4]));
+    for (x, y) in [(0, 0), (129, 69), (64, 3)] {
+        assert_eq!(fb.color(0, x, y, 0), [0; 4]);
+    }
+    let mut st = FragmentState::new();
+    st.targets = vec![TargetState::new(Format::RGBA32UI)];
+    let t = &mut fb.tiles_mut()[1];
+    t.write_outputs(&st, 2, 1, 1, &[[1, 2, 3, 4]]);
+    assert_eq!(fb.color(0, 66, 1, 0), [1, 2, 3, 4]);
+    let image = fb.image(0);
+    let written = image.texels.iter().filter(|t| **t != [0; 4]).count();
+    assert_eq!(written, 1);
 }

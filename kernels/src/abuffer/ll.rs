@@ -25,7 +25,10 @@
 //!   each other for the resolve. Each block's counter follows the rule above for its own
 //!   range (`dropped` is the sum over blocks); with `pool_per_pixel` there is no count, and
 //!   the single counter of the paper is used. The blocks and the count of a draw are kept
-//!   for the next frame of the same draw (`sizing`).
+//!   for the next frame of the same draw (`sizing`). A fragment takes its node from its own
+//!   block's counter only, and the capture kernel says so (`with_own_block_array`): where a
+//!   worker owns a tile for the pass (blocks of 32 lie in tiles of 64), the counter's atomic
+//!   add is then a plain load and store, as the head's exchange already was.
 //!
 //! **Publication order.** A node's payload (depth, primitive) is written *before* the head
 //! exchange publishes it; its `next` link is the exchange's result, so it is written after
@@ -42,7 +45,7 @@ use std::cell::Cell;
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo, PassReport};
 
 use super::run::{AbRun, Readback};
-use super::sizing::{sized_by_count, Blocks, COUNTER_STRIDE};
+use super::sizing::{sized_by_count, Blocks, BLOCK_SHIFT, COUNTER_STRIDE};
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Capture,
     CapturedFrag, Check, Frame, HazardClass, Params,
@@ -116,13 +119,16 @@ impl ListPool {
                 "{prefix}: a pool of {nodes} nodes is larger than a buffer can hold"
             )));
         }
-        let heads = device.buffer::<u32>(&format!("{prefix}-heads"), lists)?;
-        device.memory.fill(heads, EMPTY)?;
-        let nodes =
-            device.buffer::<u32>(&format!("{prefix}-nodes"), nodes.max(1) * NODE_WORDS as u64)?;
-        if unwritten == Unwritten::Empty {
-            device.memory.fill(nodes, EMPTY)?;
-        }
+        let heads = device.buffer_filled::<u32>(&format!("{prefix}-heads"), lists, EMPTY)?;
+        let node_words = nodes.max(1) * NODE_WORDS as u64;
+        let nodes = device.buffer_filled::<u32>(
+            &format!("{prefix}-nodes"),
+            node_words,
+            match unwritten {
+                Unwritten::Empty => EMPTY,
+                Unwritten::Zero => 0,
+            },
+        )?;
         let counters = device.buffer::<u32>(&format!("{prefix}-counters"), regions)?;
         let dropped = device.buffer::<u32>(&format!("{prefix}-dropped"), regions)?;
         Ok(ListPool {
@@ -417,14 +423,21 @@ pub struct LlInsert {
 
 impl FragmentKernel for LlInsert {
     fn info(&self) -> KernelInfo {
-        KernelInfo::new(if self.publish_before_write {
+        let info = KernelInfo::new(if self.publish_before_write {
             "ll-insert-publish-first"
         } else {
             "ll-insert"
-        })
+        });
         // Each fragment exchanges its pixel's head (prefetched ahead of shading), and only
         // its pixel's: a tile's heads belong to the tile, as on a tiled GPU.
-        .with_own_pixel_array(self.pool.heads, 1)
+        let info = info.with_own_pixel_array(self.pool.heads, 1);
+        // With a counter per screen block, a fragment takes a node from its block's
+        // counter only: a tile's blocks' counters belong to the tile too. (The in-pass
+        // reader and the planted bug keep the declaration: it changes no result.)
+        match self.blocks {
+            Some(_) => info.with_own_block_array(self.pool.counters, BLOCK_SHIFT, COUNTER_STRIDE),
+            None => info,
+        }
     }
     async fn shade(&self, f: impl Fragment) {
         let p = f.pixel_index();

@@ -25,7 +25,7 @@ use super::ll::MAX_POOL_NODES;
 pub const COUNTER_STRIDE: u32 = 16;
 
 /// log2 of a [`Blocks`] block's side in pixels (32).
-const BLOCK_SHIFT: u32 = 5;
+pub const BLOCK_SHIFT: u32 = 5;
 
 /// The pool cut into screen blocks of `2^BLOCK_SHIFT` pixels a side, row-major: block `b`
 /// allocates nodes `[first[b], first[b + 1])` with counter `b * COUNTER_STRIDE` (the sizes

@@ -11,7 +11,7 @@ use crate::exec::{record_panic, Acc, Tally};
 use crate::framebuffer::TileMemory;
 use crate::invocation::{DirectFrag, DirectState, Frag, Invocation, Mode, PassEnv};
 use crate::kernel::{FragInput, FragmentKernel};
-use crate::memory::{PixelArray, PixelPrefetcher};
+use crate::memory::{BlockArray, PixelArray, PixelPrefetcher};
 use crate::pipeline::{BlockMask, BLOCK_SHIFT};
 use crate::raster::{SampleCount, Span};
 
@@ -38,6 +38,9 @@ pub(super) struct Worker<'a, K> {
     /// (`KernelInfo::with_own_pixel_array`): on a tile this worker owns, its atomics there
     /// are plain (`DirectState::owning`).
     own_array: Option<PixelArray>,
+    /// The kernel's own per-block array (`KernelInfo::with_own_block_array`): plain there
+    /// too on an owned tile that holds whole blocks.
+    own_block: Option<BlockArray>,
 }
 
 /// Covered runs ahead of the one being shaded whose per-pixel slots are prefetched: far
@@ -70,6 +73,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             own_array: Some(kernel.info())
                 .filter(|info| info.pixel_array_own)
                 .and_then(|info| info.pixel_array),
+            own_block: kernel.info().own_block_array,
         }
     }
 
@@ -111,11 +115,19 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
             if self.pass.counting() {
                 // A tile held exclusively is this worker's for the whole pass (segments
                 // share tiles; unbinned chunks have none).
-                let owned = matches!(tile, Some(TileAccess::Exclusive(_)));
-                if owned && self.own_array.is_some() {
-                    self.run_unit_counting::<true>(spans, env);
+                let owned = match &tile {
+                    Some(TileAccess::Exclusive(t)) => Some(t.tile_size),
+                    _ => None,
+                };
+                // A block lies in one tile when it is no larger (both are powers of two
+                // from the origin).
+                let block = self.own_block.filter(|b| {
+                    owned.is_some_and(|size| b.shift < 32 && 1u64 << b.shift <= u64::from(size))
+                });
+                if owned.is_some() && (self.own_array.is_some() || block.is_some()) {
+                    self.run_unit_counting::<true>(spans, env, block);
                 } else {
-                    self.run_unit_counting::<false>(spans, env);
+                    self.run_unit_counting::<false>(spans, env, None);
                 }
                 tile
             } else {
@@ -213,10 +225,16 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
     /// more instructions (callgrind, 83.3 against 94.4 M).
     ///
     /// `OWN`: the worker owns the unit's tile for the whole pass, and the kernel declared
-    /// its per-pixel array its pixels' own: atomics on the fragment's slot are plain
+    /// its per-pixel array its pixels' own, or `own_block` (its per-block array, whose
+    /// blocks lie in the tile): atomics on the fragment's slot are plain
     /// (`DirectState::owning`). A constant, so that without it the loop stays as it was.
     #[inline(never)]
-    fn run_unit_counting<const OWN: bool>(&mut self, spans: &[Span], env: &PassEnv<'_>) {
+    fn run_unit_counting<const OWN: bool>(
+        &mut self,
+        spans: &[Span],
+        env: &PassEnv<'_>,
+        own_block: Option<BlockArray>,
+    ) {
         let rows = RowSetup::new(self, env);
         let ahead = self.prefetcher(env);
         let own = self.own_array;
@@ -230,7 +248,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let kernel = *kernel;
         let slot = &slots[0];
         let state = if OWN {
-            DirectState::owning(own)
+            DirectState::owning(own, own_block)
         } else {
             DirectState::new()
         };
@@ -308,8 +326,12 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         // Every pixel's coverage: the span's of `run_unit_direct` (`RowSetup::row`).
         let cov = coverage & pass.state.sample_mask & *all_samples;
         if cov == 0 {
+            tile.clear_pending_color();
             return;
         }
+        // Planes an earlier framebuffer left uncleared are cleared row by row just ahead
+        // of the row's writes (`TileMemory::color_unclear`), by this thread, in cache.
+        let unclear = tile.take_pending_color();
         let samples = samples_of(cov);
         let targets = pass.targets.min(8);
         // One sample, every target written plainly (a resolve): the output's bits go
@@ -326,6 +348,9 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         // Blocks no geometry reached: their pixels get the kernel's declared output.
         let skip = pass.touched.zip(pass.untouched_output);
         for ly in 0..tile.h {
+            if unclear {
+                tile.clear_color_row(ly);
+            }
             let y = y0 + ly;
             // Full-screen ids are by pixel, row-major (`Row::row_seq` with source 0).
             let row_seq = pass.seq_base.wrapping_add(y as u64 * env.width as u64);
@@ -388,6 +413,12 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                     }
                     tile.write_outputs(pass.state, lx, ly, cov, &colors[..targets]);
                 }
+            }
+        }
+        if unclear {
+            // The padding rows of an edge tile (never written, but the planes' values).
+            for ly in tile.h..tile.tile_size {
+                tile.clear_color_row(ly);
             }
         }
         slot.clear_outputs();
@@ -690,6 +721,7 @@ impl Untouched<'_> {
         debug_assert_eq!(self.targets, 1);
         if tile.samples == 1 && self.cov == 1 && self.state.targets[0].plain_write() {
             // The bits go straight to the texels (what `write_outputs` computes).
+            tile.clear_pending_color();
             let row = (ly * tile.tile_size) as usize;
             tile.color[0][row + run.start as usize..row + run.end as usize].fill(self.bits);
             return;
