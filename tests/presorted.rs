@@ -793,3 +793,23 @@ fn a_viewpoint_inside_the_bounding_polyhedron_is_a_clear_error() {
         "{e}"
     );
 }
+
+/// The checks above can fail: lists of the torus with every segment drawn front to back
+/// (reversed) fail the exact draw order and the image comparison up to ties.
+#[test]
+fn reversed_lists_are_caught() {
+    let (pos, idx) = torus(8, 4);
+    let scene = scene_of(&pos, &idx);
+    let mesh = loaded_mesh(&scene);
+    let mut lists = presorted::presort(&mesh, &PresortConfig::default(), &Silent).unwrap();
+    for s in &mut lists.segments {
+        s.instances.reverse();
+    }
+    let f = tmp("reversed.bin");
+    file::save(&lists, &f).unwrap();
+    let r =
+        std::panic::catch_unwind(|| exact_from_views(&scene, &f, &["presorted"], &[(30.0, 20.0)]));
+    let e = r.expect_err("reversed lists passed");
+    let msg = e.downcast_ref::<String>().cloned().unwrap_or_default();
+    assert!(msg.contains("nearer along the pixel centre's ray"), "{msg}");
+}
