@@ -25,6 +25,7 @@ mod occupancy;
 mod output;
 mod params;
 mod presorted;
+mod presorted_exact;
 mod racebench;
 mod render;
 mod report;

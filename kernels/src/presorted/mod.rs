@@ -85,12 +85,12 @@ pub struct Instance {
     pub piece: u32,
     /// The back-facing duplicate: rendered only from behind the triangle's plane.
     pub back: bool,
-    /// The last instance of its triangle and facing in the segment: its test planes are
-    /// left to the LESS depth test (section 4.1: it is drawn iff no earlier copy was).
+    /// The last instance of its triangle and facing in the segment: the paper leaves its
+    /// test planes to a LESS depth test (section 4.1: it is drawn iff no earlier copy was).
+    /// Stored, but the run time here tests every copy's planes ([`runtime`] says why).
     pub last: bool,
     /// Test planes `p` (world space), all of which must pass: `dot(p, [v, -1]) > 0`.
-    /// The last instance keeps them too (its exact region), for the variants that select
-    /// without a depth test.
+    /// The last instance keeps them too (its exact region).
     pub planes: Vec<[f32; 4]>,
 }
 

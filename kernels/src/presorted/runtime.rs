@@ -4,10 +4,18 @@
 //!   partition (section 4.2); each fragment of an instance passes the facing test (the
 //!   back-face culling of section 3.1, as the same dot product: front and back copies then
 //!   partition viewpoint space exactly) and its test planes, `dot(p, [v, -1]) > 0`, or is
-//!   discarded; the last copy of a triangle skips its planes and is kept by a LESS depth
-//!   test iff no earlier copy was drawn (section 4.1). Survivors are blended back to front
-//!   by fixed-function "over", which the emulator applies in API order whatever order the
-//!   fragments were shaded in.
+//!   discarded. Survivors are blended back to front by fixed-function "over", which the
+//!   emulator applies in API order whatever order the fragments were shaded in. Every copy
+//!   tests its planes, the last one included, and the depth test is off: the paper leaves
+//!   the last copy's planes to a LESS depth test (section 4.1: drawn iff no earlier copy
+//!   was), but LESS also rejects any fragment whose rasterized depth is not strictly below
+//!   that of a fragment drawn before it, and rasterized depths are those of the triangle
+//!   with its vertices snapped to 1/256 pixel: up to about 2e-4 off in window depth at
+//!   40 x 40, where a fold of two grazing triangles at a silhouette, or two triangles that
+//!   meet along a line, put fragments in the exact back-to-front order whose rasterized
+//!   depths are equal or inverted (the bunny's lists lost one such fragment at azimuth
+//!   27.920723, elevation -38.48013). The planes alone select exactly one copy (each
+//!   instance keeps its exact region's planes), so nothing is dropped.
 //! - `presorted-vs`: the vertex-shader option: the same test per vertex, failing vertices
 //!   moved to the viewpoint so that the near plane culls the triangle (vertices are no
 //!   longer shared, as the paper notes). Run on the host as the draw's vertex stage.
@@ -46,7 +54,6 @@ pub struct SegmentData {
     pub tri: Vec<u32>,
     /// Each instance's piece (the input triangle unless triangles were split).
     pub piece: Vec<u32>,
-    pub last: Vec<bool>,
     pub facing: Vec<[f32; 4]>,
     /// Instance i's planes are `planes[offsets[i]..offsets[i + 1]]`.
     pub offsets: Vec<u32>,
@@ -72,16 +79,6 @@ pub fn facing_plane(mesh: &Mesh, tri: u32, back: bool) -> [f32; 4] {
 }
 
 impl Prepared {
-    /// Whether every copy, the last included, selects by its planes and the depth test is
-    /// off: when triangles were split. The LESS trick of section 4.1 needs depths that
-    /// strictly decrease along the draw order at every pixel; pieces of a split triangle
-    /// meet the triangle that cut them along a line inside it, where the two depths are
-    /// equal up to rounding, and LESS then drops fragments the truth keeps. The planes
-    /// alone select exactly one copy (every instance keeps its exact region's planes).
-    pub fn all_planes(&self) -> bool {
-        self.lists.is_split()
-    }
-
     pub fn new(mesh: &Mesh, lists: Presorted) -> Prepared {
         let positions = mesh.positions.clone();
         let segments = lists
@@ -121,7 +118,6 @@ impl Prepared {
                         .collect(),
                     tri,
                     piece: s.instances.iter().map(|i| i.piece).collect(),
-                    last: s.instances.iter().map(|i| i.last).collect(),
                     offsets,
                     planes,
                     clip_offsets,
@@ -134,13 +130,12 @@ impl Prepared {
 }
 
 impl SegmentData {
-    /// Whether instance `i` passes its tests from `eye` (`planes`: also its test planes).
-    pub fn passes(&self, i: usize, eye: Vec3, planes: bool) -> bool {
+    /// Whether instance `i` passes its tests from `eye`: its facing and its test planes.
+    pub fn passes(&self, i: usize, eye: Vec3) -> bool {
         test(self.facing[i], eye)
-            && (!planes
-                || self.planes[self.offsets[i] as usize..self.offsets[i + 1] as usize]
-                    .iter()
-                    .all(|p| test(*p, eye)))
+            && self.planes[self.offsets[i] as usize..self.offsets[i + 1] as usize]
+                .iter()
+                .all(|p| test(*p, eye))
     }
 }
 
@@ -240,8 +235,6 @@ struct SelectKernel<'a> {
     seg: &'a SegmentData,
     eye: Vec3,
     alpha: f32,
-    /// Every copy tests its planes (no LESS trick; see [`Prepared::all_planes`]).
-    all_planes: bool,
 }
 
 impl FragmentKernel for SelectKernel<'_> {
@@ -250,12 +243,7 @@ impl FragmentKernel for SelectKernel<'_> {
     }
     async fn shade(&self, f: impl Fragment) {
         let i = f.primitive_id() as usize;
-        // The last copy leaves its planes to the LESS depth test.
-        if !self
-            .seg
-            .passes(i, self.eye, self.all_planes || !self.seg.last[i])
-            || !self.seg.in_piece(i, f.barycentrics())
-        {
+        if !self.seg.passes(i, self.eye) || !self.seg.in_piece(i, f.barycentrics()) {
             f.discard();
             return;
         }
@@ -316,7 +304,7 @@ impl FragmentKernel for SsboKernel<'_> {
     }
     async fn shade(&self, f: impl Fragment) {
         let i = f.primitive_id() as usize;
-        if !self.seg.passes(i, self.eye, true) || !self.seg.in_piece(i, f.barycentrics()) {
+        if !self.seg.passes(i, self.eye) || !self.seg.in_piece(i, f.barycentrics()) {
             f.discard();
             return;
         }
@@ -370,16 +358,16 @@ impl Algorithm for PresortedAlgo {
         let (name, summary, passes, memory, hazard) = match self.0 {
             Variant::Fragment => (
                 "presorted",
-                "depth-presorted triangle lists: the viewpoint's segment, half-space test per fragment, LESS for last copies, fixed-function over in API order",
+                "depth-presorted triangle lists: the viewpoint's segment, half-space test per fragment (every copy, no depth test), fixed-function over in API order",
                 "1 geometry (after off-line preprocessing)",
-                "16 + 4 bytes (RGBA32F colour + depth)",
+                "16 bytes (RGBA32F colour)",
                 HazardClass::HazardFree,
             ),
             Variant::Vertex => (
                 "presorted-vs",
                 "depth-presorted triangle lists, half-space test in the vertex stage (failing triangles moved to the viewpoint)",
                 "1 geometry (after off-line preprocessing)",
-                "16 + 4 bytes (RGBA32F colour + depth)",
+                "16 bytes (RGBA32F colour)",
                 HazardClass::HazardFree,
             ),
             Variant::Ssbo => (
@@ -433,12 +421,12 @@ impl Algorithm for PresortedAlgo {
             Variant::Fragment | Variant::Vertex => {
                 let mut fb = framebuffer(&sub, SampleCount::X1, &[Format::RGBA32F])?;
                 fb.clear_color(0, [bg[0].to_bits(), bg[1].to_bits(), bg[2].to_bits(), 0]);
-                fb.clear_depth(1.0);
                 let mut state = capture_state();
+                // Selection by the planes alone (module docs): no depth test.
                 state.fragment.depth = DepthState {
-                    test: !prep.all_planes(),
-                    func: CompareFunc::Less,
-                    write: true,
+                    test: false,
+                    func: CompareFunc::Always,
+                    write: false,
                 };
                 let mut t = TargetState::new(Format::RGBA32F);
                 t.blend = Some(fragrace_emu::BlendState::over());
@@ -448,11 +436,10 @@ impl Algorithm for PresortedAlgo {
                         seg,
                         eye: eye32,
                         alpha: params.alpha,
-                        all_planes: prep.all_planes(),
                     };
                     common::geometry_pass(&device, &mut fb, &sub, &state, &kernel, exec)?
                 } else {
-                    let moved = vertex_stage(seg, eye32, prep.all_planes());
+                    let moved = vertex_stage(seg, eye32);
                     let vs_frame = Frame {
                         mesh: &moved,
                         ..*frame
@@ -466,7 +453,7 @@ impl Algorithm for PresortedAlgo {
                 let img = fb.image(0);
                 let image: Vec<[f32; 4]> =
                     img.texels.iter().map(|t| t.map(f32::from_bits)).collect();
-                (report, image, pixels(frame) as u64 * 20)
+                (report, image, pixels(frame) as u64 * 16)
             }
             Variant::Ssbo | Variant::SsboInterlock => {
                 let n = pixels(frame);
@@ -492,9 +479,9 @@ impl Algorithm for PresortedAlgo {
             }
         };
         let mut checks = vec![selection_check(seg, eye32, &prep.lists, k)];
-        // Each input triangle drawn exactly once: the fragments blended (past the LESS test
-        // for the fixed-function variants, past the kernel's selection for the SSBO ones)
-        // are exactly those of the input mesh (an extra pass, not in the report).
+        // Each input triangle drawn exactly once: the fragments blended (past the selection
+        // and the piece clips) are exactly those of the input mesh (an extra pass, not in
+        // the report).
         let blended = match self.0 {
             Variant::Fragment | Variant::Vertex => report.stats.samples_passed,
             Variant::Ssbo | Variant::SsboInterlock => {
@@ -532,10 +519,10 @@ impl Algorithm for PresortedAlgo {
 
 /// The vertex stage of `presorted-vs`: three vertices per instance (no sharing); those of
 /// an instance failing its test moved to the viewpoint, where the near plane culls them.
-pub fn vertex_stage(seg: &SegmentData, eye: Vec3, all_planes: bool) -> Mesh {
+pub fn vertex_stage(seg: &SegmentData, eye: Vec3) -> Mesh {
     let mut positions = Vec::with_capacity(seg.mesh.indices.len() * 3);
     for (i, t) in seg.mesh.indices.iter().enumerate() {
-        let keep = seg.passes(i, eye, all_planes || !seg.last[i]);
+        let keep = seg.passes(i, eye);
         for &v in t {
             positions.push(if keep {
                 seg.mesh.positions[v as usize]
@@ -555,12 +542,11 @@ pub fn vertex_stage(seg: &SegmentData, eye: Vec3, all_planes: bool) -> Mesh {
 }
 
 /// Host check of the selection: with every copy's exact planes, each piece (each input
-/// triangle, unless some were split) has exactly one instance that passes (so the LESS
-/// chain, which draws the first passing copy or the last one, draws exactly that one).
+/// triangle, unless some were split) has exactly one instance that passes.
 fn selection_check(seg: &SegmentData, eye: Vec3, lists: &Presorted, k: usize) -> Check {
     let mut count = vec![0u32; lists.pieces.len()];
     for i in 0..seg.piece.len() {
-        if seg.passes(i, eye, true) {
+        if seg.passes(i, eye) {
             count[seg.piece[i] as usize] += 1;
         }
     }
