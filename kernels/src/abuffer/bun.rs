@@ -24,7 +24,8 @@
 
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
-use super::ll::{insert, pool_from_params, ListPool, ListResolve, Walk};
+use super::ll::{insert, pool_from_params, ListPool, ListResolve};
+use super::walk::Walk;
 use super::run::AbRun;
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Frame, HazardClass, Params,

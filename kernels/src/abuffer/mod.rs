@@ -4,12 +4,14 @@
 //! Each algorithm has its module; what they share has one module per concept: `run` (the
 //! scaffolding of a run: device, passes, result), `checks` (the invariants every
 //! A-buffer checks), `array` (the fixed-array and count-scan-store storage and its
-//! resolve). The count pass is `basic::CountKernel`.
+//! resolve), `sizing` (`ll`'s pool sized by a count pass), `walk` (the host's walk of the
+//! lists after a frame). The count pass is `basic::CountKernel`.
 
 mod array;
 mod checks;
 mod run;
 mod sizing;
+mod walk;
 
 // `pub(crate)`: modules whose protocol kernels `crate::protocols` re-exports.
 crate::registry::family! {
