@@ -5,54 +5,16 @@
 //! `cargo bench --bench explore`
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use fragrace_emu::{
-    Buf, Device, FragInput, Fragment, FragmentKernel, KernelInfo, Policy, ScheduleConfig,
-};
+use fragrace_emu::{Policy, ScheduleConfig};
 
-/// The loom/shuttle peer's model: take a node with a counter `fetch_add`, publish it with a
-/// compare-exchange loop on the pixel's head.
-struct Push {
-    counter: Buf<u32>,
-    head: Buf<u32>,
-    next: Buf<u32>,
-}
-
-impl FragmentKernel for Push {
-    fn info(&self) -> KernelInfo {
-        KernelInfo::new("ll-push")
-    }
-    async fn shade(&self, f: impl Fragment) {
-        let node = f.atomic_add(self.counter, 0, 1).await;
-        let mut old = f.atomic_load(self.head, 0).await;
-        loop {
-            f.store(self.next, node, old).await;
-            match f.atomic_compare_exchange(self.head, 0, old, node).await {
-                Ok(_) => break,
-                Err(cur) => old = cur,
-            }
-        }
-    }
-}
+#[path = "../emu/examples/common/push_model.rs"]
+mod push_model;
+use push_model::push_model;
 
 fn ll_push(c: &mut Criterion) {
     let mut g = c.benchmark_group("ll-push-4");
-    let mut dev = Device::new();
-    let counter = dev.buffer::<u32>("counter", 1).unwrap();
-    let head = dev.buffer::<u32>("head", 1).unwrap();
-    let next = dev.buffer::<u32>("next", 5).unwrap();
-    dev.memory.write(counter, 0, &[1]).unwrap();
-    let kernel = Push {
-        counter,
-        head,
-        next,
-    };
-    let frags: Vec<FragInput> = (0..4)
-        .map(|i| FragInput {
-            primitive_id: i,
-            coverage: 1,
-            ..Default::default()
-        })
-        .collect();
+    let (dev, kernel, frags) = push_model();
+    let (counter, head, next) = (kernel.counter, kernel.head, kernel.next);
     const BATCH: u64 = 10_000;
     g.throughput(Throughput::Elements(BATCH));
     for policy in [Policy::Random, Policy::Pct { depth: 2 }] {

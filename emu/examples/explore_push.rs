@@ -5,60 +5,35 @@
 //!
 //! `cargo run --release -p fragrace-emu --example explore_push -- [POLICY] [EXECUTIONS]`
 
-use fragrace_emu::{
-    Buf, Device, FragInput, Fragment, FragmentKernel, KernelInfo, Policy, ScheduleConfig,
-};
+use fragrace_emu::{Policy, ScheduleConfig};
 
-struct Push {
-    counter: Buf<u32>,
-    head: Buf<u32>,
-    next: Buf<u32>,
-}
-
-impl FragmentKernel for Push {
-    fn info(&self) -> KernelInfo {
-        KernelInfo::new("ll-push")
-    }
-    async fn shade(&self, f: impl Fragment) {
-        let node = f.atomic_add(self.counter, 0, 1).await;
-        let mut old = f.atomic_load(self.head, 0).await;
-        loop {
-            f.store(self.next, node, old).await;
-            match f.atomic_compare_exchange(self.head, 0, old, node).await {
-                Ok(_) => break,
-                Err(cur) => old = cur,
-            }
-        }
-    }
-}
+#[path = "common/push_model.rs"]
+mod push_model;
+use push_model::push_model;
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let policy: Policy = args
-        .next()
-        .unwrap_or_else(|| "pct:2".into())
-        .parse()
-        .expect("a policy");
-    let n: u64 = args
-        .next()
-        .map_or(10_000, |a| a.parse().expect("a number of executions"));
-    let mut dev = Device::new();
-    let counter = dev.buffer::<u32>("counter", 1).unwrap();
-    let head = dev.buffer::<u32>("head", 1).unwrap();
-    let next = dev.buffer::<u32>("next", 5).unwrap();
-    dev.memory.write(counter, 0, &[1]).unwrap();
-    let kernel = Push {
-        counter,
-        head,
-        next,
+    let policy_arg = args.next().unwrap_or_else(|| "pct:2".into());
+    let policy: Policy = match policy_arg.parse() {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("explore_push: {e}");
+            std::process::exit(2);
+        }
     };
-    let frags: Vec<FragInput> = (0..4)
-        .map(|i| FragInput {
-            primitive_id: i,
-            coverage: 1,
-            ..Default::default()
-        })
-        .collect();
+    let n: u64 = match args.next().map(|a| (a.parse::<u64>(), a)) {
+        None => 10_000,
+        Some((Ok(n), _)) if n >= 1 => n,
+        Some((_, a)) => {
+            eprintln!(
+                "explore_push: executions `{a}`: a whole number from 1 to {}",
+                u64::MAX
+            );
+            std::process::exit(2);
+        }
+    };
+    let (dev, kernel, frags) = push_model();
+    let (counter, head) = (kernel.counter, kernel.head);
     let sc = ScheduleConfig {
         policy,
         seed: 0,
