@@ -69,41 +69,35 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
     fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
         let st = self.state;
         // The fused path never keeps the contention table (`shade_direct` checks).
-        let route = match (st.own, st.own_block) {
-            (Some(own), _) if OWN && own.buffer == buf.id => {
-                // The tile is this worker's for the pass: the fragment's own slot is
-                // reached by no other thread (`DirectState::owning`).
-                let input = st.input.get();
-                let first = (input.y as u64 * self.frag.env.width as u64 + input.x as u64)
-                    * own.stride as u64;
+        // Where the tile is this worker's for the pass, the fragment's own slot (of its
+        // pixel, or of its block, which lies in the tile) is reached by no other thread
+        // (`DirectState::owning`): its first word, its words and the declaration.
+        let input = st.input.get();
+        let width = self.frag.env.width;
+        let owned = match (st.own, st.own_block) {
+            (Some(own), _) if OWN && own.buffer == buf.id => Some((
+                (input.y as u64 * width as u64 + input.x as u64) * own.stride as u64,
+                own.stride as u64,
+                "with_own_pixel_array",
+            )),
+            (_, Some(own)) if OWN && own.buffer == buf.id => Some((
+                own.first_word(input.x, input.y, width),
+                own.stride as u64,
+                "with_own_block_array",
+            )),
+            _ => None,
+        };
+        let route = match owned {
+            Some((first, stride, declared)) => {
                 // Out of bounds is reported as such, below.
-                if (index as u64).wrapping_sub(first) >= own.stride as u64 && index < buf.len {
-                    self.frag.not_own_slot(
-                        buf.id,
-                        index,
-                        (input.x, input.y),
-                        "with_own_pixel_array",
-                    );
+                if (index as u64).wrapping_sub(first) >= stride && index < buf.len {
+                    self.frag
+                        .not_own_slot(buf.id, index, (input.x, input.y), declared);
                     return Poll::Pending;
                 }
                 Route::Owned(&st.words)
             }
-            (_, Some(own)) if OWN && own.buffer == buf.id => {
-                // The same for the slot of the fragment's block, which lies in the tile.
-                let input = st.input.get();
-                let first = own.first_word(input.x, input.y, self.frag.env.width);
-                if (index as u64).wrapping_sub(first) >= own.stride as u64 && index < buf.len {
-                    self.frag.not_own_slot(
-                        buf.id,
-                        index,
-                        (input.x, input.y),
-                        "with_own_block_array",
-                    );
-                    return Poll::Pending;
-                }
-                Route::Owned(&st.words)
-            }
-            _ => Route::Cached(&st.words),
+            None => Route::Cached(&st.words),
         };
         self.frag
             .perform_counted::<T>(&st.steps, &st.ops, route, buf, index, op)
