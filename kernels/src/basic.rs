@@ -187,7 +187,7 @@ impl FragmentKernel for OpaqueKernel {
         KernelInfo::new("opaque")
     }
     async fn shade(&self, f: impl Fragment) {
-        let c = common::unpack_color(common::prim_color_packed(f.primitive_id()));
+        let c = common::prim_rgb(f.primitive_id());
         // Headlight-style shading by depth keeps the silhouette readable without normals.
         let shade = 1.0 - 0.5 * f.depth();
         f.output(0, [c[0] * shade, c[1] * shade, c[2] * shade, 1.0]);

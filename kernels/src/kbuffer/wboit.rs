@@ -37,7 +37,7 @@ use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, Check, Deferred, Frame, HazardClass, Params,
 };
 use crate::common::{
-    self, capture_state, framebuffer, geometry_pass, pixels, prim_color_packed, unpack_color,
+    self, capture_state, framebuffer, geometry_pass, pixels, prim_rgb,
 };
 use crate::resolve;
 
@@ -68,7 +68,7 @@ impl FragmentKernel for Accumulate {
         KernelInfo::new("wboit-accumulate")
     }
     async fn shade(&self, f: impl Fragment) {
-        let c = unpack_color(prim_color_packed(f.primitive_id()));
+        let c = prim_rgb(f.primitive_id());
         let a = self.alpha;
         let w = weight(f.depth(), a);
         f.output(0, [c[0] * a * w, c[1] * a * w, c[2] * a * w, a * w]);

@@ -9,7 +9,7 @@
 //! Also the over operator (front-to-back blending of premultiplied visibilities, \[PD84\] in
 //! the paper) and the composite of merged records over the background.
 
-use crate::common::{prim_color_packed, unpack_color};
+use crate::common::prim_rgb;
 
 /// A fragment of the z-thickness model, possibly merged from several.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -52,7 +52,7 @@ impl ZFrag {
 
     /// One original fragment of primitive `prim` (the truth's colour of it) at opacity `alpha`.
     pub fn of_primitive(z: f32, t: f32, prim: u32, alpha: f32) -> ZFrag {
-        let c = unpack_color(prim_color_packed(prim));
+        let c = prim_rgb(prim);
         ZFrag::new(z, t, [c[0], c[1], c[2]], alpha)
     }
 

@@ -48,7 +48,7 @@ use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity, CapturedFrag, Check, Frame, HazardClass,
     Params,
 };
-use crate::common::{capture_state, prim_color_packed, unpack_color};
+use crate::common::{capture_state, prim_rgb};
 
 /// Targets of the framebuffer.
 const COMPOSITE: usize = 0;
@@ -83,7 +83,7 @@ impl FragmentKernel for ShadePass {
         KernelInfo::new("f2b2-shade")
     }
     async fn shade(&self, f: impl Fragment) {
-        let c = unpack_color(prim_color_packed(f.primitive_id()));
+        let c = prim_rgb(f.primitive_id());
         let a = self.alpha;
         f.output(COMPOSITE, [c[0] * a, c[1] * a, c[2] * a, a]);
         f.output(COUNT, [1.0, 0.0, 0.0, 0.0]);
