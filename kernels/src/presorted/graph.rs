@@ -270,13 +270,7 @@ impl Graph {
                     .or_insert_with(|| occlusion_planes(a, b));
                 stats.pairs += 1;
                 let (ri, rj) = (&g.nodes[i].region, &g.nodes[j].region);
-                if has_witness(
-                    centroids[ti as usize],
-                    centroids[tj as usize],
-                    occl,
-                    ri,
-                    rj,
-                ) {
+                if has_witness(centroids[ti as usize], centroids[tj as usize], occl, ri, rj) {
                     g.push_edge(i, j);
                     stats.witnessed += 1;
                 } else if g.try_edge(i, j, occl) {
@@ -560,6 +554,41 @@ pub(super) mod tests {
             witnessed * 2 > edges,
             "{witnessed} of {edges} edges witnessed"
         );
+    }
+
+    #[test]
+    fn a_sample_of_rows_has_the_full_graphs_edges_of_those_rows() {
+        // The estimate's rows (every third node) against the whole graph: the same edges
+        // leave each sampled node, in the same order.
+        let mut seed = 0x1234_5678_9abc_def1u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let tris: Arc<[[DVec3; 3]]> = (0..24)
+            .map(|_| {
+                let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;
+                [0, 1, 2].map(|_| c + DVec3::new(rnd(), rnd(), rnd()) * 0.1)
+            })
+            .collect();
+        let dirs = directions(6).unwrap();
+        let part = partition_region(&dirs, 0);
+        let full = Graph::build(tris.clone(), &part, &|_, _| {});
+        let mut sample = Graph::nodes_of(tris, &part);
+        let rows: Vec<usize> = (0..sample.nodes.len()).step_by(3).collect();
+        let stats = sample.add_rows(rows.iter().copied(), &|_, _| {});
+        let pairs = |g: &Graph| -> Vec<(usize, usize)> {
+            g.edges
+                .iter()
+                .filter(|e| rows.contains(&e.from))
+                .map(|e| (e.from, e.to))
+                .collect()
+        };
+        assert!(pairs(&full).len() > 10, "{} edges", pairs(&full).len());
+        assert_eq!(pairs(&sample), pairs(&full));
+        assert_eq!(sample.edges.len() as u64, stats.witnessed + stats.clipped);
     }
 
     #[test]
