@@ -234,7 +234,7 @@ impl Graph {
         let mut rows = rows.peekable();
         let mut done = 0u64;
         while let Some(i) = rows.next() {
-            if done % 64 == 0 {
+            if done.is_multiple_of(64) {
                 tick(done, total);
             }
             done += 1;
