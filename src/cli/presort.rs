@@ -19,8 +19,8 @@ pub struct PresortOptions {
     #[arg(long, default_value_t = 6)]
     pub partitions: u32,
     /// Where to write the lists (written to a temporary file and renamed when complete).
-    #[arg(long)]
-    pub out: PathBuf,
+    #[arg(long, required_unless_present = "estimate_graph")]
+    pub out: Option<PathBuf>,
     /// Worker threads (partitions run one per task; default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -36,6 +36,11 @@ pub struct PresortOptions {
     /// it, a mesh with duplicate triangles is refused, naming them. OBJ meshes only.
     #[arg(long, value_name = "PATH")]
     pub dedupe_to: Option<PathBuf>,
+    /// Instead of presorting, measure the occlusion graphs on ROWS rows of each partition's
+    /// graph (evenly spaced) and print the rows per second and the estimated graph time of
+    /// every partition (the graphs are most of the preprocessing of a large mesh).
+    #[arg(long, value_name = "ROWS")]
+    pub estimate_graph: Option<usize>,
     /// Print one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -145,19 +150,27 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
         logged: Mutex::new(vec![0.0; a.partitions as usize]),
         start: Instant::now(),
     };
+    let cfg = PresortConfig {
+        partitions: a.partitions,
+        threads,
+        method: a.method,
+    };
+    let out = match (a.estimate_graph, &a.out) {
+        (Some(rows), _) => return estimate(a, &mesh, &cfg, rows, bar),
+        (None, Some(out)) => out,
+        // (clap requires one of the two.)
+        (None, None) => {
+            return Err(presorted::PresortError::Config(
+                "presort needs --out FILE, or --estimate-graph ROWS to measure the graphs".into(),
+            )
+            .into())
+        }
+    };
     let t = Instant::now();
-    let lists = presorted::presort(
-        &mesh,
-        &PresortConfig {
-            partitions: a.partitions,
-            threads,
-            method: a.method,
-        },
-        &bar,
-    )?;
+    let lists = presorted::presort(&mesh, &cfg, &bar)?;
     let secs = t.elapsed().as_secs_f64();
     bar.bar.finish_and_clear();
-    file::save(&lists, &a.out)?;
+    file::save(&lists, out)?;
     let per: Vec<serde_json::Value> = lists
         .stats
         .iter()
@@ -198,7 +211,7 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
         "instances": lists.total_instances(),
         "duplication_ratio": lists.duplication_ratio(),
         "avg_segment_ratio": lists.avg_segment_ratio(),
-        "out": a.out,
+        "out": out,
         "per_partition": per,
     });
     if a.json {
@@ -223,7 +236,77 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
             lists.total_instances(),
             lists.duplication_ratio(),
             lists.avg_segment_ratio(),
-            a.out.display()
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+/// `presort --estimate-graph ROWS`: the graphs measured on a sample of rows.
+fn estimate(
+    a: &PresortOptions,
+    mesh: &fragrace_emu::Mesh,
+    cfg: &PresortConfig,
+    rows: usize,
+    bar: Bar,
+) -> Result<(), CliError> {
+    let t = Instant::now();
+    let est = presorted::estimate_graph(mesh, cfg, rows, &bar)?;
+    let secs = t.elapsed().as_secs_f64();
+    bar.bar.finish_and_clear();
+    let total: f64 = est.iter().map(|e| e.graph_seconds()).sum();
+    let wall = total / cfg.threads.min(est.len()).max(1) as f64;
+    if a.json {
+        let per: Vec<serde_json::Value> = est
+            .iter()
+            .map(|e| {
+                serde_json::json!({
+                    "nodes": e.nodes,
+                    "rows": e.rows,
+                    "edges": e.edges,
+                    "exact_pairs": e.pairs.pairs,
+                    "witnessed_edges": e.pairs.witnessed,
+                    "clipped_edges": e.pairs.clipped,
+                    "seconds": e.seconds,
+                    "rows_per_second": e.rows_per_second(),
+                    "graph_seconds": e.graph_seconds(),
+                })
+            })
+            .collect();
+        let summary = serde_json::json!({
+            "mesh": a.mesh,
+            "triangles": mesh.indices.len(),
+            "partitions": cfg.partitions,
+            "threads": cfg.threads,
+            "seconds": secs,
+            "graph_seconds_sum": total,
+            "graph_wall_seconds": wall,
+            "per_partition": per,
+        });
+        println!("{summary}");
+    } else {
+        for (k, e) in est.iter().enumerate() {
+            println!(
+                "partition {k}: {} rows of {} in {:.1} s ({:.1} rows/s, {} edges of {} pairs \
+                 past the cheap tests, {} by a witness): graph about {:.0} s",
+                e.rows,
+                e.nodes,
+                e.seconds,
+                e.rows_per_second(),
+                e.edges,
+                e.pairs.pairs,
+                e.pairs.witnessed,
+                e.graph_seconds()
+            );
+        }
+        println!(
+            "{} ({} triangles, {} partitions): graphs about {:.0} s in all, {:.0} s wall on {} threads",
+            a.mesh,
+            mesh.indices.len(),
+            cfg.partitions,
+            total,
+            wall,
+            cfg.threads
         );
     }
     Ok(())

@@ -95,7 +95,7 @@ fn bounding_sphere(t: &[DVec3; 3]) -> (DVec3, f64) {
 /// Every direction `n` within the dual cone (at most `90° - α` from `w`) has `n . d >= 0`
 /// along that cone, so `O` lies in `n . (x - ca) >= -ra`; the test tries `w` itself and the
 /// direction of the dual cone nearest to the region's centre as seen from `ca`.
-fn cone_misses(sa: (DVec3, f64), sb: (DVec3, f64), region: &Region) -> bool {
+fn cone_misses(sa: (DVec3, f64), sb: (DVec3, f64), region: &Region, centre: DVec3) -> bool {
     let ((ca, ra), (cb, rb)) = (sa, sb);
     let w = ca - cb;
     let dist = w.length();
@@ -105,7 +105,6 @@ fn cone_misses(sa: (DVec3, f64), sb: (DVec3, f64), region: &Region) -> bool {
     let w = w / dist;
     let sin_a = (ra + rb) / dist;
     let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
-    let centre = region.verts.iter().copied().sum::<DVec3>() / region.verts.len() as f64;
     let m = ca - centre;
     let along = m.dot(w);
     let perp = m - w * along;
@@ -126,10 +125,70 @@ fn cone_misses(sa: (DVec3, f64), sb: (DVec3, f64), region: &Region) -> bool {
     })
 }
 
+/// The mean of a region's vertices (the point [`cone_misses`] aims at).
+fn centre(region: &Region) -> DVec3 {
+    region.verts.iter().copied().sum::<DVec3>() / region.verts.len() as f64
+}
+
+/// How far inside every half-space a witness viewpoint must lie ([`has_witness`]): a
+/// thousand times the tolerances of the clips ([`EPS`]) and ten times [`MIN_WIDTH`].
+const WITNESS_MARGIN: f64 = 1e-6;
+
+/// Distances from `a`'s centroid, along the centroids' direction, at which [`has_witness`]
+/// looks for a witness (inside the viewpoint box, `FAR` = 64, from a centroid in the unit
+/// ball).
+const WITNESS_REACH: [f64; 3] = [40.0, 12.0, 4.0];
+
+/// Whether the reduced occlusion region `O_{a->b} ∩ E_from ∩ E_to` provably has an interior,
+/// without clipping: a viewpoint `v` at least [`WITNESS_MARGIN`] inside every half-space of
+/// `occl` (the facets of `O_{a->b}`) and of both rendering regions (each region is the
+/// intersection of its faces' half-spaces) is the centre of a ball of that radius inside
+/// the exact region. [`Graph::try_edge`]'s clips only ever drop what lies beyond a plane
+/// by more than [`EPS`] (`1e-9`, rounding of the clipped vertices about `1e-13` in the
+/// viewpoint box), so every region they produce on the way holds that ball too: no clip
+/// finds every vertex within [`MIN_WIDTH`] of the outside (the ball reaches `2e-6` past
+/// the plane), and the result spans more than `MIN_WIDTH` in every direction; the clip
+/// would therefore have found the edge. Candidates: `c_a + s (c_a - c_b)/|c_a - c_b|` (in
+/// `O_{a->b}` by its definition, `a + cone(a - b)`) for the distances of
+/// [`WITNESS_REACH`]; when none is a witness, the clip decides.
+fn has_witness(ca: DVec3, cb: DVec3, occl: &[Plane], from: &Region, to: &Region) -> bool {
+    let w = (ca - cb).normalize_or_zero();
+    if w == DVec3::ZERO {
+        return false;
+    }
+    WITNESS_REACH.iter().any(|s| {
+        let v = ca + w * *s;
+        occl.iter()
+            .chain(&from.planes)
+            .chain(&to.planes)
+            .all(|p| p.eval(v) >= WITNESS_MARGIN)
+    })
+}
+
+/// What building rows of a graph did ([`Graph::add_rows`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RowStats {
+    /// Pairs that passed the cheap rejections (their occlusion region was needed).
+    pub pairs: u64,
+    /// Of those, edges proven by a witness viewpoint ([`has_witness`]).
+    pub witnessed: u64,
+    /// Edges found by clipping the reduced region.
+    pub clipped: u64,
+}
+
 impl Graph {
     /// Nodes (front and back copy of every triangle whose copy can be rendered from the
     /// partition) and every edge. `tick(done, total)` reports progress over the nodes.
     pub fn build(tris: Arc<[[DVec3; 3]]>, partition: &Region, tick: &dyn Fn(u64, u64)) -> Graph {
+        let mut g = Graph::nodes_of(tris, partition);
+        let n = g.nodes.len();
+        g.add_rows(0..n, tick);
+        g
+    }
+
+    /// The nodes of the partition (front and back copy of every triangle whose copy can be
+    /// rendered from it), without edges.
+    pub fn nodes_of(tris: Arc<[[DVec3; 3]]>, partition: &Region) -> Graph {
         let mut g = Graph {
             tris: tris.clone(),
             ..Default::default()
@@ -147,18 +206,38 @@ impl Graph {
                 }
             }
         }
+        g
+    }
+
+    /// Adds the edges leaving each node of `rows` (increasing; a row of the graph: every
+    /// node `j` it may occlude is tried). [`Graph::build`] runs every row; a sample of rows
+    /// measures the cost of the graph ([`super::estimate_graph`]).
+    pub fn add_rows(
+        &mut self,
+        rows: impl ExactSizeIterator<Item = usize>,
+        tick: &dyn Fn(u64, u64),
+    ) -> RowStats {
+        let g = self;
+        let tris = g.tris.clone();
         let n = g.nodes.len();
+        let total = rows.len() as u64;
         let planes: Vec<Plane> = g
             .nodes
             .iter()
             .map(|x| facing(&tris[x.tri as usize], x.back))
             .collect();
         let spheres: Vec<(DVec3, f64)> = tris.iter().map(bounding_sphere).collect();
-        let mut occl_cache: HashMap<(u32, u32), Arc<[Plane]>> = HashMap::new();
-        for i in 0..n {
-            if i % 64 == 0 {
-                tick(i as u64, n as u64);
+        let centroids: Vec<DVec3> = tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
+        let centres: Vec<DVec3> = g.nodes.iter().map(|x| centre(&x.region)).collect();
+        let mut stats = RowStats::default();
+        let mut occl_cache: HashMap<(u32, u32), Vec<Plane>> = HashMap::new();
+        let mut rows = rows.peekable();
+        let mut done = 0u64;
+        while let Some(i) = rows.next() {
+            if done.is_multiple_of(64) {
+                tick(done, total);
             }
+            done += 1;
             let ti = g.nodes[i].tri;
             let a = &tris[ti as usize];
             for j in 0..n {
@@ -180,26 +259,32 @@ impl Graph {
                     continue;
                 }
                 let (sa, sb) = (spheres[ti as usize], spheres[tj as usize]);
-                if cone_misses(sa, sb, &g.nodes[i].region)
-                    || cone_misses(sa, sb, &g.nodes[j].region)
+                if cone_misses(sa, sb, &g.nodes[i].region, centres[i])
+                    || cone_misses(sa, sb, &g.nodes[j].region, centres[j])
                     || !may_occlude(a, b, &g.nodes[i].region, &g.nodes[j].region)
                 {
                     continue;
                 }
                 let occl = occl_cache
                     .entry((ti, tj))
-                    .or_insert_with(|| occlusion_planes(a, b).into())
-                    .clone();
-                g.try_edge(i, j, &occl);
+                    .or_insert_with(|| occlusion_planes(a, b));
+                stats.pairs += 1;
+                let (ri, rj) = (&g.nodes[i].region, &g.nodes[j].region);
+                if has_witness(centroids[ti as usize], centroids[tj as usize], occl, ri, rj) {
+                    g.push_edge(i, j);
+                    stats.witnessed += 1;
+                } else if g.try_edge(i, j, occl) {
+                    stats.clipped += 1;
+                }
             }
             // Occlusion planes of pairs with node i's triangle are no longer needed once
-            // both of its copies are done.
-            if g.nodes[i].back || g.nodes.get(i + 1).is_none_or(|x| x.tri != ti) {
+            // its next row (its other copy, if any) is done.
+            if rows.peek().is_none_or(|&x| g.nodes[x].tri != ti) {
                 occl_cache.retain(|k, _| k.0 != ti);
             }
         }
-        tick(n as u64, n as u64);
-        g
+        tick(total, total);
+        stats
     }
 
     pub fn add_node(&mut self, node: Node) -> usize {
@@ -215,6 +300,12 @@ impl Graph {
         if self.reduced(from, to, occl).is_empty() {
             return false;
         }
+        self.push_edge(from, to);
+        true
+    }
+
+    /// Adds the edge `from -> to`.
+    fn push_edge(&mut self, from: usize, to: usize) {
         let id = self.edges.len();
         self.edges.push(Edge {
             from,
@@ -223,7 +314,6 @@ impl Graph {
         });
         self.out[from].push(id);
         self.inn[to].push(id);
-        true
     }
 
     /// Live edges leaving `x`.
@@ -400,7 +490,9 @@ pub(super) mod tests {
                     let occl = occlusion_planes(a, b);
                     let reduced = ea.cut(&occl).intersect(&eb);
                     let (sa, sb) = (bounding_sphere(a), bounding_sphere(b));
-                    if cone_misses(sa, sb, &ea) || cone_misses(sa, sb, &eb) {
+                    if cone_misses(sa, sb, &ea, centre(&ea))
+                        || cone_misses(sa, sb, &eb, centre(&eb))
+                    {
                         rejected += 1;
                         assert!(
                             reduced.is_empty(),
@@ -413,6 +505,90 @@ pub(super) mod tests {
         }
         assert!(edges > 0);
         assert!(rejected > 6 * 40 * 39 / 4, "only {rejected} pairs rejected");
+    }
+
+    #[test]
+    fn a_witness_is_found_only_for_edges_and_for_most_of_them() {
+        // Random small triangles in the unit ball (a fixed LCG), each ordered pair and
+        // facing in each partition of the cube: a witness must mean a non-empty reduced
+        // region (the clip's answer), and it must prove most edges (else it saves nothing).
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let tris: Vec<[DVec3; 3]> = (0..30)
+            .map(|_| {
+                let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;
+                [0, 1, 2].map(|_| c + DVec3::new(rnd(), rnd(), rnd()) * 0.1)
+            })
+            .collect();
+        let dirs = directions(6).unwrap();
+        let (mut witnessed, mut edges) = (0, 0);
+        for k in 0..dirs.len() {
+            let part = partition_region(&dirs, k);
+            for (ia, a) in tris.iter().enumerate() {
+                for (ib, b) in tris.iter().enumerate() {
+                    for (fa, fb) in [(false, false), (false, true), (true, false), (true, true)] {
+                        let (ea, eb) = (part.cut(&[facing(a, fa)]), part.cut(&[facing(b, fb)]));
+                        if ia == ib || ea.is_empty() || eb.is_empty() {
+                            continue;
+                        }
+                        let occl = occlusion_planes(a, b);
+                        let edge = !ea.cut(&occl).intersect(&eb).is_empty();
+                        let ca = (a[0] + a[1] + a[2]) / 3.0;
+                        let cb = (b[0] + b[1] + b[2]) / 3.0;
+                        if has_witness(ca, cb, &occl, &ea, &eb) {
+                            witnessed += 1;
+                            assert!(edge, "pair {ia} -> {ib} witnessed without an edge");
+                        }
+                        edges += usize::from(edge);
+                    }
+                }
+            }
+        }
+        assert!(edges > 1000, "{edges} edges");
+        assert!(
+            witnessed * 2 > edges,
+            "{witnessed} of {edges} edges witnessed"
+        );
+    }
+
+    #[test]
+    fn a_sample_of_rows_has_the_full_graphs_edges_of_those_rows() {
+        // The estimate's rows (every third node) against the whole graph: the same edges
+        // leave each sampled node, in the same order.
+        let mut seed = 0x1234_5678_9abc_def1u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let tris: Arc<[[DVec3; 3]]> = (0..24)
+            .map(|_| {
+                let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;
+                [0, 1, 2].map(|_| c + DVec3::new(rnd(), rnd(), rnd()) * 0.1)
+            })
+            .collect();
+        let dirs = directions(6).unwrap();
+        let part = partition_region(&dirs, 0);
+        let full = Graph::build(tris.clone(), &part, &|_, _| {});
+        let mut sample = Graph::nodes_of(tris, &part);
+        let rows: Vec<usize> = (0..sample.nodes.len()).step_by(3).collect();
+        let stats = sample.add_rows(rows.iter().copied(), &|_, _| {});
+        let pairs = |g: &Graph| -> Vec<(usize, usize)> {
+            g.edges
+                .iter()
+                .filter(|e| rows.contains(&e.from))
+                .map(|e| (e.from, e.to))
+                .collect()
+        };
+        assert!(pairs(&full).len() > 10, "{} edges", pairs(&full).len());
+        assert_eq!(pairs(&sample), pairs(&full));
+        assert_eq!(sample.edges.len() as u64, stats.witnessed + stats.clipped);
     }
 
     #[test]

@@ -291,6 +291,92 @@ pub fn presort(
     })
 }
 
+/// The measured cost of one partition's occlusion graph, from a sample of its rows
+/// ([`estimate_graph`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GraphEstimate {
+    /// Nodes of the partition's graph (its rows).
+    pub nodes: usize,
+    /// Rows built (evenly spaced over the nodes).
+    pub rows: usize,
+    /// Edges leaving the rows built.
+    pub edges: usize,
+    /// How the rows' pairs were decided.
+    pub pairs: graph::RowStats,
+    /// Time the rows took.
+    pub seconds: f64,
+}
+
+impl GraphEstimate {
+    /// Rows per second.
+    pub fn rows_per_second(&self) -> f64 {
+        self.rows as f64 / self.seconds.max(1e-9)
+    }
+    /// The whole graph's time at the sample's rate.
+    pub fn graph_seconds(&self) -> f64 {
+        self.nodes as f64 / self.rows_per_second()
+    }
+}
+
+/// Measures what the occlusion graphs of `mesh` would cost without building them: in every
+/// partition (in parallel on `cfg.threads`, as [`presort`] runs them), the out-edges of
+/// `rows` nodes evenly spaced over the graph's nodes. The pieces are those of the first
+/// round (crossing triangles split; a later round's cycle cuts add a few pieces).
+pub fn estimate_graph(
+    mesh: &Mesh,
+    cfg: &PresortConfig,
+    rows: usize,
+    progress: &dyn Progress,
+) -> Result<Vec<GraphEstimate>, PresortError> {
+    if cfg.threads == 0 {
+        return Err(PresortError::Config(
+            "threads 0: preprocessing needs at least 1 thread".into(),
+        ));
+    }
+    if rows == 0 {
+        return Err(PresortError::Config(
+            "rows 0: the estimate needs at least 1 row of each graph".into(),
+        ));
+    }
+    let dirs = partition::directions(cfg.partitions).map_err(PresortError::Config)?;
+    input::check(mesh)?;
+    let frame = Frame3::of(&mesh.positions);
+    let input: Vec<[DVec3; 3]> = mesh
+        .indices
+        .iter()
+        .map(|t| t.map(|i| frame.to_local(mesh.positions[i as usize].as_dvec3())))
+        .collect();
+    let (pieces, _) = split::split_crossing(&input)?;
+    let tris: Arc<[[DVec3; 3]]> = pieces.iter().map(|p| p.pos).collect();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(cfg.threads)
+        .build()
+        .map_err(|e| PresortError::Config(format!("thread pool: {e}")))?;
+    Ok(pool.install(|| {
+        use rayon::prelude::*;
+        (0..dirs.len())
+            .into_par_iter()
+            .map(|k| {
+                let region = partition::partition_region(&dirs, k);
+                let mut g = graph::Graph::nodes_of(tris.clone(), &region);
+                let n = g.nodes.len();
+                let take = rows.min(n);
+                let t = Instant::now();
+                let pairs = g.add_rows((0..take).map(|r| r * n / take), &|d, t| {
+                    progress.update(k, "graph", d, t)
+                });
+                GraphEstimate {
+                    nodes: n,
+                    rows: take,
+                    edges: g.edge_count(),
+                    pairs,
+                    seconds: t.elapsed().as_secs_f64(),
+                }
+            })
+            .collect()
+    }))
+}
+
 /// The pieces with their clips in world space.
 fn world_pieces(frame: &Frame3, pieces: &[split::Piece]) -> Vec<Piece> {
     pieces
