@@ -22,12 +22,14 @@
 //! it steps.
 
 mod clock;
+mod loads;
 mod reads;
 mod table;
 
 use crate::memory::{Addr, OpKind};
 pub use clock::MAX_CLOCK_LANES;
 use clock::{Clocks, NO_CLOCK, NO_LANE, UNTRACKED};
+use loads::Loads;
 use reads::Reads;
 use table::AddrTable;
 use table::FastMap;
@@ -237,7 +239,7 @@ struct InvState {
 struct Lane {
     /// This invocation's latest load (plain or atomic, the latter including a failed
     /// compare-exchange) per address.
-    loads: Vec<Load>,
+    loads: Loads,
     /// Slab entries whose toucher set holds this lane (cleared when it finishes).
     touched: Vec<u32>,
     /// An open record load: (base, len, interrupted by (who, step)).
@@ -634,7 +636,7 @@ impl Detector {
                 |ld: &Load| prev_write.filter(|w| (w.seq != seq) & (w.step > ld.step));
             match op {
                 OpKind::Store | OpKind::AtomicStore => {
-                    let my_load = loads.iter().find(|l| l.addr == addr);
+                    let my_load = loads.get(addr);
                     if let Some(w) = my_load.and_then(since_my_load) {
                         let both_plain = my_load.is_some_and(|l| l.plain) & plain;
                         if both_plain || !ordered(&w) {
@@ -643,7 +645,7 @@ impl Detector {
                     }
                 }
                 OpKind::CompareExchange => {
-                    let my_load = loads.iter().find(|l| l.addr == addr && !l.plain);
+                    let my_load = loads.get(addr).filter(|l| !l.plain);
                     if let Some(w) = my_load.filter(|l| l.value == read).and_then(since_my_load) {
                         rep.report(invs, HazardKind::LostUpdate, addr, seq, w.seq, step);
                     }
@@ -655,10 +657,7 @@ impl Detector {
                         value: read,
                         plain,
                     };
-                    match loads.iter_mut().find(|l| l.addr == addr) {
-                        Some(l) => *l = now,
-                        None => loads.push(now),
-                    }
+                    loads.set(now);
                 }
                 _ => {}
             }

@@ -301,7 +301,7 @@ pub(crate) fn schedule_once<'a, F: Future<Output = ()>>(
             detector.start(id_of(&inputs[next]), step, s);
             chooser.admit(s as u32);
             if let Some(m) = simt.as_mut() {
-                m.admit(s);
+                m.admit(s, next);
             }
             inflight.push(s);
             stale = true;

@@ -44,6 +44,15 @@ pub(crate) struct Simt {
     epoch: u64,
     /// Per candidate (after [`Simt::filter`]): whether it is spinning.
     spinning: Vec<bool>,
+    /// Per slot: whether its invocation is spinning, `None` until computed. A slot's answer
+    /// depends on its pending step and the steps it made, which change only when the slot
+    /// is polled (at its admission and at its own steps), so it is computed once per step
+    /// of the slot rather than for every candidate at every step of the run (the scan over
+    /// each candidate's steps was a twelfth of a `kb-interlock` campaign's time).
+    spin: Vec<Option<bool>>,
+    /// Per slot: its invocation's warp (admission index / lanes, set at admission: a
+    /// division per candidate per step otherwise).
+    warp_of: Vec<u64>,
     /// Slots held by the rule at the last [`Simt::filter`].
     held: Vec<usize>,
     /// The step being taken.
@@ -67,6 +76,8 @@ impl Simt {
             futile: Vec::new(),
             epoch: 0,
             spinning: Vec::new(),
+            spin: Vec::new(),
+            warp_of: Vec::new(),
             held: Vec::new(),
             taking: None,
         }
@@ -80,6 +91,10 @@ impl Simt {
         }
         self.futile.clear();
         self.futile.resize(width, (0, 0));
+        self.spin.clear();
+        self.spin.resize(width, None);
+        self.warp_of.clear();
+        self.warp_of.resize(width, 0);
         self.epoch = 0;
         self.spinning.clear();
         self.held.clear();
@@ -90,9 +105,11 @@ impl Simt {
         admission as u64 / self.lanes
     }
 
-    /// A new invocation in `slot`.
-    pub fn admit(&mut self, slot: usize) {
+    /// A new invocation in `slot`, the pass's `admission`-th (from 0).
+    pub fn admit(&mut self, slot: usize, admission: usize) {
         self.executed[slot].clear();
+        self.spin[slot] = None;
+        self.warp_of[slot] = self.warp(admission);
         self.futile[slot] = (self.epoch, 0);
         self.epoch += 1;
     }
@@ -126,14 +143,25 @@ impl Simt {
         self.held.clear();
         for c in cands.iter() {
             let s = c.slot as usize;
-            self.spinning.push(self.is_spinning(&slots[s], s));
+            let spins = match self.spin[s] {
+                Some(spins) => spins,
+                None => {
+                    let spins = self.is_spinning(&slots[s], s);
+                    self.spin[s] = Some(spins);
+                    spins
+                }
+            };
+            self.spinning.push(spins);
         }
+        debug_assert!(cands
+            .iter()
+            .all(|c| self.warp_of[c.slot as usize] == self.warp(which[c.slot as usize])));
         let mut keep = 0;
         let mut start = 0;
         while start < cands.len() {
-            let warp = self.warp(which[cands[start].slot as usize]);
+            let warp = self.warp_of[cands[start].slot as usize];
             let mut end = start;
-            while end < cands.len() && self.warp(which[cands[end].slot as usize]) == warp {
+            while end < cands.len() && self.warp_of[cands[end].slot as usize] == warp {
                 end += 1;
             }
             let any_spins = self.spinning[start..end].iter().any(|&s| s);
@@ -235,6 +263,8 @@ impl Simt {
             // Interlock entries and exits change what others may do.
             _ => true,
         };
+        // (The slot was polled: its pending step changed, and maybe its steps.)
+        self.spin[slot] = None;
         if let Some(StepKind::Mem { addr, op, .. }) = kind {
             let done = &mut self.executed[slot];
             if !done.contains(&(addr, op)) {

@@ -275,3 +275,25 @@ fn a_compare_exchange_that_validates_a_value_that_came_back_is_aba() {
         .read(0, OpKind::CompareExchange, LOCK, 0);
     assert_eq!(r.counts(), HazardCounts::default());
 }
+
+#[test]
+fn lost_updates_are_found_among_many_loads_of_an_invocation() {
+    // A loads 40 words (past the short list an invocation's loads start in), B writes
+    // some of them, then A stores to each: a lost update exactly where B wrote between.
+    let word = |i: u32| Addr::new(2, i * 7);
+    let written = [3u32, 8, 9, 31, 39];
+    let mut r = Run::new(2);
+    for i in 0..40 {
+        r.op(0, OpKind::Load, word(i));
+    }
+    for &i in &written {
+        r.op(1, OpKind::AtomicStore, word(i));
+    }
+    // (A load again after B's write: the latest load is the one that counts.)
+    r.op(0, OpKind::Load, word(9));
+    for i in 0..40 {
+        r.op(0, OpKind::Store, word(i));
+    }
+    let c = r.counts();
+    assert_eq!(c.lost_updates, written.len() as u64 - 1, "{c:?}");
+}

@@ -220,12 +220,15 @@ impl Memory {
             .collect()
     }
 
+    #[inline]
     fn check<T: Word>(&self, buf: Buf<T>) -> Result<&Buffer, MemoryError> {
         let b = self
             .buffers
             .get(buf.id as usize)
             .ok_or(MemoryError::NoSuchBuffer(buf.id))?;
-        if b.ty != T::NAME {
+        // (The names are static strings: the same pointer is the same type, without the
+        // string comparison every host-side `get` and `set` made.)
+        if !std::ptr::eq(b.ty, T::NAME) && b.ty != T::NAME {
             return Err(MemoryError::WrongType {
                 name: b.name.clone(),
                 actual: b.ty,
@@ -302,8 +305,20 @@ impl Memory {
     }
 
     /// Sets one word (host side, no allocation).
+    #[inline]
     pub fn set<T: Word>(&self, buf: Buf<T>, index: u32, value: T) -> Result<(), MemoryError> {
-        self.write(buf, index as u64, std::slice::from_ref(&value))
+        let b = self.check(buf)?;
+        if index >= buf.len {
+            // (As `write` reports it.)
+            return Err(MemoryError::OutOfRange {
+                name: b.name.clone(),
+                offset: index as u64,
+                len: 1,
+                words: buf.len,
+            });
+        }
+        self.word(buf.id, index).store(value.to_bits());
+        Ok(())
     }
 
     /// Writes `data` at `offset` (host side).
