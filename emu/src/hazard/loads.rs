@@ -190,7 +190,7 @@ mod tests {
             addr: Addr(addr),
             step,
             value: step * 3,
-            plain: step % 2 == 0,
+            plain: step.is_multiple_of(2),
         }
     }
 

@@ -214,12 +214,17 @@ impl Progress for Silent {
 /// gives up ([`split::break_cycle`]).
 pub const MAX_CYCLE_ROUNDS: u32 = 8;
 
-/// Preprocesses `mesh` (sections 3-4.2): every partition in parallel, one per task.
-pub fn presort(
-    mesh: &Mesh,
-    cfg: &PresortConfig,
-    progress: &dyn Progress,
-) -> Result<Presorted, PresortError> {
+/// What [`presort`] and [`estimate_graph`] start from: the partitions' directions, the
+/// mesh's local frame, its triangles in that frame, and the pool of `cfg.threads` threads
+/// (the configuration and the mesh checked first).
+struct Prepared {
+    dirs: Vec<DVec3>,
+    frame: Frame3,
+    input: Vec<[DVec3; 3]>,
+    pool: rayon::ThreadPool,
+}
+
+fn prepare(mesh: &Mesh, cfg: &PresortConfig) -> Result<Prepared, PresortError> {
     if cfg.threads == 0 {
         return Err(PresortError::Config(
             "threads 0: preprocessing needs at least 1 thread".into(),
@@ -228,16 +233,36 @@ pub fn presort(
     let dirs = partition::directions(cfg.partitions).map_err(PresortError::Config)?;
     input::check(mesh)?;
     let frame = Frame3::of(&mesh.positions);
-    let input: Vec<[DVec3; 3]> = mesh
+    let input = mesh
         .indices
         .iter()
         .map(|t| t.map(|i| frame.to_local(mesh.positions[i as usize].as_dvec3())))
         .collect();
-    let (mut split_pieces, mut split_stats) = split::split_crossing(&input)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(cfg.threads)
         .build()
         .map_err(|e| PresortError::Config(format!("thread pool: {e}")))?;
+    Ok(Prepared {
+        dirs,
+        frame,
+        input,
+        pool,
+    })
+}
+
+/// Preprocesses `mesh` (sections 3-4.2): every partition in parallel, one per task.
+pub fn presort(
+    mesh: &Mesh,
+    cfg: &PresortConfig,
+    progress: &dyn Progress,
+) -> Result<Presorted, PresortError> {
+    let Prepared {
+        dirs,
+        frame,
+        input,
+        pool,
+    } = prepare(mesh, cfg)?;
+    let (mut split_pieces, mut split_stats) = split::split_crossing(&input)?;
     // Rounds: a cycle seen whole from some viewpoint is broken by cutting one of its pieces
     // by another's plane, and every partition runs again on the new pieces.
     let mut round = 0;
@@ -328,30 +353,16 @@ pub fn estimate_graph(
     rows: usize,
     progress: &dyn Progress,
 ) -> Result<Vec<GraphEstimate>, PresortError> {
-    if cfg.threads == 0 {
-        return Err(PresortError::Config(
-            "threads 0: preprocessing needs at least 1 thread".into(),
-        ));
-    }
     if rows == 0 {
         return Err(PresortError::Config(
             "rows 0: the estimate needs at least 1 row of each graph".into(),
         ));
     }
-    let dirs = partition::directions(cfg.partitions).map_err(PresortError::Config)?;
-    input::check(mesh)?;
-    let frame = Frame3::of(&mesh.positions);
-    let input: Vec<[DVec3; 3]> = mesh
-        .indices
-        .iter()
-        .map(|t| t.map(|i| frame.to_local(mesh.positions[i as usize].as_dvec3())))
-        .collect();
+    let Prepared {
+        dirs, input, pool, ..
+    } = prepare(mesh, cfg)?;
     let (pieces, _) = split::split_crossing(&input)?;
     let tris: Arc<[[DVec3; 3]]> = pieces.iter().map(|p| p.pos).collect();
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(cfg.threads)
-        .build()
-        .map_err(|e| PresortError::Config(format!("thread pool: {e}")))?;
     Ok(pool.install(|| {
         use rayon::prelude::*;
         (0..dirs.len())
