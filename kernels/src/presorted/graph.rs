@@ -464,13 +464,7 @@ pub(super) mod tests {
         // Random small triangles in the unit ball (a fixed LCG), each pair against each
         // partition of the cube: a rejection must mean an empty reduced region, and it must
         // reject many pairs (else it prunes nothing).
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut rnd = super::super::test_lcg();
         let tris: Vec<[DVec3; 3]> = (0..40)
             .map(|_| {
                 let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;

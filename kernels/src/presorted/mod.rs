@@ -491,3 +491,15 @@ fn segment_of(g: &graph::Graph, order: &[cells::Placed], frame: &Frame3) -> Segm
         .collect();
     Segment { instances }
 }
+
+/// The tests' fixed random numbers in [-1, 1): a 64-bit LCG from a fixed seed.
+#[cfg(test)]
+fn test_lcg() -> impl FnMut() -> f64 {
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    move || {
+        seed = seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
