@@ -8,7 +8,7 @@ use std::task::{Context, Poll};
 use super::{DirectState, Frag, FragView, Route};
 use crate::fragment::{sealed, Fragment};
 use crate::framebuffer::Image;
-use crate::memory::{Buf, MemOp, Word};
+use crate::memory::{Buf, MemOp, OpKind, Word};
 
 /// The context of the fused path of the direct executors: every access is performed when
 /// it is made and never suspends (see the module docs). The fragment's input, step count,
@@ -65,6 +65,31 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
     fn set_depth_out(&self, z: f32) {
         self.state.depth_out.set(Some(z));
     }
+    /// The fragment's own slot of `buf` when this worker owns the tile and `buf` is the
+    /// kernel's own per-pixel or per-block array (`DirectState::owning`): its first word,
+    /// its words, and the declaration that made it own.
+    #[inline(always)]
+    fn own_slot<T: Word>(&self, buf: Buf<T>) -> Option<(u64, u64, &'static str)> {
+        if !OWN {
+            return None;
+        }
+        let st = self.state;
+        let input = st.input.get();
+        let width = self.frag.env.width;
+        match (st.own, st.own_block) {
+            (Some(own), _) if own.buffer == buf.id => Some((
+                (input.y as u64 * width as u64 + input.x as u64) * own.stride as u64,
+                own.stride as u64,
+                "with_own_pixel_array",
+            )),
+            (_, Some(own)) if own.buffer == buf.id => Some((
+                own.first_word(input.x, input.y, width),
+                own.stride as u64,
+                "with_own_block_array",
+            )),
+            _ => None,
+        }
+    }
     #[inline(always)]
     fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
         let st = self.state;
@@ -72,25 +97,11 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
         // Where the tile is this worker's for the pass, the fragment's own slot (of its
         // pixel, or of its block, which lies in the tile) is reached by no other thread
         // (`DirectState::owning`): its first word, its words and the declaration.
-        let input = st.input.get();
-        let width = self.frag.env.width;
-        let owned = match (st.own, st.own_block) {
-            (Some(own), _) if OWN && own.buffer == buf.id => Some((
-                (input.y as u64 * width as u64 + input.x as u64) * own.stride as u64,
-                own.stride as u64,
-                "with_own_pixel_array",
-            )),
-            (_, Some(own)) if OWN && own.buffer == buf.id => Some((
-                own.first_word(input.x, input.y, width),
-                own.stride as u64,
-                "with_own_block_array",
-            )),
-            _ => None,
-        };
-        let route = match owned {
+        let route = match self.own_slot(buf) {
             Some((first, stride, declared)) => {
                 // Out of bounds is reported as such, below.
                 if (index as u64).wrapping_sub(first) >= stride && index < buf.len {
+                    let input = st.input.get();
                     self.frag
                         .not_own_slot(buf.id, index, (input.x, input.y), declared);
                     return Poll::Pending;
@@ -101,6 +112,31 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
         };
         self.frag
             .perform_counted::<T>(&st.steps, &st.ops, route, buf, index, op)
+    }
+    /// The fast path of a plain record access of `len` words at `base..` (fewer words than
+    /// `u32::MAX`): one bounds check, one step claim and one count for the record
+    /// ([`Frag::claim_record`]), when the words lie in bounds, the step limit allows them all
+    /// and, for the kernel's own array, all lie in the fragment's own slot. Then every word
+    /// is what [`DirectFrag::perform`] would have loaded or stored, one by one, on the same
+    /// route: a plain load or store, the same on an owned slot as on any word. False, with
+    /// nothing done, otherwise (the word-by-word path then faults where it would).
+    #[inline(always)]
+    fn claim_record<T: Word>(&self, buf: Buf<T>, base: u32, len: usize, kind: OpKind) -> bool {
+        let st = self.state;
+        let Ok(len) = u32::try_from(len) else {
+            return false;
+        };
+        if len == 0 {
+            return false;
+        }
+        if let Some((first, stride, _)) = self.own_slot(buf) {
+            let (lo, hi) = (u64::from(base), u64::from(base) + u64::from(len));
+            if lo < first || hi > first + stride {
+                return false;
+            }
+        }
+        self.frag
+            .claim_record(&st.steps, &st.ops, buf.len, base, len, kind)
     }
     #[inline(always)]
     fn op<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Performed<T> {
@@ -165,6 +201,12 @@ impl<const OWN: bool> Fragment for DirectFrag<'_, OWN> {
         base: u32,
         out: &mut [T],
     ) -> impl Future<Output = ()> {
+        if self.claim_record(buf, base, out.len(), OpKind::Load) {
+            let st = self.state;
+            st.words
+                .load_record(self.frag.env.memory, buf.id, base, out);
+            return Performed(Poll::Ready(()));
+        }
         let mut done = Poll::Ready(());
         for (w, slot) in out.iter_mut().enumerate() {
             match self.perform::<T>(buf, base.wrapping_add(w as u32), MemOp::Load) {
@@ -184,6 +226,12 @@ impl<const OWN: bool> Fragment for DirectFrag<'_, OWN> {
         base: u32,
         values: &[T],
     ) -> impl Future<Output = ()> {
+        if self.claim_record(buf, base, values.len(), OpKind::Store) {
+            let st = self.state;
+            st.words
+                .store_record(self.frag.env.memory, buf.id, base, values);
+            return Performed(Poll::Ready(()));
+        }
         let mut done = Poll::Ready(());
         for (w, v) in values.iter().enumerate() {
             let op = MemOp::Store(v.to_bits());

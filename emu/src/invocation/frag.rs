@@ -16,7 +16,7 @@ use crate::fragment::{sealed, Fragment};
 use crate::framebuffer::Image;
 use crate::interlock::{Interlock, InterlockMode};
 use crate::kernel::{FaultKind, FragInput};
-use crate::memory::{Addr, Buf, MemOp, Word};
+use crate::memory::{Addr, Buf, MemOp, OpKind, Word};
 
 /// The context of one kernel invocation. Cheap to copy.
 #[derive(Clone, Copy)]
@@ -375,6 +375,39 @@ impl<'a> Frag<'a> {
     #[inline]
     pub(crate) fn spurious_cas_failure(&self) -> bool {
         spurious_cas_failure(self.env, self.input().seq, self.inv.steps.get())
+    }
+
+    /// Claims at once the steps and operation counts of a plain record access of `len`
+    /// words at `base..base + len` of a buffer of `buf_len` words (the fused path's
+    /// [`Fragment::load_record`] and [`Fragment::store_record`]): true when every word is in
+    /// bounds, the step limit allows all of them and the invocation has not faulted, the
+    /// steps and counts are then taken, as `len` calls of [`Frag::perform_counted`] would
+    /// take them. False, with nothing taken, otherwise: the caller goes word by word, so a
+    /// fault falls on the word it would fall on.
+    ///
+    /// [`Fragment::load_record`]: crate::Fragment::load_record
+    /// [`Fragment::store_record`]: crate::Fragment::store_record
+    #[inline(always)]
+    pub(crate) fn claim_record(
+        &self,
+        steps: &Cell<u64>,
+        ops: &[Cell<u32>; OP_KINDS],
+        buf_len: u32,
+        base: u32,
+        len: u32,
+        kind: OpKind,
+    ) -> bool {
+        let n = steps.get() + u64::from(len);
+        if u64::from(base) + u64::from(len) > u64::from(buf_len)
+            || n > self.env.max_steps
+            || self.inv.faulted()
+        {
+            return false;
+        }
+        steps.set(n);
+        let k = kind as usize;
+        ops[k].set(ops[k].get() + len);
+        true
     }
 
     /// One step of the invocation counted into `steps` for the watchdog: an access (see

@@ -118,6 +118,45 @@ impl<'m> WordCache<'m> {
             apply32_owned::<T>(&self.words32(memory, b)[i], op) as u64
         }
     }
+
+    /// Plain loads of the words `base..base + out.len()` of buffer `b` (in bounds: the
+    /// caller checked, [`crate::invocation`]'s record fast path), the buffer's slice found
+    /// once for the record: what `out.len()` calls of [`WordCache::apply`] with
+    /// [`MemOp::Load`] return.
+    #[inline(always)]
+    pub fn load_record<T: Word>(&self, memory: &'m Memory, b: u32, base: u32, out: &mut [T]) {
+        let base = base as usize;
+        if T::WIDE {
+            let words = &self.words64(memory, b)[base..base + out.len()];
+            for (o, w) in out.iter_mut().zip(words) {
+                *o = T::from_bits(w.load(Ordering::Relaxed));
+            }
+        } else {
+            let words = &self.words32(memory, b)[base..base + out.len()];
+            for (o, w) in out.iter_mut().zip(words) {
+                *o = T::from_bits(u64::from(w.load(Ordering::Relaxed)));
+            }
+        }
+    }
+
+    /// Plain stores of `values` to the words `base..base + values.len()` of buffer `b` (in
+    /// bounds, as for [`WordCache::load_record`]): what `values.len()` calls of
+    /// [`WordCache::apply`] with [`MemOp::Store`] write.
+    #[inline(always)]
+    pub fn store_record<T: Word>(&self, memory: &'m Memory, b: u32, base: u32, values: &[T]) {
+        let base = base as usize;
+        if T::WIDE {
+            let words = &self.words64(memory, b)[base..base + values.len()];
+            for (v, w) in values.iter().zip(words) {
+                w.store(v.to_bits(), Ordering::Relaxed);
+            }
+        } else {
+            let words = &self.words32(memory, b)[base..base + values.len()];
+            for (v, w) in values.iter().zip(words) {
+                w.store(v.to_bits() as u32, Ordering::Relaxed);
+            }
+        }
+    }
 }
 
 impl Memory {

@@ -370,3 +370,110 @@ fn reading_undeclared_interpolants_is_misuse_under_every_executor() {
         }
     }
 }
+
+/// Every pixel stores a three-word record at `3 * pixel + shift` and loads it back into its
+/// output: with `shift = 1` on a buffer of `3 * pixels` words, the last pixel's record
+/// crosses the buffer's end after two words.
+struct Records {
+    buf: Buf<u32>,
+    shift: u32,
+}
+
+impl FragmentKernel for Records {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("records")
+    }
+    async fn shade(&self, f: impl Fragment) {
+        let at = f.pixel_index() * 3 + self.shift;
+        let v = f.pixel_index() + 1;
+        f.store_record(self.buf, at, &[v, v + 100, v + 200]).await;
+        let mut r = [0u32; 3];
+        f.load_record(self.buf, at, &mut r).await;
+        f.output(0, [r[0] as f32, r[1] as f32, r[2] as f32, 1.0]);
+    }
+}
+
+#[test]
+fn a_record_faults_at_the_word_a_word_by_word_access_would() {
+    // Records are performed word by word: a record that leaves its buffer, or meets the
+    // step limit, has its earlier words stored and faults at the first word it cannot
+    // perform, whatever the executor (the fused path claims a whole record at once only
+    // when every word would succeed).
+    let run = |e: &ExecConfig| {
+        let mut dev = Device::new();
+        let buf = dev.buffer::<u32>("rec", 48).unwrap();
+        let mut fb = Framebuffer::new(4, 4, SampleCount::X1, 8, &[Format::RGBA32F]).unwrap();
+        let mut st = FragmentState::new();
+        st.targets = vec![TargetState::new(Format::RGBA32F)];
+        let r = dev
+            .fullscreen(&mut fb, &st, &Records { buf, shift: 1 }, e)
+            .unwrap();
+        (r, dev.memory.read(buf).unwrap(), fb.color(0, 1, 1, 0))
+    };
+    for e in all_execs().iter().chain(&direct_execs()) {
+        let (r, words, texel) = run(e);
+        assert_eq!(r.stats.faulted, 1, "{e:?}");
+        assert!(
+            matches!(&r.faults[0].kind, FaultKind::OutOfBounds { buffer, len: 48, .. } if buffer == "rec"),
+            "{e:?}: {:?}",
+            r.faults[0]
+        );
+        // Pixel 15's record: words 46 and 47 stored, the third (48) out of bounds.
+        assert_eq!(&words[46..], &[16, 116], "{e:?}");
+        assert_eq!(words[1..4], [1, 101, 201], "{e:?}");
+        assert_eq!(
+            r.stats.ops.of(fragrace_emu::memory::OpKind::Store),
+            15 * 3 + 2,
+            "{e:?}"
+        );
+        assert_eq!(
+            r.stats.ops.of(fragrace_emu::memory::OpKind::Load),
+            15 * 3,
+            "{e:?}"
+        );
+        assert_eq!(
+            texel,
+            [
+                6f32.to_bits(),
+                106f32.to_bits(),
+                206f32.to_bits(),
+                1f32.to_bits()
+            ]
+        );
+    }
+    // The step limit falls inside the load: four words performed, the fifth faults.
+    for mut e in all_execs().into_iter().chain(direct_execs()) {
+        e.max_steps = 4;
+        let mut dev = Device::new();
+        let buf = dev.buffer::<u32>("rec", 64).unwrap();
+        let r = dev
+            .fullscreen(
+                &mut fb(4, 4),
+                &FragmentState::new(),
+                &Records { buf, shift: 0 },
+                &e,
+            )
+            .unwrap();
+        assert_eq!(r.stats.faulted, 16, "{e:?}");
+        assert!(r
+            .faults
+            .iter()
+            .all(|f| matches!(f.kind, FaultKind::Watchdog { .. })));
+        assert_eq!(
+            r.stats.ops.of(fragrace_emu::memory::OpKind::Store),
+            16 * 3,
+            "{e:?}"
+        );
+        // The direct executors count an operation once performed (the scheduled one when
+        // issued, the faulting word's included).
+        if !matches!(e.mode, fragrace_emu::ExecMode::Scheduled(_)) {
+            let loads = r.stats.ops.of(fragrace_emu::memory::OpKind::Load);
+            assert_eq!(loads, 16, "{e:?}");
+        }
+        assert_eq!(
+            dev.memory.read(buf).unwrap()[45..48],
+            [16, 116, 216],
+            "{e:?}"
+        );
+    }
+}

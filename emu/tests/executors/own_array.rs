@@ -214,3 +214,45 @@ fn own_block_counters_count_their_blocks_under_every_executor_and_check_where_ow
     }
     assert_eq!(counters.iter().sum::<u32>(), 256);
 }
+
+/// Stores a record of `len` words at its own slot of two words a pixel.
+struct OwnRecord {
+    slots: Buf<u32>,
+    len: usize,
+}
+
+impl FragmentKernel for OwnRecord {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("own-record").with_own_pixel_array(self.slots, 2)
+    }
+    async fn shade(&self, f: impl Fragment) {
+        let words = [f.primitive_id() + 1; 3];
+        f.store_record(self.slots, f.pixel_index() * 2, &words[..self.len])
+            .await;
+    }
+}
+
+#[test]
+fn a_record_past_its_own_slot_faults_at_the_first_word_outside() {
+    let run = |len: usize| {
+        let mut dev = Device::new();
+        // One spare word, so that the last pixel's third word is in bounds.
+        let slots = dev.buffer::<u32>("slots", 16 * 8 * 2 + 1).unwrap();
+        let r = draw(&dev, &OwnRecord { slots, len }, &owning());
+        (r, dev.memory.read(slots).unwrap())
+    };
+    // Within the slot: no fault, both words the last fragment's (API order per pixel).
+    let (r, words) = run(2);
+    assert!(r.faults.is_empty(), "{:?}", r.faults);
+    assert!(words[..256].chunks(2).all(|s| s[0] == s[1] && s[0] >= 3));
+    // Three words: the first two stored, the third (the next pixel's) a misuse.
+    let (r, words) = run(3);
+    assert_eq!(r.stats.faulted, 256);
+    assert!(r
+        .faults
+        .iter()
+        .all(|f| matches!(&f.kind, FaultKind::Misuse { message }
+        if message.contains("with_own_pixel_array"))));
+    assert!(words[..256].chunks(2).all(|s| s[0] == s[1] && s[0] >= 3));
+    assert_eq!(words[256], 0, "no third word stored");
+}
