@@ -44,16 +44,21 @@ pub struct TileMemory {
     pub tile_size: u32,
     pub samples: u32,
     /// Raw channel words per target (f32 bits for float and RGBA8 formats, u32 otherwise).
-    /// While `color_unclear` is set they are not the tile's values (see there).
+    /// While `color_fill` is set they are not the tile's values (see there).
     pub(crate) color: Vec<Vec<[u32; 4]>>,
-    /// The colour planes still hold what an earlier framebuffer left in them (a new
-    /// framebuffer takes kept planes without clearing them: [`TilePlanes::take`]): every
-    /// texel's value is 0, the clear, and whoever first writes the tile clears it first
+    /// A pending clear (a GPU's per-tile fast clear): `Some(v)` when the colour planes
+    /// still hold words that are not the tile's, and every texel of every plane has the
+    /// value `v`. Whoever first writes the tile clears it first
     /// ([`TileMemory::clear_pending_color`], or row by row just ahead of the writes in the
     /// fused full-screen path, which owns the tile: the clear is then done by the pass's
-    /// threads, each on rows it is about to write, instead of a 64 MiB `memset` on one
-    /// thread for a 2048x2048 RGBA32F target before the frame's passes).
-    pub(crate) color_unclear: bool,
+    /// threads, each on rows it is about to write); a readback fills in `v`. Two sources:
+    /// - a new framebuffer takes kept planes without clearing them ([`TilePlanes::take`]):
+    ///   `v` = 0, the clear, instead of a 64 MiB `memset` on one thread for a 2048x2048
+    ///   RGBA32F target before the frame's passes;
+    /// - a full-screen pass that writes one value to every pixel of a tile no geometry
+    ///   reached (a resolve's background: [`TileMemory::fast_clear`]) writes nothing: at
+    ///   2048x2048 the bunny leaves three tiles in four empty, 48 MiB of background texels.
+    pub(crate) color_fill: Option<[u32; 4]>,
     /// Depth per sample. Empty until a depth or stencil test first needs it (most
     /// multi-fragment passes never test): then all samples hold `depth_clear`.
     pub depth: Vec<f32>,
@@ -96,11 +101,11 @@ impl TileMemory {
         targets: usize,
     ) -> TileMemory {
         let n = (tile_size * tile_size * samples) as usize;
-        let mut color_unclear = false;
+        let mut unclear = false;
         let color = (0..targets)
             .map(|_| {
-                let (plane, unclear) = TILE_COLORS.take(n);
-                color_unclear |= unclear;
+                let (plane, kept) = TILE_COLORS.take(n);
+                unclear |= kept;
                 plane
             })
             .collect();
@@ -112,7 +117,7 @@ impl TileMemory {
             tile_size,
             samples,
             color,
-            color_unclear,
+            color_fill: unclear.then_some([0; 4]),
             depth: Vec::new(),
             stencil: Vec::new(),
             depth_clear: 1.0,
@@ -131,15 +136,11 @@ impl TileMemory {
         }
     }
 
-    /// Texel `i` (an [`TileMemory::index`]) of target `target`'s plane: 0 while the planes
-    /// await their clear (`color_unclear`).
+    /// Texel `i` (an [`TileMemory::index`]) of target `target`'s plane: the pending clear's
+    /// value while the planes await it (`color_fill`).
     pub fn color_at(&self, target: usize, i: usize) -> [u32; 4] {
         let texel = self.color[target][i];
-        if self.color_unclear {
-            [0; 4]
-        } else {
-            texel
-        }
+        self.color_fill.unwrap_or(texel)
     }
 
     /// Texels of each colour plane (the full tile, padding included, every sample).
@@ -147,40 +148,48 @@ impl TileMemory {
         (self.tile_size * self.tile_size * self.samples) as usize
     }
 
-    /// Clears the colour planes if they still hold an earlier framebuffer's words
-    /// (`color_unclear`): before anything reads or writes them as the tile's.
+    /// Performs the pending clear of the colour planes, if any (`color_fill`): before
+    /// anything reads or writes them as the tile's.
     #[inline]
     pub(crate) fn clear_pending_color(&mut self) {
-        if self.color_unclear {
-            self.clear_all_color();
+        if let Some(v) = self.color_fill {
+            self.clear_all_color(v);
         }
     }
 
     #[cold]
-    fn clear_all_color(&mut self) {
+    fn clear_all_color(&mut self, v: [u32; 4]) {
         for plane in &mut self.color {
-            plane.fill([0; 4]);
+            plane.fill(v);
         }
-        self.color_unclear = false;
+        self.color_fill = None;
     }
 
-    /// Takes over the pending clear of the colour planes: true if they held an earlier
-    /// framebuffer's words, and the caller now clears every row of the tile
-    /// ([`TileMemory::clear_color_row`], padding rows included) before it reads or writes it.
+    /// Takes over the pending clear of the colour planes: its value if there was one, and
+    /// the caller now clears every row of the tile to it ([`TileMemory::clear_color_row`],
+    /// padding rows included) before it reads or writes the row.
     #[inline]
-    pub(crate) fn take_pending_color(&mut self) -> bool {
-        std::mem::replace(&mut self.color_unclear, false)
+    pub(crate) fn take_pending_color(&mut self) -> Option<[u32; 4]> {
+        self.color_fill.take()
     }
 
-    /// Zeroes row `ly` of the tile (every column, padding included, every sample) in every
-    /// colour plane.
+    /// Sets row `ly` of the tile (every column, padding included, every sample) to `v` in
+    /// every colour plane.
     #[inline]
-    pub(crate) fn clear_color_row(&mut self, ly: u32) {
+    pub(crate) fn clear_color_row(&mut self, ly: u32, v: [u32; 4]) {
         let per_row = (self.tile_size * self.samples) as usize;
         let at = ly as usize * per_row;
         for plane in &mut self.color {
-            plane[at..at + per_row].fill([0; 4]);
+            plane[at..at + per_row].fill(v);
         }
+    }
+
+    /// Gives every texel of every colour plane (every sample, padding included) the value
+    /// `v` without writing it: a pending clear (`color_fill`), performed by the first write
+    /// to the tile or filled in by a readback. What writing `v` everywhere leaves.
+    #[inline]
+    pub(crate) fn fast_clear(&mut self, v: [u32; 4]) {
+        self.color_fill = Some(v);
     }
 
     /// Index of sample `s` of tile-local pixel `(lx, ly)` in every buffer of the tile.
@@ -380,7 +389,7 @@ pub struct Framebuffer {
 /// every frame (every run has its framebuffer). Freed, they went back to the OS (the top of
 /// `malloc`'s heap is trimmed), so each frame's resolve faulted them in again, a page fault
 /// per 4 KiB as it wrote its first pixel of each page. A tile here takes a kept plane of its
-/// size as it is, and clears it when it is first written (`TileMemory::color_unclear`).
+/// size as it is, and clears it when it is first written (`TileMemory::color_fill`).
 /// Plain `std` mutex: bookkeeping.
 static TILE_COLORS: TilePlanes = TilePlanes {
     free: std::sync::Mutex::new(Vec::new()),
@@ -557,10 +566,7 @@ impl Framebuffer {
     pub fn color(&self, target: usize, x: u32, y: u32, sample: u32) -> [u32; 4] {
         let (t, i) = self.locate(x, y, sample);
         let t = &self.tiles[t];
-        if t.color_unclear {
-            return [0; 4];
-        }
-        t.color[target][i]
+        t.color_at(target, i)
     }
     /// Depth of one sample, global pixel coordinates.
     pub fn depth(&self, x: u32, y: u32, sample: u32) -> f32 {
@@ -579,15 +585,21 @@ impl Framebuffer {
         let samples = self.samples.count();
         let mut texels = vec![[0u32; 4]; self.width as usize * self.height as usize * samples];
         let row = self.width as usize * samples;
-        // Tiles not yet cleared hold zeros: the texels are already.
-        for tile in self.tiles.iter().filter(|t| !t.color_unclear) {
+        for tile in &self.tiles {
             let src = &tile.color[target];
             // Each tile row is a contiguous run of `w * samples` texels in both layouts.
             let run = tile.w as usize * samples;
             for ly in 0..tile.h {
-                let from = tile.index(0, ly, 0);
                 let to = (tile.y0 + ly) as usize * row + tile.x0 as usize * samples;
-                texels[to..to + run].copy_from_slice(&src[from..from + run]);
+                match tile.color_fill {
+                    // The texels are zeros already.
+                    Some([0, 0, 0, 0]) => {}
+                    Some(v) => texels[to..to + run].fill(v),
+                    None => {
+                        let from = tile.index(0, ly, 0);
+                        texels[to..to + run].copy_from_slice(&src[from..from + run]);
+                    }
+                }
             }
         }
         Image {

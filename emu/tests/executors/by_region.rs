@@ -35,16 +35,17 @@ impl FragmentKernel for Insert {
 }
 
 /// Walks its pixel's list: writes how many nodes and the sum of their primitive ids plus
-/// one, and at an untouched pixel (an empty list) zeros.
+/// one, and at an untouched pixel (an empty list) `empty`.
 struct Walk {
     heads: Buf<u32>,
     nodes: Buf<u32>,
     by_region: bool,
+    empty: [u32; 4],
 }
 
 impl FragmentKernel for Walk {
     fn info(&self) -> KernelInfo {
-        let info = KernelInfo::new("walk").with_untouched_output([0; 4]);
+        let info = KernelInfo::new("walk").with_untouched_output(self.empty);
         if self.by_region {
             info.with_by_region_reads()
         } else {
@@ -59,7 +60,25 @@ impl FragmentKernel for Walk {
             n += 1;
             cur = f.load(self.nodes, cur * 2 + 1).await;
         }
-        f.output_u32(0, [n, sum, 0, 0]);
+        f.output_u32(0, if n == 0 { self.empty } else { [n, sum, 0, 0] });
+    }
+}
+
+/// Writes `value` at column 0 and discards elsewhere.
+struct Column0 {
+    value: [u32; 4],
+}
+
+impl FragmentKernel for Column0 {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("column-0")
+    }
+    async fn shade(&self, f: impl Fragment) {
+        if f.x() == 0 {
+            f.output_u32(0, self.value);
+        } else {
+            f.discard();
+        }
     }
 }
 
@@ -100,6 +119,18 @@ struct Outcome {
 }
 
 fn run(exec: &ExecConfig, together: bool, by_region: bool) -> Outcome {
+    run_with(exec, together, by_region, [0; 4], None)
+}
+
+/// [`run`] with the walk's output at empty pixels, and a full-screen pass of [`Column0`]
+/// writing `then` at column 0 after the two passes.
+fn run_with(
+    exec: &ExecConfig,
+    together: bool,
+    by_region: bool,
+    empty: [u32; 4],
+    then: Option<[u32; 4]>,
+) -> Outcome {
     let mut dev = Device::new().with_coverage(Coverage::Tracked);
     let n = (W * H) as u64;
     let heads = dev.buffer::<u32>("heads", n).unwrap();
@@ -121,6 +152,7 @@ fn run(exec: &ExecConfig, together: bool, by_region: bool) -> Outcome {
         heads,
         nodes,
         by_region,
+        empty,
     };
     let (geometry, full) = if together {
         dev.draw_then_fullscreen(&mut fb, &draw, &state, &insert, &fs_state, &walk, exec)
@@ -130,6 +162,10 @@ fn run(exec: &ExecConfig, together: bool, by_region: bool) -> Outcome {
         let f = dev.fullscreen(&mut fb, &fs_state, &walk, exec).unwrap();
         (g, f)
     };
+    if let Some(value) = then {
+        dev.fullscreen(&mut fb, &fs_state, &Column0 { value }, exec)
+            .unwrap();
+    }
     let h = dev.memory.read(heads).unwrap();
     let nd = dev.memory.read(nodes).unwrap();
     let lists = h
@@ -182,4 +218,34 @@ fn by_region_passes_run_together_give_the_two_passes_results_under_every_executo
             assert!(r.full.passes[0].full_screen, "{what}");
         }
     }
+}
+
+#[test]
+fn empty_tiles_hold_the_declared_output_when_read_back_and_when_written_again() {
+    // A resolve's empty tiles are fast-cleared to its declared output (nothing written
+    // until the tile is read back or written again): the image, a pixel read alone, and a
+    // later pass that writes one column of every tile find the declared output elsewhere.
+    let empty = [7, 8, 9, 10];
+    let mut execs = all_execs();
+    execs.extend(direct_execs());
+    for exec in &execs {
+        for then in [None, Some([1, 2, 3, 4])] {
+            let r = run_with(exec, true, true, empty, then);
+            let what = format!("{exec:?}, then {then:?}");
+            for (p, (texel, list)) in r.image.iter().zip(&r.lists).enumerate() {
+                let want = match then {
+                    Some(v) if (p as u32).is_multiple_of(W) => v,
+                    _ if list.is_empty() => empty,
+                    _ => [list.len() as u32, list.iter().map(|id| id + 1).sum(), 0, 0],
+                };
+                assert_eq!(*texel, want, "{what}: pixel {p}");
+            }
+        }
+    }
+    // The screen's second column of blocks (32 pixels wide, x >= 32) and so its tiles
+    // (8 pixels) are empty: the fast-cleared tiles the loop above read back and wrote.
+    let r = run_with(&ExecConfig::ordered(), true, true, empty, None);
+    assert!((0..W * H)
+        .filter(|p| p % W >= 32)
+        .all(|p| r.lists[p as usize].is_empty()));
 }
