@@ -558,6 +558,36 @@ fn long_acceptance_presorted_bunny_shipped_lists_256_views() {
     shipped_lists_are_exact("bunny", &random_views(256));
 }
 
+/// The same acceptance on the 11K dragon without its duplicate triangles
+/// (`assets/dragon_res4_dedup.obj.gz`, 10,600 triangles, written by `fragrace presort
+/// assets/dragon_res4.obj.gz --partitions 6 --dedupe-to assets/dragon_res4_dedup.obj.gz`,
+/// which also made `assets/dragon_res4_dedup.presort.gz`: 183,617 instances, 12 min on 2
+/// threads). Not in the `long_` tier yet: it fails at the view (131.04698, 44.93628), one
+/// pixel of 194 at 40 x 40 (pixel 972, 0.032 from the truth's composite, not a tie: the lists
+/// draw two fragments out of their exact order), under investigation (issue 26).
+#[test]
+#[ignore = "fails at view (131.04698, 44.93628), pixel 972: the dragon's lists misorder a pair there (issue 26, under investigation)"]
+fn acceptance_presorted_dragon_res4_shipped_lists_256_views() {
+    shipped_lists_are_exact("dragon_res4_dedup", &random_views(256));
+}
+
+/// The shipped deduplicated dragon is `assets/dragon_res4.obj.gz` without its duplicate
+/// triangles (`presorted::input::dedupe`: the first copy of each kept, the rest in order):
+/// the same positions and normals, 502 triangles fewer.
+#[test]
+fn the_shipped_dedupe_of_dragon_res4_is_its_dedupe() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets");
+    let raw = fragrace::scene::obj::load_obj(dir.join("dragon_res4.obj.gz")).unwrap();
+    let shipped = fragrace::scene::obj::load_obj(dir.join("dragon_res4_dedup.obj.gz")).unwrap();
+    let d = presorted::input::dedupe(&raw);
+    assert_eq!(d.removed.len(), 502);
+    assert_eq!(raw.indices.len() - shipped.indices.len(), 502);
+    assert!(
+        d.mesh == shipped,
+        "the shipped mesh differs from the dedupe of the original"
+    );
+}
+
 /// Issue 26, the bunny: at this viewpoint two triangles sharing an edge fold at a
 /// silhouette, both nearly edge-on (1.2 degrees); the lists draw them in the exact order
 /// along the pixel centre's ray, but their rasterized depths (snapped vertices) tie within
@@ -580,16 +610,16 @@ fn a_pixel_on_a_crossing_line_is_a_tie() {
     shipped_lists_are_exact("teapot", &[(87.59434, 50.03714)]);
 }
 
-/// The acceptance of "Depth-Presorted Triangle Lists" on the shipped meshes: 256 random
-/// viewpoints each (`cargo test --release --test integration -- --ignored
-/// acceptance_presorted`). Not in the `long_` tier that CI runs: it does not pass yet
-/// (teapot and bunny presort, in minutes, but dragon_res4 is refused for its duplicate
-/// triangles until deduplicated (`presort --dedupe-to`), and its occlusion graphs alone are
-/// estimated at about half an hour on 2 threads; docs/algorithms.md, presorted lists).
+/// The acceptance of "Depth-Presorted Triangle Lists" on the shipped meshes from scratch:
+/// each presorted here (6 partitions), then 256 random viewpoints each (`cargo test
+/// --release --test integration -- --ignored acceptance_presorted_shipped`). Not in the
+/// `long_` tier that CI runs: the dragon's presort alone took 12 min on 2 threads and 4.9
+/// GB (2026-11-28); the shipped lists of all three, made by the same `presort`, are the
+/// long tier's (`long_acceptance_presorted_*_shipped_lists_256_views`).
 #[test]
-#[ignore = "fails until dragon_res4 presorts here (refused: duplicate triangles; deduplicated, its graphs are estimated at ~33 min on 2 threads); presorts bunny, teapot and dragon_res4 and renders 256 views of each"]
+#[ignore = "minutes: presorts teapot, bunny and the deduplicated dragon_res4 (12 min, 4.9 GB on 2 threads) and renders 256 views of each; the shipped lists are the long tier's"]
 fn acceptance_presorted_shipped_meshes_256_views() {
-    for name in ["teapot.obj.gz", "bunny.obj.gz", "dragon_res4.obj.gz"] {
+    for name in ["teapot.obj.gz", "bunny.obj.gz", "dragon_res4_dedup.obj.gz"] {
         shipped_mesh_is_exact(name, 256, &["presorted"]);
     }
 }
