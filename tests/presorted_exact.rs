@@ -66,8 +66,7 @@ pub fn matches_up_to_ties(
         return false;
     }
     let mut groups: Vec<std::ops::Range<usize>> = Vec::new();
-    for (k, pair) in fixed.iter().enumerate() {
-        let i = *pair;
+    for (k, &i) in fixed.iter().enumerate() {
         let tied = k > 0 && {
             let h = fixed[k - 1];
             f64::from(frags[i].depth) - f64::from(frags[h].depth) <= bounds[i] + bounds[h]
@@ -132,7 +131,7 @@ pub fn snapped_only(mesh: &Mesh, view_proj: glam::Mat4, cap: &Capture, p: usize)
         .iter()
         .map(|f| {
             let t = mesh.indices[f.prim as usize].map(|i| mesh.positions[i as usize].as_dvec3());
-            !hits_inside(&t, eye, dir).is_some()
+            hits_inside(&t, eye, dir).is_none()
         })
         .collect()
 }
