@@ -590,16 +590,7 @@ impl Waves {
         // Admission order: pixel block by block, API order within a block.
         let block = sc.block.max(1);
         let blocks_per_row = env.width.div_ceil(block) as u64;
-        let mut order: Vec<usize> = (0..inputs.len()).collect();
-        // (Keys are distinct, so an unstable sort gives the same order, at less cost: the
-        // stable sort was a twentieth of a `kb-interlock` campaign.)
-        order.sort_unstable_by_key(|&i| {
-            let f = &inputs[i];
-            (
-                (f.y / block) as u64 * blocks_per_row + (f.x / block) as u64,
-                i,
-            )
-        });
+        let order = admission_order(inputs, block, blocks_per_row);
         let sched: Vec<FragInput> = order.iter().map(|&i| inputs[i]).collect();
         let mut s_outs = vec![FragOut::default(); sched.len()];
         let mut s_colors = vec![[0u32; 4]; sched.len() * targets];
@@ -623,5 +614,105 @@ impl Waves {
         self.bytes_used += outcome.bytes_used;
         self.index += 1;
         outcome
+    }
+}
+
+/// Buckets beyond the inputs' count that [`admission_order`] may allocate for its counting
+/// sort; with more blocks than that (large viewports with few fragments) it sorts.
+const COUNTING_SLACK: u64 = 4096;
+
+/// The scheduled executor's admission order of a wave's `inputs` (see [`Waves`]): their
+/// indices by pixel block (`block` pixels a side, `blocks_per_row` to a row of blocks,
+/// row-major), in API order (index order) within a block. A counting sort by block when
+/// the blocks are few for the inputs (a fuzz scene's waves: the comparison sort of every
+/// wave was a thirtieth of a `kb-interlock` campaign, docs/performance.md), else a sort by
+/// (block, index); both give the one order those distinct keys define.
+pub(crate) fn admission_order(inputs: &[FragInput], block: u32, blocks_per_row: u64) -> Vec<usize> {
+    let key = |f: &FragInput| (f.y / block) as u64 * blocks_per_row + (f.x / block) as u64;
+    let blocks = inputs.iter().map(key).max().map_or(0, |k| k + 1);
+    if blocks > inputs.len() as u64 * 4 + COUNTING_SLACK {
+        let mut order: Vec<usize> = (0..inputs.len()).collect();
+        order.sort_unstable_by_key(|&i| (key(&inputs[i]), i));
+        return order;
+    }
+    // Start of each block's run, then a stable scatter in index order.
+    let mut start = vec![0usize; blocks as usize + 1];
+    for f in inputs {
+        start[key(f) as usize + 1] += 1;
+    }
+    for b in 1..start.len() {
+        start[b] += start[b - 1];
+    }
+    let mut order = vec![0usize; inputs.len()];
+    for (i, f) in inputs.iter().enumerate() {
+        let b = key(f) as usize;
+        order[start[b]] = i;
+        start[b] += 1;
+    }
+    order
+}
+
+#[cfg(test)]
+mod admission_tests {
+    use super::*;
+
+    /// The order as it was computed before the counting sort: a sort by (block, index).
+    fn sorted(inputs: &[FragInput], block: u32, blocks_per_row: u64) -> Vec<usize> {
+        let mut order: Vec<usize> = (0..inputs.len()).collect();
+        order.sort_by_key(|&i| {
+            let f = &inputs[i];
+            (
+                (f.y / block) as u64 * blocks_per_row + (f.x / block) as u64,
+                i,
+            )
+        });
+        order
+    }
+
+    #[test]
+    fn counting_sort_gives_the_sorted_order() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = |m: u32| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state % u64::from(m)) as u32
+        };
+        // (width, height, fragments, block): few blocks (counting sort), and a wide
+        // viewport with few fragments (the comparison sort's branch).
+        for (w, h, n, block) in [
+            (64, 48, 3000, 8),
+            (37, 91, 500, 4),
+            (16, 16, 1, 1),
+            (50_000, 50_000, 40, 1),
+        ] {
+            let inputs: Vec<FragInput> = (0..n)
+                .map(|i| FragInput {
+                    x: next(w),
+                    y: next(h),
+                    seq: i as u64,
+                    ..FragInput::default()
+                })
+                .collect();
+            let bpr = u64::from(w.div_ceil(block));
+            let got = admission_order(&inputs, block, bpr);
+            assert_eq!(
+                got,
+                sorted(&inputs, block, bpr),
+                "{w}x{h}, {n} fragments, block {block}"
+            );
+            let blocks = inputs
+                .iter()
+                .map(|f| (f.y / block) as u64 * bpr + (f.x / block) as u64)
+                .max()
+                .unwrap()
+                + 1;
+            assert_eq!(
+                blocks > n as u64 * 4 + COUNTING_SLACK,
+                w == 50_000,
+                "branch taken"
+            );
+        }
+        assert!(admission_order(&[], 8, 4).is_empty());
     }
 }
