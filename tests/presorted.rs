@@ -203,6 +203,7 @@ fn presorted_torus(method: presorted::Method) -> (SceneSpec, presorted::Presorte
         partitions: 6,
         threads: 2,
         method,
+        ..Default::default()
     };
     let lists = presorted::presort(&mesh, &config, &Silent).unwrap();
     (scene, lists)

@@ -41,6 +41,11 @@ pub struct PresortOptions {
     /// every partition (the graphs are most of the preprocessing of a large mesh).
     #[arg(long, value_name = "ROWS")]
     pub estimate_graph: Option<usize>,
+    /// Refuse graphs estimated above this much memory, and stop building any that grows
+    /// past it (the graphs of `--threads` partitions are built at once; default: half of
+    /// the physical memory). E.g. `20G`, `512MiB`.
+    #[arg(long, value_name = "SIZE")]
+    pub memory_limit: Option<String>,
     /// Print one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -150,10 +155,18 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
         logged: Mutex::new(vec![0.0; a.partitions as usize]),
         start: Instant::now(),
     };
+    let (memory_limit, limit_source) = crate::budget::limit(a.memory_limit.as_deref())?;
+    if !a.json {
+        eprintln!(
+            "memory limit of the occlusion graphs: {} ({limit_source})",
+            crate::budget::human(memory_limit)
+        );
+    }
     let cfg = PresortConfig {
         partitions: a.partitions,
         threads,
         method: a.method,
+        memory_limit: Some(memory_limit),
     };
     let out = match (a.estimate_graph, &a.out) {
         (Some(rows), _) => return estimate(a, &mesh, &cfg, rows, bar),
@@ -256,6 +269,10 @@ fn estimate(
     bar.bar.finish_and_clear();
     let total: f64 = est.iter().map(|e| e.graph_seconds()).sum();
     let wall = total / cfg.threads.min(est.len()).max(1) as f64;
+    // What the `threads` largest graphs hold, built at once.
+    let mut bytes: Vec<u64> = est.iter().map(|e| e.graph_bytes).collect();
+    bytes.sort_unstable_by(|x, y| y.cmp(x));
+    let at_once: u64 = bytes.iter().take(cfg.threads).sum();
     if a.json {
         let per: Vec<serde_json::Value> = est
             .iter()
@@ -270,6 +287,8 @@ fn estimate(
                     "seconds": e.seconds,
                     "rows_per_second": e.rows_per_second(),
                     "graph_seconds": e.graph_seconds(),
+                    "graph_edges": e.graph_edges,
+                    "graph_bytes": e.graph_bytes,
                 })
             })
             .collect();
@@ -278,6 +297,8 @@ fn estimate(
             "triangles": mesh.indices.len(),
             "partitions": cfg.partitions,
             "threads": cfg.threads,
+            "memory_limit": cfg.memory_limit,
+            "graph_bytes_at_once": at_once,
             "seconds": secs,
             "graph_seconds_sum": total,
             "graph_wall_seconds": wall,
@@ -288,7 +309,7 @@ fn estimate(
         for (k, e) in est.iter().enumerate() {
             println!(
                 "partition {k}: {} rows of {} in {:.1} s ({:.1} rows/s, {} edges of {} pairs \
-                 past the cheap tests, {} by a witness): graph about {:.0} s",
+                 past the cheap tests, {} by a witness): graph about {:.0} s, {} edges, {}",
                 e.rows,
                 e.nodes,
                 e.seconds,
@@ -296,17 +317,23 @@ fn estimate(
                 e.edges,
                 e.pairs.pairs,
                 e.pairs.witnessed,
-                e.graph_seconds()
+                e.graph_seconds(),
+                e.graph_edges,
+                crate::budget::human(e.graph_bytes)
             );
         }
         println!(
-            "{} ({} triangles, {} partitions): graphs about {:.0} s in all, {:.0} s wall on {} threads",
+            "{} ({} triangles, {} partitions): graphs about {:.0} s in all, {:.0} s wall on {} \
+             threads; the largest {} at once hold about {} (limit {})",
             a.mesh,
             mesh.indices.len(),
             cfg.partitions,
             total,
             wall,
-            cfg.threads
+            cfg.threads,
+            cfg.threads.min(est.len()),
+            crate::budget::human(at_once),
+            cfg.memory_limit.map_or("none".into(), crate::budget::human)
         );
     }
     Ok(())

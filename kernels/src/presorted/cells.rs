@@ -109,10 +109,7 @@ pub fn resolve(
     tick: &dyn Fn(u64, u64),
 ) -> Result<Vec<Placed>, CellError> {
     let n = g.nodes.len();
-    let adj: Vec<Vec<usize>> = (0..n)
-        .map(|x| g.out_edges(x).map(|e| e.to).collect())
-        .collect();
-    let comps = scc::components(&adj);
+    let comps = scc::components(n, |x| g.out_edges(x).map(|e| e.to as usize));
     let tri: Vec<u32> = g.nodes.iter().map(|x| x.tri).collect();
     let mut out: Vec<Placed> = Vec::with_capacity(n);
     let limit = MAX_COPIES * n.max(1);
@@ -133,14 +130,14 @@ pub fn resolve(
         let mut edges: Vec<CellEdge> = Vec::new();
         for (i, &x) in comp.iter().enumerate() {
             for e in g.out_edges(x) {
-                let j = idx[e.to];
+                let j = idx[e.to as usize];
                 if j == usize::MAX {
                     continue;
                 }
                 let region = g.nodes[x]
                     .region
                     .cut(&g.occl(e))
-                    .intersect(&g.nodes[e.to].region);
+                    .intersect(&g.nodes[e.to as usize].region);
                 if !region.is_empty() {
                     edges.push(CellEdge {
                         from: i,
@@ -234,7 +231,7 @@ fn subdivide(
         adj[e.from].push(e.to);
         eout[e.from].push(k);
     }
-    for comp in scc::components(&adj) {
+    for comp in scc::components(m, |v| adj[v].iter().copied()) {
         if comp.len() == 1 {
             out.push((cell.nodes[comp[0]], planes.clone()));
             if out.len() > limit {

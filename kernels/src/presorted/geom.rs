@@ -110,6 +110,18 @@ impl Region {
         r
     }
 
+    /// Bytes the region holds on the heap (its planes, face loops and vertices).
+    pub fn heap_bytes(&self) -> usize {
+        self.planes.capacity() * std::mem::size_of::<Plane>()
+            + self.loops.capacity() * std::mem::size_of::<Vec<DVec3>>()
+            + self
+                .loops
+                .iter()
+                .map(|l| l.capacity() * std::mem::size_of::<DVec3>())
+                .sum::<usize>()
+            + self.verts.capacity() * std::mem::size_of::<DVec3>()
+    }
+
     /// Whether the region has an interior.
     pub fn is_empty(&self) -> bool {
         self.verts.is_empty()

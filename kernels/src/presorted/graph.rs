@@ -5,6 +5,7 @@
 //! `O_{i->j} ∩ E_i ∩ E_j` (eq. 1) has an interior.
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 use glam::DVec3;
@@ -26,13 +27,67 @@ pub struct Node {
 }
 
 /// One occlusion edge: `from` occludes `to` from some viewpoint of both regions. Only the
-/// endpoints are stored (the graph has up to n^2 edges): the occlusion region and the
-/// reduced region are recomputed where needed ([`Graph::occl`], [`Graph::edge_region`]).
-#[derive(Clone, Copy, Debug)]
+/// endpoints are stored (the graph has up to n^2 edges, hundreds of millions on a 48K-
+/// triangle mesh): the occlusion region and the reduced region are recomputed where needed
+/// ([`Graph::occl`], [`Graph::edge_region`]), whether it is alive is a bit of
+/// [`Graph::alive`], and node and edge ids are `u32` (at most [`MAX_IDS`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Edge {
-    pub from: usize,
-    pub to: usize,
-    pub alive: bool,
+    pub from: u32,
+    pub to: u32,
+}
+
+/// Most nodes, and most edges, of one graph (ids are `u32`).
+pub const MAX_IDS: u64 = u32::MAX as u64;
+
+/// Bytes a graph holds per edge with its in-edges not indexed ([`Graph::index_in_edges`],
+/// which only the scan needs): the [`Edge`] and its id in its source's out-list; the
+/// alive bit is counted by [`Graph::bytes_for`].
+pub const EDGE_BYTES: u64 = (std::mem::size_of::<Edge>() + std::mem::size_of::<u32>()) as u64;
+
+/// Bytes per edge the index of in-edges adds: an id in the target's in-list, counted twice
+/// (the lists grow by doubling as edges arrive in any order).
+pub const IN_EDGE_BYTES: u64 = 2 * std::mem::size_of::<u32>() as u64;
+
+/// Bytes per node beyond its region's heap: the node, its out-list, and what building the
+/// rows keeps per node (its facing plane and region centre) and per triangle (bounding
+/// sphere and centroid, counted per node).
+pub const NODE_BYTES: u64 = (std::mem::size_of::<Node>()
+    + std::mem::size_of::<Vec<u32>>()
+    + std::mem::size_of::<Plane>()
+    + 2 * std::mem::size_of::<DVec3>()
+    + std::mem::size_of::<(DVec3, f64)>()) as u64;
+
+/// One bit per edge: whether it is alive (an edge dies when an endpoint is split).
+#[derive(Clone, Debug, Default)]
+pub struct Bits {
+    words: Vec<u64>,
+    len: usize,
+}
+
+impl Bits {
+    pub fn push(&mut self, v: bool) {
+        if self.len.is_multiple_of(64) {
+            self.words.push(0);
+        }
+        self.len += 1;
+        self.set(self.len - 1, v);
+    }
+    pub fn get(&self, i: usize) -> bool {
+        self.words[i / 64] >> (i % 64) & 1 == 1
+    }
+    pub fn set(&mut self, i: usize, v: bool) {
+        let (w, b) = (i / 64, 1u64 << (i % 64));
+        if v {
+            self.words[w] |= b;
+        } else {
+            self.words[w] &= !b;
+        }
+    }
+    /// Bits set.
+    pub fn count_ones(&self) -> usize {
+        self.words.iter().map(|w| w.count_ones() as usize).sum()
+    }
 }
 
 /// The graph of one partition.
@@ -41,10 +96,74 @@ pub struct Graph {
     pub tris: Arc<[[DVec3; 3]]>,
     pub nodes: Vec<Node>,
     pub edges: Vec<Edge>,
+    /// Whether each edge is alive.
+    pub alive: Bits,
     /// Edges leaving each node (ids into `edges`, dead ones included until pruned).
-    pub out: Vec<Vec<usize>>,
-    /// Edges entering each node.
-    pub inn: Vec<Vec<usize>>,
+    pub out: Vec<Vec<u32>>,
+    /// Edges entering each node, once indexed ([`Graph::index_in_edges`]: the cells never
+    /// need them, and they are a third of the graph's memory).
+    inn: Option<Vec<Vec<u32>>>,
+}
+
+/// A bound on the bytes of the graphs being built at once (one per partition, `threads`
+/// of them in parallel): each graph charges its nodes and every row of edges as it grows,
+/// and building stops with [`GraphError::Memory`] rather than exceeding the bound.
+#[derive(Debug)]
+pub struct MemoryBudget {
+    limit: Option<u64>,
+    // (A plain atomic counter shared by the preprocessing threads on the CPU; the emulated
+    // GPU is not involved.)
+    used: AtomicU64,
+}
+
+impl MemoryBudget {
+    /// A budget of `limit` bytes (`None`: unbounded).
+    pub fn new(limit: Option<u64>) -> MemoryBudget {
+        MemoryBudget {
+            limit,
+            used: AtomicU64::new(0),
+        }
+    }
+
+    /// Takes `bytes` from the budget, or fails naming what all graphs would hold.
+    pub fn charge(&self, bytes: u64) -> Result<(), GraphError> {
+        let total = self.used.fetch_add(bytes, Ordering::Relaxed) + bytes;
+        match self.limit {
+            Some(limit) if total > limit => {
+                self.used.fetch_sub(bytes, Ordering::Relaxed);
+                Err(GraphError::Memory {
+                    bytes: total,
+                    limit,
+                })
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Gives `bytes` back.
+    pub fn release(&self, bytes: u64) {
+        self.used.fetch_sub(bytes, Ordering::Relaxed);
+    }
+}
+
+/// Building a graph stopped.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum GraphError {
+    #[error(
+        "the occlusion graphs being built at once would hold {}, over the memory limit of \
+         {}: use fewer threads (partitions are built in parallel), fewer partitions, or a \
+         simpler mesh",
+        gib(*bytes),
+        gib(*limit)
+    )]
+    Memory { bytes: u64, limit: u64 },
+    #[error("more than {MAX_IDS} edges in one graph (edge ids are u32)")]
+    TooManyEdges,
+}
+
+/// Bytes as GiB, for messages.
+pub fn gib(bytes: u64) -> String {
+    format!("{:.2} GiB", bytes as f64 / (1u64 << 30) as f64)
 }
 
 /// The facing half-space of a triangle (front copy), or its complement (back copy).
@@ -174,16 +293,37 @@ pub struct RowStats {
     pub witnessed: u64,
     /// Edges found by clipping the reduced region.
     pub clipped: u64,
+    /// Bytes charged to the [`MemoryBudget`] (the caller releases them with the graph).
+    pub charged: u64,
 }
 
 impl Graph {
     /// Nodes (front and back copy of every triangle whose copy can be rendered from the
     /// partition) and every edge. `tick(done, total)` reports progress over the nodes.
-    pub fn build(tris: Arc<[[DVec3; 3]]>, partition: &Region, tick: &dyn Fn(u64, u64)) -> Graph {
+    /// Its bytes are charged to `budget` (released by the caller: [`RowStats::charged`]).
+    pub fn build(
+        tris: Arc<[[DVec3; 3]]>,
+        partition: &Region,
+        budget: &MemoryBudget,
+        tick: &dyn Fn(u64, u64),
+    ) -> Result<(Graph, RowStats), GraphError> {
         let mut g = Graph::nodes_of(tris, partition);
         let n = g.nodes.len();
-        g.add_rows(0..n, tick);
-        g
+        let stats = g.add_rows(0..n, budget, tick)?;
+        Ok((g, stats))
+    }
+
+    /// Bytes of the nodes (their regions included) and of `edges` edges (with the index of
+    /// in-edges if `in_edges`): what [`Graph::add_rows`] charges, and the estimate of a
+    /// graph from a sample of its rows.
+    pub fn bytes_for(&self, edges: u64, in_edges: bool) -> u64 {
+        let nodes: u64 = self
+            .nodes
+            .iter()
+            .map(|x| NODE_BYTES + x.region.heap_bytes() as u64)
+            .sum();
+        let per_edge = EDGE_BYTES + if in_edges { IN_EDGE_BYTES } else { 0 };
+        nodes + edges * per_edge + edges.div_ceil(8)
     }
 
     /// The nodes of the partition (front and back copy of every triangle whose copy can be
@@ -212,11 +352,35 @@ impl Graph {
     /// Adds the edges leaving each node of `rows` (increasing; a row of the graph: every
     /// node `j` it may occlude is tried). [`Graph::build`] runs every row; a sample of rows
     /// measures the cost of the graph ([`super::estimate_graph`]).
+    /// Every row's bytes are charged to `budget` first; over it, what was charged is
+    /// released and the error returned.
     pub fn add_rows(
         &mut self,
         rows: impl ExactSizeIterator<Item = usize>,
+        budget: &MemoryBudget,
         tick: &dyn Fn(u64, u64),
-    ) -> RowStats {
+    ) -> Result<RowStats, GraphError> {
+        let mut stats = RowStats::default();
+        match self.add_rows_charged(rows, budget, &mut stats, tick) {
+            Ok(()) => Ok(stats),
+            Err(e) => {
+                budget.release(stats.charged);
+                Err(e)
+            }
+        }
+    }
+
+    fn add_rows_charged(
+        &mut self,
+        rows: impl ExactSizeIterator<Item = usize>,
+        budget: &MemoryBudget,
+        stats: &mut RowStats,
+        tick: &dyn Fn(u64, u64),
+    ) -> Result<(), GraphError> {
+        let nodes = self.bytes_for(0, false);
+        budget.charge(nodes)?;
+        stats.charged = nodes;
+        let in_bytes = if self.inn.is_some() { IN_EDGE_BYTES } else { 0 };
         let g = self;
         let tris = g.tris.clone();
         let n = g.nodes.len();
@@ -229,7 +393,6 @@ impl Graph {
         let spheres: Vec<(DVec3, f64)> = tris.iter().map(bounding_sphere).collect();
         let centroids: Vec<DVec3> = tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
         let centres: Vec<DVec3> = g.nodes.iter().map(|x| centre(&x.region)).collect();
-        let mut stats = RowStats::default();
         let mut occl_cache: HashMap<(u32, u32), Vec<Plane>> = HashMap::new();
         let mut rows = rows.peekable();
         let mut done = 0u64;
@@ -238,6 +401,10 @@ impl Graph {
                 tick(done, total);
             }
             done += 1;
+            if g.edges.len() as u64 + n as u64 > MAX_IDS {
+                return Err(GraphError::TooManyEdges);
+            }
+            let before = g.edges.len() as u64;
             let ti = g.nodes[i].tri;
             let a = &tris[ti as usize];
             for j in 0..n {
@@ -277,6 +444,12 @@ impl Graph {
                     stats.clipped += 1;
                 }
             }
+            // The row's out-list at its length (it is complete), and its bytes charged.
+            g.out[i].shrink_to_fit();
+            let added = g.edges.len() as u64 - before;
+            let bytes = added * (EDGE_BYTES + in_bytes) + added.div_ceil(8);
+            budget.charge(bytes)?;
+            stats.charged += bytes;
             // Occlusion planes of pairs with node i's triangle are no longer needed once
             // its next row (its other copy, if any) is done.
             if rows.peek().is_none_or(|&x| g.nodes[x].tri != ti) {
@@ -284,14 +457,36 @@ impl Graph {
             }
         }
         tick(total, total);
-        stats
+        Ok(())
     }
 
     pub fn add_node(&mut self, node: Node) -> usize {
         self.nodes.push(node);
         self.out.push(Vec::new());
-        self.inn.push(Vec::new());
+        if let Some(inn) = &mut self.inn {
+            inn.push(Vec::new());
+        }
         self.nodes.len() - 1
+    }
+
+    /// Indexes the edges entering each node (the scan walks them; [`Graph::in_edges`] and
+    /// [`Graph::split`] index them first if needed). Idempotent.
+    pub fn index_in_edges(&mut self) {
+        if self.inn.is_some() {
+            return;
+        }
+        let mut inn: Vec<Vec<u32>> = vec![Vec::new(); self.nodes.len()];
+        for (id, e) in self.edges.iter().enumerate() {
+            if self.alive.get(id) {
+                inn[e.to as usize].push(id as u32);
+            }
+        }
+        self.inn = Some(inn);
+    }
+
+    /// The ids of the edges entering `x` (dead ones included until pruned), once indexed.
+    pub fn in_ids(&self, x: usize) -> &[u32] {
+        self.inn.as_ref().map_or(&[], |inn| &inn[x])
     }
 
     /// Adds `from -> to` if its reduced occlusion region has an interior (`occl`: the
@@ -306,30 +501,60 @@ impl Graph {
 
     /// Adds the edge `from -> to`.
     fn push_edge(&mut self, from: usize, to: usize) {
-        let id = self.edges.len();
+        // (add_rows refuses a row that could pass MAX_IDS edges; a split replaces a dead
+        // edge by at most two.)
+        let id = u32::try_from(self.edges.len()).expect("edge ids fit u32 (MAX_IDS)");
+        let node = |x: usize| u32::try_from(x).expect("node ids fit u32 (MAX_IDS)");
         self.edges.push(Edge {
-            from,
-            to,
-            alive: true,
+            from: node(from),
+            to: node(to),
         });
+        self.alive.push(true);
         self.out[from].push(id);
-        self.inn[to].push(id);
+        if let Some(inn) = &mut self.inn {
+            inn[to].push(id);
+        }
+    }
+
+    /// Whether edge `e` is alive.
+    pub fn is_alive(&self, e: usize) -> bool {
+        self.alive.get(e)
     }
 
     /// Live edges leaving `x`.
     pub fn out_edges(&self, x: usize) -> impl Iterator<Item = &Edge> + '_ {
         self.out[x]
             .iter()
-            .map(|&e| &self.edges[e])
-            .filter(|e| e.alive)
+            .map(|&e| e as usize)
+            .filter(|&e| self.alive.get(e))
+            .map(|e| &self.edges[e])
     }
 
-    /// Live edges entering `x`.
-    pub fn in_edges(&self, x: usize) -> impl Iterator<Item = &Edge> + '_ {
-        self.inn[x]
+    /// Live edges entering `x` (from the index of in-edges, or a pass over every edge when
+    /// they are not indexed: [`Graph::index_in_edges`]).
+    pub fn in_edges(&self, x: usize) -> Box<dyn Iterator<Item = &Edge> + '_> {
+        match &self.inn {
+            Some(inn) => Box::new(
+                inn[x]
+                    .iter()
+                    .map(|&e| e as usize)
+                    .filter(|&e| self.alive.get(e))
+                    .map(|e| &self.edges[e]),
+            ),
+            None => Box::new(
+                self.live_edges()
+                    .map(|(_, e)| e)
+                    .filter(move |e| e.to as usize == x),
+            ),
+        }
+    }
+
+    /// Every live edge with its id.
+    pub fn live_edges(&self) -> impl Iterator<Item = (usize, &Edge)> + '_ {
+        self.edges
             .iter()
-            .map(|&e| &self.edges[e])
-            .filter(|e| e.alive)
+            .enumerate()
+            .filter(|(id, _)| self.alive.get(*id))
     }
 
     /// The reduced occlusion region `O_{from->to} ∩ E_from ∩ E_to` (eq. 1), empty when
@@ -344,14 +569,14 @@ impl Graph {
 
     /// The occlusion region of the triangles of an edge's endpoints (section 4.1.1).
     pub fn occl(&self, e: &Edge) -> Vec<Plane> {
-        let t = |x: usize| &self.tris[self.nodes[x].tri as usize];
+        let t = |x: u32| &self.tris[self.nodes[x as usize].tri as usize];
         occlusion_planes(t(e.from), t(e.to))
     }
 
     /// The reduced occlusion region of edge `e` (eq. 1), recomputed.
     pub fn edge_region(&self, e: usize) -> Region {
         let ed = &self.edges[e];
-        self.reduced(ed.from, ed.to, &self.occl(ed))
+        self.reduced(ed.from as usize, ed.to as usize, &self.occl(ed))
     }
 
     /// The vertices of edge `e`'s reduced occlusion region.
@@ -371,7 +596,7 @@ impl Graph {
 
     /// Live edge count.
     pub fn edge_count(&self) -> usize {
-        self.edges.iter().filter(|e| e.alive).count()
+        self.alive.count_ones()
     }
 
     /// Splits node `x` by `p`: `x` keeps `E_x ∩ p`, a new node gets `E_x ∩ ¬p`; edges are
@@ -394,19 +619,25 @@ impl Graph {
                 region: new_region,
             })
         });
-        let outs: Vec<usize> = std::mem::take(&mut self.out[x]);
-        let ins: Vec<usize> = std::mem::take(&mut self.inn[x]);
+        self.index_in_edges();
+        let outs: Vec<u32> = std::mem::take(&mut self.out[x]);
+        let ins: Vec<u32> = self
+            .inn
+            .as_mut()
+            .map(|inn| std::mem::take(&mut inn[x]))
+            .unwrap_or_default();
         let mut touched: Vec<usize> = outs
             .iter()
-            .map(|&e| self.edges[e].to)
-            .chain(ins.iter().map(|&e| self.edges[e].from))
+            .map(|&e| self.edges[e as usize].to as usize)
+            .chain(ins.iter().map(|&e| self.edges[e as usize].from as usize))
             .collect();
         for e in outs {
-            if !self.edges[e].alive {
+            let e = e as usize;
+            if !self.alive.get(e) {
                 continue;
             }
-            self.edges[e].alive = false;
-            let (to, occl) = (self.edges[e].to, self.occl(&self.edges[e]));
+            self.alive.set(e, false);
+            let (to, occl) = (self.edges[e].to as usize, self.occl(&self.edges[e]));
             if keep_alive {
                 self.try_edge(x, to, &occl);
             }
@@ -415,11 +646,12 @@ impl Graph {
             }
         }
         for e in ins {
-            if !self.edges[e].alive {
+            let e = e as usize;
+            if !self.alive.get(e) {
                 continue;
             }
-            self.edges[e].alive = false;
-            let (from, occl) = (self.edges[e].from, self.occl(&self.edges[e]));
+            self.alive.set(e, false);
+            let (from, occl) = (self.edges[e].from as usize, self.occl(&self.edges[e]));
             if keep_alive {
                 self.try_edge(from, x, &occl);
             }
@@ -431,9 +663,11 @@ impl Graph {
         touched.sort_unstable();
         touched.dedup();
         for y in touched {
-            let edges = &self.edges;
-            self.out[y].retain(|&e| edges[e].alive);
-            self.inn[y].retain(|&e| edges[e].alive);
+            let alive = &self.alive;
+            self.out[y].retain(|&e| alive.get(e as usize));
+            if let Some(inn) = &mut self.inn {
+                inn[y].retain(|&e| alive.get(e as usize));
+            }
         }
         (new, keep_alive)
     }
@@ -456,7 +690,10 @@ pub(super) mod tests {
         let tris: Arc<[[DVec3; 3]]> = vec![a, b].into();
         let dirs = directions(6).unwrap();
         let k = dirs.iter().position(|d| d.z > 0.5).unwrap();
-        Graph::build(tris, &partition_region(&dirs, k), &|_, _| {})
+        let budget = MemoryBudget::new(None);
+        Graph::build(tris, &partition_region(&dirs, k), &budget, &|_, _| {})
+            .unwrap()
+            .0
     }
 
     #[test]
@@ -569,14 +806,17 @@ pub(super) mod tests {
             .collect();
         let dirs = directions(6).unwrap();
         let part = partition_region(&dirs, 0);
-        let full = Graph::build(tris.clone(), &part, &|_, _| {});
+        let budget = MemoryBudget::new(None);
+        let (full, _) = Graph::build(tris.clone(), &part, &budget, &|_, _| {}).unwrap();
         let mut sample = Graph::nodes_of(tris, &part);
         let rows: Vec<usize> = (0..sample.nodes.len()).step_by(3).collect();
-        let stats = sample.add_rows(rows.iter().copied(), &|_, _| {});
-        let pairs = |g: &Graph| -> Vec<(usize, usize)> {
+        let stats = sample
+            .add_rows(rows.iter().copied(), &budget, &|_, _| {})
+            .unwrap();
+        let pairs = |g: &Graph| -> Vec<(u32, u32)> {
             g.edges
                 .iter()
-                .filter(|e| rows.contains(&e.from))
+                .filter(|e| rows.contains(&(e.from as usize)))
                 .map(|e| (e.from, e.to))
                 .collect()
         };
@@ -593,7 +833,111 @@ pub(super) mod tests {
         assert!(g.nodes.iter().all(|n| !n.back));
         // a (tri 0) occludes b (tri 1), never the reverse.
         assert_eq!(g.edge_count(), 1);
-        let e = g.edges.iter().find(|e| e.alive).unwrap();
-        assert_eq!((g.nodes[e.from].tri, g.nodes[e.to].tri), (0, 1));
+        let (_, e) = g.live_edges().next().unwrap();
+        assert_eq!(
+            (g.nodes[e.from as usize].tri, g.nodes[e.to as usize].tri),
+            (0, 1)
+        );
+    }
+
+    #[test]
+    fn alive_bits_round_trip_across_words() {
+        let mut b = Bits::default();
+        for i in 0..200 {
+            b.push(i % 3 == 0);
+        }
+        b.set(64, true);
+        b.set(63, false);
+        let want: Vec<bool> = (0..200)
+            .map(|i| (i % 3 == 0 || i == 64) && i != 63)
+            .collect();
+        assert_eq!((0..200).map(|i| b.get(i)).collect::<Vec<_>>(), want);
+        assert_eq!(b.count_ones(), want.iter().filter(|&&v| v).count());
+    }
+
+    /// Random small triangles in the unit ball (a fixed LCG).
+    fn random_tris(count: usize) -> Arc<[[DVec3; 3]]> {
+        let mut rnd = super::super::test_lcg();
+        (0..count)
+            .map(|_| {
+                let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;
+                [0, 1, 2].map(|_| c + DVec3::new(rnd(), rnd(), rnd()) * 0.1)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_graph_charges_its_bytes_and_stops_at_the_budget() {
+        let tris = random_tris(30);
+        let part = partition_region(&directions(6).unwrap(), 0);
+        let free = MemoryBudget::new(None);
+        let (g, stats) = Graph::build(tris.clone(), &part, &free, &|_, _| {}).unwrap();
+        let edges = g.edges.len() as u64;
+        assert!(edges > 10, "{edges} edges");
+        // What it charged is its estimate from its edge count (each row's alive bits
+        // rounded up to a byte).
+        let est = g.bytes_for(edges, false);
+        assert!(
+            (est..=est + g.nodes.len() as u64).contains(&stats.charged),
+            "{} charged, {est} estimated",
+            stats.charged
+        );
+        assert!(stats.charged >= edges * EDGE_BYTES);
+        // A budget short of it by one byte stops the build, names both figures, and keeps
+        // nothing charged.
+        let tight = MemoryBudget::new(Some(stats.charged - 1));
+        let e = Graph::build(tris.clone(), &part, &tight, &|_, _| {}).unwrap_err();
+        assert_eq!(
+            e,
+            GraphError::Memory {
+                bytes: stats.charged,
+                limit: stats.charged - 1
+            }
+        );
+        assert!(e.to_string().contains("memory limit"), "{e}");
+        assert_eq!(tight.used.load(Ordering::Relaxed), 0);
+        // Exactly enough builds the same graph.
+        let exact = MemoryBudget::new(Some(stats.charged));
+        let (h, _) = Graph::build(tris, &part, &exact, &|_, _| {}).unwrap();
+        assert_eq!(h.edges, g.edges);
+    }
+
+    #[test]
+    fn in_edges_indexed_or_not_are_the_same_and_follow_splits() {
+        let tris = random_tris(24);
+        let part = partition_region(&directions(6).unwrap(), 1);
+        let budget = MemoryBudget::new(None);
+        let (mut g, _) = Graph::build(tris, &part, &budget, &|_, _| {}).unwrap();
+        let ins = |g: &Graph| -> Vec<Vec<Edge>> {
+            (0..g.nodes.len())
+                .map(|x| g.in_edges(x).copied().collect())
+                .collect()
+        };
+        let scanned = ins(&g);
+        assert!(scanned.iter().map(Vec::len).sum::<usize>() > 10);
+        g.index_in_edges();
+        assert_eq!(ins(&g), scanned);
+        // After a split, every live edge is in its target's in-list and its source's
+        // out-list, and no dead one is.
+        let x = (0..g.nodes.len())
+            .max_by_key(|&x| g.in_edges(x).count() + g.out_edges(x).count())
+            .unwrap();
+        let c = centre(&g.nodes[x].region);
+        g.split(
+            x,
+            Plane {
+                n: DVec3::X,
+                d: -c.x,
+            },
+        );
+        for y in 0..g.nodes.len() {
+            let live_in: Vec<Edge> = g
+                .live_edges()
+                .filter(|(_, e)| e.to as usize == y)
+                .map(|(_, e)| *e)
+                .collect();
+            assert_eq!(g.in_edges(y).copied().collect::<Vec<_>>(), live_in);
+            assert!(g.in_ids(y).iter().all(|&e| g.is_alive(e as usize)));
+        }
     }
 }

@@ -53,6 +53,10 @@ pub struct PresortConfig {
     pub threads: usize,
     /// How cycles of the occlusion graph are broken.
     pub method: Method,
+    /// Bytes the occlusion graphs built at once (one per thread) may hold (`None`:
+    /// unbounded). Checked up front from a sample of each graph's rows
+    /// ([`PresortError::Memory`]) and while the graphs grow ([`graph::GraphError`]).
+    pub memory_limit: Option<u64>,
 }
 
 impl Default for PresortConfig {
@@ -61,6 +65,7 @@ impl Default for PresortConfig {
             partitions: 6,
             threads: 2,
             method: Method::default(),
+            memory_limit: None,
         }
     }
 }
@@ -195,6 +200,26 @@ pub enum PresortError {
         partition: usize,
         error: cells::CellError,
     },
+    #[error("partition {partition}: {error}")]
+    Graph {
+        partition: usize,
+        error: graph::GraphError,
+    },
+    #[error(
+        "the occlusion graphs would need about {} at once ({threads} built in parallel; \
+         per partition, estimated from {rows} rows of each: {}), over the memory limit of {}: \
+         use fewer threads, fewer partitions, or a simpler mesh",
+        graph::gib(*estimate),
+        per_partition.iter().map(|b| graph::gib(*b)).collect::<Vec<_>>().join(", "),
+        graph::gib(*limit)
+    )]
+    Memory {
+        estimate: u64,
+        limit: u64,
+        threads: usize,
+        rows: usize,
+        per_partition: Vec<u64>,
+    },
 }
 
 /// Progress of preprocessing: `(partition, phase, done, total)`, phase `"graph"` or
@@ -263,6 +288,9 @@ pub fn presort(
         pool,
     } = prepare(mesh, cfg)?;
     let (mut split_pieces, mut split_stats) = split::split_crossing(&input)?;
+    let tris: Arc<[[DVec3; 3]]> = split_pieces.iter().map(|p| p.pos).collect();
+    check_memory(&tris, &dirs, cfg, &pool, progress)?;
+    let budget = graph::MemoryBudget::new(cfg.memory_limit);
     // Rounds: a cycle seen whole from some viewpoint is broken by cutting one of its pieces
     // by another's plane, and every partition runs again on the new pieces.
     let mut round = 0;
@@ -272,7 +300,15 @@ pub fn presort(
             use rayon::prelude::*;
             (0..dirs.len())
                 .into_par_iter()
-                .map(|k| presort_partition(&tris, &dirs, k, &frame, cfg.method, progress))
+                .map(|k| {
+                    let part = Part {
+                        tris: &tris,
+                        dirs: &dirs,
+                        k,
+                        frame: &frame,
+                    };
+                    presort_partition(&part, cfg.method, &budget, progress)
+                })
                 .collect()
         });
         if all.iter().all(Result::is_ok) {
@@ -330,6 +366,11 @@ pub struct GraphEstimate {
     pub pairs: graph::RowStats,
     /// Time the rows took.
     pub seconds: f64,
+    /// The whole graph's edges at the sample's rate (edges per row).
+    pub graph_edges: u64,
+    /// The whole graph's bytes ([`graph::Graph::bytes_for`]: nodes, and `graph_edges`
+    /// edges with the in-edges if the method needs them).
+    pub graph_bytes: u64,
 }
 
 impl GraphEstimate {
@@ -363,29 +404,111 @@ pub fn estimate_graph(
     } = prepare(mesh, cfg)?;
     let (pieces, _) = split::split_crossing(&input)?;
     let tris: Arc<[[DVec3; 3]]> = pieces.iter().map(|p| p.pos).collect();
-    Ok(pool.install(|| {
+    sample_graphs(&tris, &dirs, cfg, rows, &pool, progress)
+}
+
+/// The out-edges of `rows` nodes evenly spaced over each partition's graph, measured
+/// (in parallel on `pool`).
+fn sample_graphs(
+    tris: &Arc<[[DVec3; 3]]>,
+    dirs: &[DVec3],
+    cfg: &PresortConfig,
+    rows: usize,
+    pool: &rayon::ThreadPool,
+    progress: &dyn Progress,
+) -> Result<Vec<GraphEstimate>, PresortError> {
+    let in_edges = cfg.method == Method::Scan;
+    pool.install(|| {
         use rayon::prelude::*;
         (0..dirs.len())
             .into_par_iter()
             .map(|k| {
-                let region = partition::partition_region(&dirs, k);
+                let region = partition::partition_region(dirs, k);
                 let mut g = graph::Graph::nodes_of(tris.clone(), &region);
                 let n = g.nodes.len();
                 let take = rows.min(n);
                 let t = Instant::now();
-                let pairs = g.add_rows((0..take).map(|r| r * n / take), &|d, t| {
-                    progress.update(k, "graph", d, t)
-                });
-                GraphEstimate {
+                // (A sample holds a fraction of the graph: it is not bounded.)
+                let unbounded = graph::MemoryBudget::new(None);
+                let pairs = g
+                    .add_rows((0..take).map(|r| r * n / take), &unbounded, &|d, t| {
+                        progress.update(k, "graph", d, t)
+                    })
+                    .map_err(|error| PresortError::Graph {
+                        partition: k,
+                        error,
+                    })?;
+                let edges = g.edge_count();
+                let graph_edges = (edges as f64 * n as f64 / take.max(1) as f64).round() as u64;
+                Ok(GraphEstimate {
                     nodes: n,
                     rows: take,
-                    edges: g.edge_count(),
+                    edges,
                     pairs,
                     seconds: t.elapsed().as_secs_f64(),
-                }
+                    graph_edges,
+                    graph_bytes: g.bytes_for(graph_edges, in_edges),
+                })
             })
             .collect()
-    }))
+    })
+}
+
+/// Rows of each partition's graph [`check_memory`] samples when the worst case (every
+/// ordered pair of nodes an edge) does not fit.
+pub const MEMORY_SAMPLE_ROWS: usize = 64;
+
+/// The largest `k` of `bytes`, summed: what `k` graphs built at once hold at most.
+fn largest_sum(bytes: &[u64], k: usize) -> u64 {
+    let mut b = bytes.to_vec();
+    b.sort_unstable_by(|x, y| y.cmp(x));
+    b.iter().take(k).sum()
+}
+
+/// Refuses, before any graph is built, graphs that would not fit `cfg.memory_limit`: the
+/// `threads` largest at once, each at its worst case (n (n - 1) edges) or, when that does
+/// not fit, estimated from [`MEMORY_SAMPLE_ROWS`] rows.
+fn check_memory(
+    tris: &Arc<[[DVec3; 3]]>,
+    dirs: &[DVec3],
+    cfg: &PresortConfig,
+    pool: &rayon::ThreadPool,
+    progress: &dyn Progress,
+) -> Result<(), PresortError> {
+    let Some(limit) = cfg.memory_limit else {
+        return Ok(());
+    };
+    let at_once = cfg.threads.min(dirs.len()).max(1);
+    let in_edges = cfg.method == Method::Scan;
+    let worst: Vec<u64> = (0..dirs.len())
+        .map(|k| {
+            let g = graph::Graph::nodes_of(tris.clone(), &partition::partition_region(dirs, k));
+            let n = g.nodes.len() as u64;
+            g.bytes_for(n * n.saturating_sub(1), in_edges)
+        })
+        .collect();
+    if largest_sum(&worst, at_once) <= limit {
+        return Ok(());
+    }
+    let est = sample_graphs(tris, dirs, cfg, MEMORY_SAMPLE_ROWS, pool, progress)?;
+    if let Some(k) = est.iter().position(|e| e.graph_edges > graph::MAX_IDS) {
+        return Err(PresortError::Graph {
+            partition: k,
+            error: graph::GraphError::TooManyEdges,
+        });
+    }
+    let per_partition: Vec<u64> = est.iter().map(|e| e.graph_bytes).collect();
+    let estimate = largest_sum(&per_partition, at_once);
+    if estimate > limit {
+        return Err(PresortError::Memory {
+            estimate,
+            limit,
+            threads: at_once,
+            rows: MEMORY_SAMPLE_ROWS,
+            per_partition,
+        });
+    }
+    Ok(())
 }
 
 /// The pieces with their clips in world space.
@@ -406,20 +529,60 @@ fn world_pieces(frame: &Frame3, pieces: &[split::Piece]) -> Vec<Piece> {
         .collect()
 }
 
-/// One partition: graph, preliminary order, scan, and the segment.
-fn presort_partition(
-    tris: &Arc<[[DVec3; 3]]>,
-    dirs: &[DVec3],
+/// One partition of the input: the pieces, the partitions' directions, which one, and the
+/// mesh's frame.
+struct Part<'a> {
+    tris: &'a Arc<[[DVec3; 3]]>,
+    dirs: &'a [DVec3],
     k: usize,
-    frame: &Frame3,
+    frame: &'a Frame3,
+}
+
+/// One partition: graph (its bytes charged to `budget` until the segment is made),
+/// preliminary order, scan, and the segment.
+fn presort_partition(
+    part: &Part,
     method: Method,
+    budget: &graph::MemoryBudget,
     progress: &dyn Progress,
 ) -> Result<(Segment, PartitionStats), PresortError> {
+    let k = part.k;
     let t0 = Instant::now();
-    let region = partition::partition_region(dirs, k);
-    let mut g = graph::Graph::build(tris.clone(), &region, &|d, t| {
+    let region = partition::partition_region(part.dirs, k);
+    let graph_error = |error| PresortError::Graph {
+        partition: k,
+        error,
+    };
+    let (mut g, rows) = graph::Graph::build(part.tris.clone(), &region, budget, &|d, t| {
         progress.update(k, "graph", d, t)
-    });
+    })
+    .map_err(graph_error)?;
+    // The scan's index of in-edges, charged too.
+    let in_bytes = match method {
+        Method::Cells => 0,
+        Method::Scan => g.edges.len() as u64 * graph::IN_EDGE_BYTES,
+    };
+    let result = match budget.charge(in_bytes) {
+        Ok(()) => {
+            let r = order_partition(&mut g, part, method, t0, progress);
+            budget.release(in_bytes);
+            r
+        }
+        Err(e) => Err(graph_error(e)),
+    };
+    budget.release(rows.charged);
+    result
+}
+
+/// A built partition graph resolved (cells or scan) into its segment.
+fn order_partition(
+    g: &mut graph::Graph,
+    part: &Part,
+    method: Method,
+    t0: Instant,
+    progress: &dyn Progress,
+) -> Result<(Segment, PartitionStats), PresortError> {
+    let (k, dirs, frame) = (part.k, part.dirs, part.frame);
     let mut stats = PartitionStats {
         initial_nodes: g.nodes.len(),
         edges: g.edge_count(),
@@ -430,21 +593,22 @@ fn presort_partition(
     let placed: Vec<cells::Placed> = match method {
         Method::Cells => {
             let mut cstats = cells::CellStats::default();
-            let placed = cells::resolve(&g, &mut cstats, &|d, t| progress.update(k, "scan", d, t))
+            let placed = cells::resolve(g, &mut cstats, &|d, t| progress.update(k, "scan", d, t))
                 .map_err(|error| PresortError::Cells {
-                    partition: k,
-                    error,
-                })?;
+                partition: k,
+                error,
+            })?;
             stats.cells = cstats;
             placed
         }
         Method::Scan => {
             // A viewpoint of the partition: out along its face normal.
             let eye = dirs[k] * 3.0;
-            let prelim = order::preliminary(&g, eye);
-            stats.back_edges = order::back_edges(&g, &prelim);
+            g.index_in_edges();
+            let prelim = order::preliminary(g, eye);
+            stats.back_edges = order::back_edges(g, &prelim);
             let mut sstats = scan::ScanStats::default();
-            let final_order = scan::scan(&mut g, prelim, &mut sstats, &|d, t| {
+            let final_order = scan::scan(g, prelim, &mut sstats, &|d, t| {
                 progress.update(k, "scan", d, t)
             })
             .map_err(|error| PresortError::Scan {
@@ -456,7 +620,7 @@ fn presort_partition(
         }
     };
     stats.scan_time = t1.elapsed();
-    Ok((segment_of(&g, &placed, frame), stats))
+    Ok((segment_of(g, &placed, frame), stats))
 }
 
 /// The segment of a resolved graph: instances in draw order with their test planes (the

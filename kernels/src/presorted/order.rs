@@ -70,7 +70,7 @@ pub fn preliminary(g: &Graph, eye: DVec3) -> Vec<usize> {
         delta.remove(&(before[x] - after[x], rank[x]));
         // x's out-edge targets y: y had x after it.
         for e in g.out_edges(x) {
-            let y = e.to;
+            let y = e.to as usize;
             if removed[y] {
                 continue;
             }
@@ -82,7 +82,7 @@ pub fn preliminary(g: &Graph, eye: DVec3) -> Vec<usize> {
             }
         }
         for e in g.in_edges(x) {
-            let y = e.from;
+            let y = e.from as usize;
             if removed[y] {
                 continue;
             }
@@ -132,8 +132,7 @@ pub fn back_edges(g: &Graph, order: &[usize]) -> usize {
     for (i, &x) in order.iter().enumerate() {
         pos[x] = i;
     }
-    g.edges
-        .iter()
-        .filter(|e| e.alive && pos[e.to] > pos[e.from])
+    g.live_edges()
+        .filter(|(_, e)| pos[e.to as usize] > pos[e.from as usize])
         .count()
 }

@@ -145,6 +145,7 @@ pub fn scan(
     stats: &mut ScanStats,
     tick: &dyn Fn(u64, u64),
 ) -> Result<Vec<usize>, ScanError> {
+    g.index_in_edges();
     let budget = 200 * (g.nodes.len() as u64 + g.edge_count() as u64) + 10_000;
     let max_nodes = MAX_COPIES * g.nodes.len().max(1);
     let mut whole = vec![0u32; g.nodes.len()];
@@ -188,8 +189,8 @@ pub fn scan(
         let x = order[idx];
         let backs: Vec<usize> = g.out[x]
             .iter()
-            .copied()
-            .filter(|&e| g.edges[e].alive && pos[g.edges[e].to] > idx)
+            .map(|&e| e as usize)
+            .filter(|&e| g.is_alive(e) && pos[g.edges[e].to as usize] > idx)
             .collect();
         if backs.is_empty() {
             idx += 1;
@@ -197,22 +198,23 @@ pub fn scan(
         }
         let b_last = backs
             .iter()
-            .map(|&e| pos[g.edges[e].to])
+            .map(|&e| pos[g.edges[e].to as usize])
             .max()
             .expect("non-empty");
         // The forward edges a move of x after the last b would turn: those from the
         // instances in between, and from the last b itself (x and b may occlude each other
         // from different viewpoints of the partition; leaving b -> x out made the two swap
         // places forever).
-        let mut fs: Vec<usize> = g.inn[x]
+        let mut fs: Vec<usize> = g
+            .in_ids(x)
             .iter()
-            .copied()
+            .map(|&e| e as usize)
             .filter(|&e| {
-                let p = pos[g.edges[e].from];
-                g.edges[e].alive && p > idx && p <= b_last
+                let p = pos[g.edges[e].from as usize];
+                g.is_alive(e) && p > idx && p <= b_last
             })
             .collect();
-        fs.sort_by_key(|&e| pos[g.edges[e].from]);
+        fs.sort_by_key(|&e| pos[g.edges[e].from as usize]);
         if fs.is_empty() {
             // Moving x after the last b breaks no forward edge.
             move_whole(&mut order, &mut pos, idx, b_last);
@@ -279,7 +281,7 @@ pub fn scan(
         // every pair up to a bound on the separability tests.
         let mut pair: Option<Plane> = None;
         let mut near_backs = backs.clone();
-        near_backs.sort_by_key(|&e| pos[g.edges[e].to]);
+        near_backs.sort_by_key(|&e| pos[g.edges[e].to as usize]);
         let lps_before = stats.lp_calls;
         'pairs: for &f in fs.iter().rev() {
             for &b in &near_backs {
@@ -363,14 +365,14 @@ fn dup_b_or_f(
 ) -> bool {
     let b_edge = *backs
         .iter()
-        .max_by_key(|&&e| pos[g.edges[e].to])
+        .max_by_key(|&&e| pos[g.edges[e].to as usize])
         .expect("non-empty");
     let f_edge = *fs.last().expect("non-empty");
-    let (b, f) = (g.edges[b_edge].to, g.edges[f_edge].from);
+    let (b, f) = (g.edges[b_edge].to as usize, g.edges[f_edge].from as usize);
     let Some(bf) = g.out[b]
         .iter()
-        .copied()
-        .find(|&e| g.edges[e].alive && g.edges[e].to == f)
+        .map(|&e| e as usize)
+        .find(|&e| g.is_alive(e) && g.edges[e].to as usize == f)
     else {
         return false;
     };
