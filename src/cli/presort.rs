@@ -21,7 +21,8 @@ pub struct PresortOptions {
     /// Where to write the lists (written to a temporary file and renamed when complete).
     #[arg(long, required_unless_present = "estimate_graph")]
     pub out: Option<PathBuf>,
-    /// Worker threads (partitions run one per task; default: all cores).
+    /// Worker threads (default: all cores): each partition's occlusion graph is built on all
+    /// of them, and several partitions run at once when their graphs fit `--memory-limit`.
     #[arg(long)]
     pub threads: Option<usize>,
     /// How cycles of the occlusion graph are broken: `cells` (strongly connected components,
@@ -41,9 +42,10 @@ pub struct PresortOptions {
     /// every partition (the graphs are most of the preprocessing of a large mesh).
     #[arg(long, value_name = "ROWS")]
     pub estimate_graph: Option<usize>,
-    /// Refuse graphs estimated above this much memory, and stop building any that grows
-    /// past it (the graphs of `--threads` partitions are built at once; default: half of
-    /// the physical memory). E.g. `20G`, `512MiB`.
+    /// Memory the occlusion graphs may hold: as many partitions run at once (up to
+    /// `--threads`) as their estimated graphs fit; a graph estimated above it alone is
+    /// refused, and building stops if the graphs grow past it (default: half of the physical
+    /// memory). E.g. `20G`, `512MiB`.
     #[arg(long, value_name = "SIZE")]
     pub memory_limit: Option<String>,
     /// Print one JSON object on stdout.

@@ -105,8 +105,8 @@ pub struct Graph {
     inn: Option<Vec<Vec<u32>>>,
 }
 
-/// A bound on the bytes of the graphs being built at once (one per partition, `threads`
-/// of them in parallel): each graph charges its nodes and every row of edges as it grows,
+/// A bound on the bytes of the graphs being built at once (one per partition, as many at
+/// once as the up-front estimate lets fit, at most `threads`): each graph charges its nodes and every row of edges as it grows,
 /// and building stops with [`GraphError::Memory`] rather than exceeding the bound.
 #[derive(Debug)]
 pub struct MemoryBudget {
@@ -151,8 +151,8 @@ impl MemoryBudget {
 pub enum GraphError {
     #[error(
         "the occlusion graphs being built at once would hold {}, over the memory limit of \
-         {}: use fewer threads (partitions are built in parallel), fewer partitions, or a \
-         simpler mesh",
+         {} (more than the estimate from a sample of their rows): use --threads 1 (one graph \
+         at a time), fewer partitions, or a simpler mesh",
         gib(*bytes),
         gib(*limit)
     )]
@@ -297,19 +297,54 @@ pub struct RowStats {
     pub charged: u64,
 }
 
+/// How [`Graph::add_rows`] computes its rows: the edges and the order they are added in are
+/// the same either way.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RowWork {
+    /// One row after another on the calling thread (a sample measured per partition).
+    Sequential,
+    /// Batches of rows on the current rayon pool's threads (a row's pairs depend only on
+    /// the nodes, never on the edges found so far), the edges then added row by row in
+    /// order: one graph uses every thread, so one graph at a time is enough to keep the
+    /// cores busy when memory allows no more.
+    Parallel,
+}
+
+/// The edges one row found ([`Graph::row`]): the nodes it occludes, in increasing order.
+struct Row {
+    to: Vec<u32>,
+    pairs: u64,
+    witnessed: u64,
+    clipped: u64,
+}
+
+/// What every row reads besides the graph's nodes: per node its facing plane and region
+/// centre, per triangle its bounding sphere and centroid.
+struct RowInputs {
+    planes: Vec<Plane>,
+    spheres: Vec<(DVec3, f64)>,
+    centroids: Vec<DVec3>,
+    centres: Vec<DVec3>,
+}
+
+/// Rows a thread takes at once under [`RowWork::Parallel`] (a row of the 48K dragon costs
+/// tens of milliseconds, of a small mesh microseconds).
+const ROWS_PER_TASK: usize = 16;
+
 impl Graph {
     /// Nodes (front and back copy of every triangle whose copy can be rendered from the
-    /// partition) and every edge. `tick(done, total)` reports progress over the nodes.
+    /// partition) and every edge, its rows on the current rayon pool ([`RowWork::Parallel`]).
+    /// `tick(done, total)` reports progress over the nodes.
     /// Its bytes are charged to `budget` (released by the caller: [`RowStats::charged`]).
     pub fn build(
         tris: Arc<[[DVec3; 3]]>,
         partition: &Region,
         budget: &MemoryBudget,
-        tick: &dyn Fn(u64, u64),
+        tick: &(dyn Fn(u64, u64) + Sync),
     ) -> Result<(Graph, RowStats), GraphError> {
         let mut g = Graph::nodes_of(tris, partition);
         let n = g.nodes.len();
-        let stats = g.add_rows(0..n, budget, tick)?;
+        let stats = g.add_rows(0..n, RowWork::Parallel, budget, tick)?;
         Ok((g, stats))
     }
 
@@ -350,18 +385,20 @@ impl Graph {
     }
 
     /// Adds the edges leaving each node of `rows` (increasing; a row of the graph: every
-    /// node `j` it may occlude is tried). [`Graph::build`] runs every row; a sample of rows
-    /// measures the cost of the graph ([`super::estimate_graph`]).
+    /// node `j` it may occlude is tried), computed as `work` says; the edges are added in
+    /// row order either way. [`Graph::build`] runs every row; a sample of rows measures the
+    /// cost of the graph ([`super::estimate_graph`]).
     /// Every row's bytes are charged to `budget` first; over it, what was charged is
     /// released and the error returned.
     pub fn add_rows(
         &mut self,
         rows: impl ExactSizeIterator<Item = usize>,
+        work: RowWork,
         budget: &MemoryBudget,
-        tick: &dyn Fn(u64, u64),
+        tick: &(dyn Fn(u64, u64) + Sync),
     ) -> Result<RowStats, GraphError> {
         let mut stats = RowStats::default();
-        match self.add_rows_charged(rows, budget, &mut stats, tick) {
+        match self.add_rows_charged(rows, work, budget, &mut stats, tick) {
             Ok(()) => Ok(stats),
             Err(e) => {
                 budget.release(stats.charged);
@@ -373,91 +410,155 @@ impl Graph {
     fn add_rows_charged(
         &mut self,
         rows: impl ExactSizeIterator<Item = usize>,
+        work: RowWork,
         budget: &MemoryBudget,
         stats: &mut RowStats,
-        tick: &dyn Fn(u64, u64),
+        tick: &(dyn Fn(u64, u64) + Sync),
     ) -> Result<(), GraphError> {
         let nodes = self.bytes_for(0, false);
         budget.charge(nodes)?;
         stats.charged = nodes;
         let in_bytes = if self.inn.is_some() { IN_EDGE_BYTES } else { 0 };
-        let g = self;
-        let tris = g.tris.clone();
-        let n = g.nodes.len();
+        let n = self.nodes.len();
         let total = rows.len() as u64;
-        let planes: Vec<Plane> = g
-            .nodes
-            .iter()
-            .map(|x| facing(&tris[x.tri as usize], x.back))
-            .collect();
-        let spheres: Vec<(DVec3, f64)> = tris.iter().map(bounding_sphere).collect();
-        let centroids: Vec<DVec3> = tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
-        let centres: Vec<DVec3> = g.nodes.iter().map(|x| centre(&x.region)).collect();
-        let mut occl_cache: HashMap<(u32, u32), Vec<Plane>> = HashMap::new();
-        let mut rows = rows.peekable();
+        let inputs = self.row_inputs();
+        // Units of work: the rows of one triangle's copies (consecutive), which share the
+        // occlusion planes of their triangle's pairs.
+        let rows: Vec<usize> = rows.collect();
+        let mut units: Vec<&[usize]> = Vec::new();
+        let mut start = 0;
+        for k in 1..=rows.len() {
+            if k == rows.len() || self.nodes[rows[k]].tri != self.nodes[rows[start]].tri {
+                units.push(&rows[start..k]);
+                start = k;
+            }
+        }
+        let per_batch = match work {
+            RowWork::Sequential => 1,
+            RowWork::Parallel => ROWS_PER_TASK * rayon::current_num_threads().max(1),
+        };
         let mut done = 0u64;
-        while let Some(i) = rows.next() {
-            if done.is_multiple_of(64) {
-                tick(done, total);
-            }
-            done += 1;
-            if g.edges.len() as u64 + n as u64 > MAX_IDS {
-                return Err(GraphError::TooManyEdges);
-            }
-            let before = g.edges.len() as u64;
-            let ti = g.nodes[i].tri;
-            let a = &tris[ti as usize];
-            for j in 0..n {
-                let tj = g.nodes[j].tri;
-                if ti == tj {
-                    continue;
+        for batch in units.chunks(per_batch) {
+            let unit_rows = |unit: &&[usize]| -> Vec<Row> {
+                let mut occl_cache: HashMap<(u32, u32), Vec<Plane>> = HashMap::new();
+                unit.iter()
+                    .map(|&i| self.row(i, &inputs, &mut occl_cache))
+                    .collect()
+            };
+            let found: Vec<Vec<Row>> = match work {
+                RowWork::Sequential => batch.iter().map(unit_rows).collect(),
+                RowWork::Parallel => {
+                    use rayon::prelude::*;
+                    batch.par_iter().map(unit_rows).collect()
                 }
-                let b = &tris[tj as usize];
-                // j must reach behind i, and i in front of j (see module docs of geom).
-                if !b.iter().any(|q| planes[i].eval(*q) < -EPS)
-                    || !a.iter().any(|p| planes[j].eval(*p) > EPS)
-                {
-                    continue;
+            };
+            for (unit, found) in batch.iter().zip(found) {
+                for (&i, row) in unit.iter().zip(found) {
+                    if done.is_multiple_of(64) {
+                        tick(done, total);
+                    }
+                    done += 1;
+                    if self.edges.len() as u64 + n as u64 > MAX_IDS {
+                        return Err(GraphError::TooManyEdges);
+                    }
+                    for &j in &row.to {
+                        self.push_edge(i, j as usize);
+                    }
+                    stats.pairs += row.pairs;
+                    stats.witnessed += row.witnessed;
+                    stats.clipped += row.clipped;
+                    // The row's out-list at its length (it is complete), and its bytes
+                    // charged.
+                    self.out[i].shrink_to_fit();
+                    let added = row.to.len() as u64;
+                    let bytes = added * (EDGE_BYTES + in_bytes) + added.div_ceil(8);
+                    budget.charge(bytes)?;
+                    stats.charged += bytes;
                 }
-                // Each region must reach into the other's facing half-space.
-                if g.nodes[i].region.outside_any(&planes[j..=j])
-                    || g.nodes[j].region.outside_any(&planes[i..=i])
-                {
-                    continue;
-                }
-                let (sa, sb) = (spheres[ti as usize], spheres[tj as usize]);
-                if cone_misses(sa, sb, &g.nodes[i].region, centres[i])
-                    || cone_misses(sa, sb, &g.nodes[j].region, centres[j])
-                    || !may_occlude(a, b, &g.nodes[i].region, &g.nodes[j].region)
-                {
-                    continue;
-                }
-                let occl = occl_cache
-                    .entry((ti, tj))
-                    .or_insert_with(|| occlusion_planes(a, b));
-                stats.pairs += 1;
-                let (ri, rj) = (&g.nodes[i].region, &g.nodes[j].region);
-                if has_witness(centroids[ti as usize], centroids[tj as usize], occl, ri, rj) {
-                    g.push_edge(i, j);
-                    stats.witnessed += 1;
-                } else if g.try_edge(i, j, occl) {
-                    stats.clipped += 1;
-                }
-            }
-            // The row's out-list at its length (it is complete), and its bytes charged.
-            g.out[i].shrink_to_fit();
-            let added = g.edges.len() as u64 - before;
-            let bytes = added * (EDGE_BYTES + in_bytes) + added.div_ceil(8);
-            budget.charge(bytes)?;
-            stats.charged += bytes;
-            // Occlusion planes of pairs with node i's triangle are no longer needed once
-            // its next row (its other copy, if any) is done.
-            if rows.peek().is_none_or(|&x| g.nodes[x].tri != ti) {
-                occl_cache.retain(|k, _| k.0 != ti);
             }
         }
         tick(total, total);
         Ok(())
+    }
+
+    /// What every row reads ([`RowInputs`]).
+    fn row_inputs(&self) -> RowInputs {
+        let tris = &self.tris;
+        RowInputs {
+            planes: self
+                .nodes
+                .iter()
+                .map(|x| facing(&tris[x.tri as usize], x.back))
+                .collect(),
+            spheres: tris.iter().map(bounding_sphere).collect(),
+            centroids: tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect(),
+            centres: self.nodes.iter().map(|x| centre(&x.region)).collect(),
+        }
+    }
+
+    /// Row `i`: every node `j` that node `i` occludes from some viewpoint of both regions,
+    /// in increasing order. `occl_cache` keeps the occlusion planes of `i`'s triangle's
+    /// pairs for its other copy's row.
+    fn row(
+        &self,
+        i: usize,
+        inputs: &RowInputs,
+        occl_cache: &mut HashMap<(u32, u32), Vec<Plane>>,
+    ) -> Row {
+        let RowInputs {
+            planes,
+            spheres,
+            centroids,
+            centres,
+        } = inputs;
+        let tris = &self.tris;
+        let mut row = Row {
+            to: Vec::new(),
+            pairs: 0,
+            witnessed: 0,
+            clipped: 0,
+        };
+        let ti = self.nodes[i].tri;
+        let a = &tris[ti as usize];
+        for j in 0..self.nodes.len() {
+            let tj = self.nodes[j].tri;
+            if ti == tj {
+                continue;
+            }
+            let b = &tris[tj as usize];
+            // j must reach behind i, and i in front of j (see module docs of geom).
+            if !b.iter().any(|q| planes[i].eval(*q) < -EPS)
+                || !a.iter().any(|p| planes[j].eval(*p) > EPS)
+            {
+                continue;
+            }
+            // Each region must reach into the other's facing half-space.
+            if self.nodes[i].region.outside_any(&planes[j..=j])
+                || self.nodes[j].region.outside_any(&planes[i..=i])
+            {
+                continue;
+            }
+            let (sa, sb) = (spheres[ti as usize], spheres[tj as usize]);
+            if cone_misses(sa, sb, &self.nodes[i].region, centres[i])
+                || cone_misses(sa, sb, &self.nodes[j].region, centres[j])
+                || !may_occlude(a, b, &self.nodes[i].region, &self.nodes[j].region)
+            {
+                continue;
+            }
+            let occl = occl_cache
+                .entry((ti, tj))
+                .or_insert_with(|| occlusion_planes(a, b));
+            row.pairs += 1;
+            let (ri, rj) = (&self.nodes[i].region, &self.nodes[j].region);
+            if has_witness(centroids[ti as usize], centroids[tj as usize], occl, ri, rj) {
+                row.to.push(j as u32);
+                row.witnessed += 1;
+            } else if !self.reduced(i, j, occl).is_empty() {
+                row.to.push(j as u32);
+                row.clipped += 1;
+            }
+        }
+        row
     }
 
     pub fn add_node(&mut self, node: Node) -> usize {

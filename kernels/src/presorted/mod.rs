@@ -49,13 +49,15 @@ pub use runtime::algorithms;
 pub struct PresortConfig {
     /// Faces of the bounding polyhedron = partitions of viewpoint space: 4, 6, 16 or 64.
     pub partitions: u32,
-    /// Worker threads (partitions run one per task).
+    /// Worker threads: several partitions at once when their graphs fit in
+    /// `memory_limit` together, and each graph's rows on every thread.
     pub threads: usize,
     /// How cycles of the occlusion graph are broken.
     pub method: Method,
-    /// Bytes the occlusion graphs built at once (one per thread) may hold (`None`:
-    /// unbounded). Checked up front from a sample of each graph's rows
-    /// ([`PresortError::Memory`]) and while the graphs grow ([`graph::GraphError`]).
+    /// Bytes the occlusion graphs built at once may hold (`None`: unbounded). Checked up
+    /// front from a sample of each graph's rows, which sets how many partitions run at once
+    /// (down to one; [`PresortError::Memory`] when the largest graph alone would not fit),
+    /// and while the graphs grow ([`graph::GraphError`]).
     pub memory_limit: Option<u64>,
 }
 
@@ -206,9 +208,9 @@ pub enum PresortError {
         error: graph::GraphError,
     },
     #[error(
-        "the occlusion graphs would need about {} at once ({threads} built in parallel; \
-         per partition, estimated from {rows} rows of each: {}), over the memory limit of {}: \
-         use fewer threads, fewer partitions, or a simpler mesh",
+        "the largest occlusion graph would need about {} (per partition, estimated from \
+         {rows} rows of each: {}), over the memory limit of {}: use fewer partitions, a \
+         simpler mesh, or a higher --memory-limit if the machine has the memory",
         graph::gib(*estimate),
         per_partition.iter().map(|b| graph::gib(*b)).collect::<Vec<_>>().join(", "),
         graph::gib(*limit)
@@ -216,7 +218,6 @@ pub enum PresortError {
     Memory {
         estimate: u64,
         limit: u64,
-        threads: usize,
         rows: usize,
         per_partition: Vec<u64>,
     },
@@ -289,25 +290,31 @@ pub fn presort(
     } = prepare(mesh, cfg)?;
     let (mut split_pieces, mut split_stats) = split::split_crossing(&input)?;
     let tris: Arc<[[DVec3; 3]]> = split_pieces.iter().map(|p| p.pos).collect();
-    check_memory(&tris, &dirs, cfg, &pool, progress)?;
+    let at_once = check_memory(&tris, &dirs, cfg, &pool, progress)?;
     let budget = graph::MemoryBudget::new(cfg.memory_limit);
     // Rounds: a cycle seen whole from some viewpoint is broken by cutting one of its pieces
     // by another's plane, and every partition runs again on the new pieces.
     let mut round = 0;
     let results: Vec<(Segment, PartitionStats)> = loop {
         let tris: Arc<[[DVec3; 3]]> = split_pieces.iter().map(|p| p.pos).collect();
+        // `at_once` partitions at a time (each graph's rows also run on every thread).
         let all: Vec<Result<(Segment, PartitionStats), PresortError>> = pool.install(|| {
             use rayon::prelude::*;
-            (0..dirs.len())
-                .into_par_iter()
-                .map(|k| {
-                    let part = Part {
-                        tris: &tris,
-                        dirs: &dirs,
-                        k,
-                        frame: &frame,
-                    };
-                    presort_partition(&part, cfg.method, &budget, progress)
+            let ks: Vec<usize> = (0..dirs.len()).collect();
+            ks.chunks(at_once)
+                .flat_map(|group| {
+                    group
+                        .par_iter()
+                        .map(|&k| {
+                            let part = Part {
+                                tris: &tris,
+                                dirs: &dirs,
+                                k,
+                                frame: &frame,
+                            };
+                            presort_partition(&part, cfg.method, &budget, progress)
+                        })
+                        .collect::<Vec<_>>()
                 })
                 .collect()
         });
@@ -431,9 +438,12 @@ fn sample_graphs(
                 // (A sample holds a fraction of the graph: it is not bounded.)
                 let unbounded = graph::MemoryBudget::new(None);
                 let pairs = g
-                    .add_rows((0..take).map(|r| r * n / take), &unbounded, &|d, t| {
-                        progress.update(k, "graph", d, t)
-                    })
+                    .add_rows(
+                        (0..take).map(|r| r * n / take),
+                        graph::RowWork::Sequential,
+                        &unbounded,
+                        &|d, t| progress.update(k, "graph", d, t),
+                    )
                     .map_err(|error| PresortError::Graph {
                         partition: k,
                         error,
@@ -465,20 +475,22 @@ fn largest_sum(bytes: &[u64], k: usize) -> u64 {
     b.iter().take(k).sum()
 }
 
-/// Refuses, before any graph is built, graphs that would not fit `cfg.memory_limit`: the
-/// `threads` largest at once, each at its worst case (n (n - 1) edges) or, when that does
-/// not fit, estimated from [`MEMORY_SAMPLE_ROWS`] rows.
+/// How many partitions' graphs may be built at once within `cfg.memory_limit` (at most
+/// `cfg.threads`; each graph's rows run on every thread anyway, [`graph::RowWork`]), and
+/// refuses, before any graph is built, a mesh whose largest graph alone would not fit: each
+/// graph at its worst case (n (n - 1) edges) or, when that does not fit, estimated from
+/// [`MEMORY_SAMPLE_ROWS`] rows.
 fn check_memory(
     tris: &Arc<[[DVec3; 3]]>,
     dirs: &[DVec3],
     cfg: &PresortConfig,
     pool: &rayon::ThreadPool,
     progress: &dyn Progress,
-) -> Result<(), PresortError> {
+) -> Result<usize, PresortError> {
+    let most = cfg.threads.min(dirs.len()).max(1);
     let Some(limit) = cfg.memory_limit else {
-        return Ok(());
+        return Ok(most);
     };
-    let at_once = cfg.threads.min(dirs.len()).max(1);
     let in_edges = cfg.method == Method::Scan;
     let worst: Vec<u64> = (0..dirs.len())
         .map(|k| {
@@ -487,8 +499,8 @@ fn check_memory(
             g.bytes_for(n * n.saturating_sub(1), in_edges)
         })
         .collect();
-    if largest_sum(&worst, at_once) <= limit {
-        return Ok(());
+    if largest_sum(&worst, most) <= limit {
+        return Ok(most);
     }
     let est = sample_graphs(tris, dirs, cfg, MEMORY_SAMPLE_ROWS, pool, progress)?;
     if let Some(k) = est.iter().position(|e| e.graph_edges > graph::MAX_IDS) {
@@ -498,17 +510,18 @@ fn check_memory(
         });
     }
     let per_partition: Vec<u64> = est.iter().map(|e| e.graph_bytes).collect();
-    let estimate = largest_sum(&per_partition, at_once);
-    if estimate > limit {
-        return Err(PresortError::Memory {
-            estimate,
+    match (1..=most)
+        .rev()
+        .find(|&k| largest_sum(&per_partition, k) <= limit)
+    {
+        Some(k) => Ok(k),
+        None => Err(PresortError::Memory {
+            estimate: largest_sum(&per_partition, 1),
             limit,
-            threads: at_once,
             rows: MEMORY_SAMPLE_ROWS,
             per_partition,
-        });
+        }),
     }
-    Ok(())
 }
 
 /// The pieces with their clips in world space.

@@ -134,7 +134,12 @@ fn a_sample_of_rows_has_the_full_graphs_edges_of_those_rows() {
     let mut sample = Graph::nodes_of(tris, &part);
     let rows: Vec<usize> = (0..sample.nodes.len()).step_by(3).collect();
     let stats = sample
-        .add_rows(rows.iter().copied(), &budget, &|_, _| {})
+        .add_rows(
+            rows.iter().copied(),
+            RowWork::Sequential,
+            &budget,
+            &|_, _| {},
+        )
         .unwrap();
     let pairs = |g: &Graph| -> Vec<(u32, u32)> {
         g.edges
@@ -146,6 +151,44 @@ fn a_sample_of_rows_has_the_full_graphs_edges_of_those_rows() {
     assert!(pairs(&full).len() > 10, "{} edges", pairs(&full).len());
     assert_eq!(pairs(&sample), pairs(&full));
     assert_eq!(sample.edges.len() as u64, stats.witnessed + stats.clipped);
+}
+
+#[test]
+fn rows_on_many_threads_give_the_graph_of_rows_one_after_another() {
+    // The same edges in the same order (ids, out-lists) and the same counts, on a pool of
+    // 3 threads taking batches of rows, as one thread taking them in order.
+    let mut seed = 0x0bad_cafe_f00d_1234u64;
+    let mut rnd = || {
+        seed = seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let tris: Arc<[[DVec3; 3]]> = (0..60)
+        .map(|_| {
+            let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;
+            [0, 1, 2].map(|_| c + DVec3::new(rnd(), rnd(), rnd()) * 0.15)
+        })
+        .collect();
+    let dirs = directions(6).unwrap();
+    let part = partition_region(&dirs, 1);
+    let budget = MemoryBudget::new(None);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(3)
+        .build()
+        .unwrap();
+    let (par, par_stats) = pool
+        .install(|| Graph::build(tris.clone(), &part, &budget, &|_, _| {}))
+        .unwrap();
+    let mut seq = Graph::nodes_of(tris, &part);
+    let n = seq.nodes.len();
+    let seq_stats = seq
+        .add_rows(0..n, RowWork::Sequential, &budget, &|_, _| {})
+        .unwrap();
+    assert!(par.edges.len() > 100, "{} edges", par.edges.len());
+    assert_eq!(par.edges, seq.edges);
+    assert_eq!(par.out, seq.out);
+    assert_eq!(par_stats, seq_stats);
 }
 
 #[test]
