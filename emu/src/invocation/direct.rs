@@ -21,10 +21,21 @@ use crate::memory::{Buf, MemOp, OpKind, Word};
 /// ([`KernelInfo::with_own_pixel_array`](crate::KernelInfo::with_own_pixel_array)). A
 /// constant, so that a context without it carries no code for it (the kernel's state
 /// machine is then small enough to be inlined into the shading loop).
+///
+/// It is one pointer: a kernel's future copies its context on its first poll, and a copy
+/// of a wider context (three pointers, stored one by one just before) was a 16-byte load
+/// of two 8-byte stores, which the store buffer cannot forward: a stall of about 15 cycles
+/// per fragment, in each nested `async fn` that takes the context (docs/performance.md).
 #[derive(Clone, Copy)]
-pub struct DirectFrag<'a, const OWN: bool = false> {
-    frag: Frag<'a>,
-    state: &'a DirectState<'a>,
+pub struct DirectFrag<'c, 'a, const OWN: bool = false> {
+    ctx: &'c DirectCtx<'a>,
+}
+
+/// What a [`DirectFrag`] points to: the invocation and its pass, and the per-fragment
+/// state. The executor keeps it on its stack for the invocation.
+pub(crate) struct DirectCtx<'a> {
+    pub frag: Frag<'a>,
+    pub state: &'a DirectState<'a>,
 }
 
 /// An access already performed: its outcome (`Pending` when the invocation faulted; the
@@ -40,30 +51,31 @@ impl<T: Copy> Future for Performed<T> {
     }
 }
 
-impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
-    /// The context of the invocation in `frag`'s slot, whose per-fragment state is `state`.
+impl<'c, 'a, const OWN: bool> DirectFrag<'c, 'a, OWN> {
+    /// The context of the invocation in `ctx.frag`'s slot, whose per-fragment state is
+    /// `ctx.state`.
     #[inline(always)]
-    pub(crate) fn new(frag: Frag<'a>, state: &'a DirectState<'a>) -> Self {
-        DirectFrag { frag, state }
+    pub(crate) fn new(ctx: &'c DirectCtx<'a>) -> Self {
+        DirectFrag { ctx }
     }
     #[inline(always)]
     fn as_frag(&self) -> &Frag<'a> {
-        &self.frag
+        &self.ctx.frag
     }
     #[inline(always)]
     fn view(&self) -> FragView<'a> {
         FragView {
-            input: self.state.input.get(),
-            env: self.frag.env,
+            input: self.ctx.state.input.get(),
+            env: self.ctx.frag.env,
         }
     }
     #[inline(always)]
     fn set_discarded(&self) {
-        self.state.discarded.set(true);
+        self.ctx.state.discarded.set(true);
     }
     #[inline(always)]
     fn set_depth_out(&self, z: f32) {
-        self.state.depth_out.set(Some(z));
+        self.ctx.state.depth_out.set(Some(z));
     }
     /// The fragment's own slot of `buf` when this worker owns the tile and `buf` is the
     /// kernel's own per-pixel or per-block array (`DirectState::owning`): its first word,
@@ -73,9 +85,9 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
         if !OWN {
             return None;
         }
-        let st = self.state;
+        let st = self.ctx.state;
         let input = st.input.get();
-        let width = self.frag.env.width;
+        let width = self.ctx.frag.env.width;
         match (st.own, st.own_block) {
             (Some(own), _) if own.buffer == buf.id => Some((
                 (input.y as u64 * width as u64 + input.x as u64) * own.stride as u64,
@@ -92,7 +104,7 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
     }
     #[inline(always)]
     fn perform<T: Word>(&self, buf: Buf<T>, index: u32, op: MemOp) -> Poll<T> {
-        let st = self.state;
+        let st = self.ctx.state;
         // The fused path never keeps the contention table (`shade_direct` checks).
         // Where the tile is this worker's for the pass, the fragment's own slot (of its
         // pixel, or of its block, which lies in the tile) is reached by no other thread
@@ -102,7 +114,8 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
                 // Out of bounds is reported as such, below.
                 if (index as u64).wrapping_sub(first) >= stride && index < buf.len {
                     let input = st.input.get();
-                    self.frag
+                    self.ctx
+                        .frag
                         .not_own_slot(buf.id, index, (input.x, input.y), declared);
                     return Poll::Pending;
                 }
@@ -110,7 +123,8 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
             }
             None => Route::Cached(&st.words),
         };
-        self.frag
+        self.ctx
+            .frag
             .perform_counted::<T>(&st.steps, &st.ops, route, buf, index, op)
     }
     /// The fast path of a plain record access of `len` words at `base..` (fewer words than
@@ -122,7 +136,7 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
     /// nothing done, otherwise (the word-by-word path then faults where it would).
     #[inline(always)]
     fn claim_record<T: Word>(&self, buf: Buf<T>, base: u32, len: usize, kind: OpKind) -> bool {
-        let st = self.state;
+        let st = self.ctx.state;
         let Ok(len) = u32::try_from(len) else {
             return false;
         };
@@ -135,7 +149,8 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
                 return false;
             }
         }
-        self.frag
+        self.ctx
+            .frag
             .claim_record(&st.steps, &st.ops, buf.len, base, len, kind)
     }
     #[inline(always)]
@@ -148,7 +163,7 @@ impl<'a, const OWN: bool> DirectFrag<'a, OWN> {
     }
 }
 
-impl<const OWN: bool> Fragment for DirectFrag<'_, OWN> {
+impl<const OWN: bool> Fragment for DirectFrag<'_, '_, OWN> {
     getters!();
     word_accesses!(op, unit);
 
@@ -178,9 +193,9 @@ impl<const OWN: bool> Fragment for DirectFrag<'_, OWN> {
         new: T,
     ) -> impl Future<Output = Result<T, T>> {
         if super::spurious_cas_failure(
-            self.frag.env,
-            self.state.input.get().seq,
-            self.state.steps.get(),
+            self.ctx.frag.env,
+            self.ctx.state.input.get().seq,
+            self.ctx.state.steps.get(),
         ) {
             // A failed attempt reads the word, as a real failed CAS does.
             return Performed(self.perform::<T>(buf, index, MemOp::AtomicLoad).map(Err));
@@ -202,9 +217,9 @@ impl<const OWN: bool> Fragment for DirectFrag<'_, OWN> {
         out: &mut [T],
     ) -> impl Future<Output = ()> {
         if self.claim_record(buf, base, out.len(), OpKind::Load) {
-            let st = self.state;
+            let st = self.ctx.state;
             st.words
-                .load_record(self.frag.env.memory, buf.id, base, out);
+                .load_record(self.ctx.frag.env.memory, buf.id, base, out);
             return Performed(Poll::Ready(()));
         }
         let mut done = Poll::Ready(());
@@ -227,9 +242,9 @@ impl<const OWN: bool> Fragment for DirectFrag<'_, OWN> {
         values: &[T],
     ) -> impl Future<Output = ()> {
         if self.claim_record(buf, base, values.len(), OpKind::Store) {
-            let st = self.state;
+            let st = self.ctx.state;
             st.words
-                .store_record(self.frag.env.memory, buf.id, base, values);
+                .store_record(self.ctx.frag.env.memory, buf.id, base, values);
             return Performed(Poll::Ready(()));
         }
         let mut done = Poll::Ready(());
@@ -247,8 +262,8 @@ impl<const OWN: bool> Fragment for DirectFrag<'_, OWN> {
     }
     #[inline(always)]
     fn yield_now(&self) -> impl Future<Output = ()> {
-        Performed(self.frag.count_step(&self.state.steps))
+        Performed(self.ctx.frag.count_step(&self.ctx.state.steps))
     }
 }
 
-impl<const OWN: bool> sealed::Sealed for DirectFrag<'_, OWN> {}
+impl<const OWN: bool> sealed::Sealed for DirectFrag<'_, '_, OWN> {}

@@ -9,7 +9,7 @@ use std::task::{Context, Poll, Waker};
 
 use crate::exec::{record_panic, Acc, Tally};
 use crate::framebuffer::TileMemory;
-use crate::invocation::{DirectFrag, DirectState, Frag, Invocation, Mode, PassEnv};
+use crate::invocation::{DirectCtx, DirectFrag, DirectState, Frag, Invocation, Mode, PassEnv};
 use crate::kernel::{FragInput, FragmentKernel};
 use crate::memory::{BlockArray, PixelArray, PixelPrefetcher};
 use crate::pipeline::{BlockMask, BLOCK_SHIFT};
@@ -618,7 +618,11 @@ fn shade_direct<'a, K: FragmentKernel, const OWN: bool>(
         let mut cx = Context::from_waker(Waker::noop());
         // Interlock here is by ownership (no lock to leave, no turn to pass: `PassEnv::
         // interlock`), so the kernel is the whole invocation.
-        let frag = DirectFrag::<OWN>::new(Frag { inv, env }, state);
+        let ctx = DirectCtx {
+            frag: Frag { inv, env },
+            state,
+        };
+        let frag = DirectFrag::<OWN>::new(&ctx);
         // One poll: under `DirectFrag` nothing suspends, and an invocation is pending
         // only once it has faulted (it is then dropped).
         let pending = std::pin::pin!(kernel.shade(frag))
