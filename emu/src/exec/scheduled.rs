@@ -510,6 +510,8 @@ pub(crate) fn explore<K: FragmentKernel>(
     let mut futs: Vec<Option<_>> = Vec::with_capacity(width);
     futs.resize_with(width, || None);
     let mut scratch = SchedScratch::new(env.width, env.height);
+    // (An execution shows its callback no hotspots: the detector need not count them.)
+    scratch.detector.keep_hotspots(false);
     let mut sc = sc.clone();
     let mut n = 0;
     // One accumulator for every execution: each counts only its faults (`Harvest::Faults`),
