@@ -410,7 +410,7 @@ impl Detector {
     /// Whether to keep the per-address statistics of [`Detector::hotspots`] (on by default).
     /// Off, an access skips them (the access count, the toucher set, the peak) and so does
     /// an invocation's finish (leaving the toucher sets), and `hotspots` reports nothing:
-    /// an exploration shows its executions no hotspots, and they were a tenth of its
+    /// an exploration shows its executions no hotspots, and they were an eighth of its
     /// detector's instructions. The hazards found are the same either way.
     pub fn keep_hotspots(&mut self, keep: bool) {
         self.hotspots = keep;
