@@ -178,7 +178,9 @@ pub(crate) struct Chooser {
     policy: Policy,
     kind: Kind,
     rng: SmallRng,
-    /// PCT: priority per in-flight slot (higher runs first), change points.
+    /// PCT: priority per in-flight slot (higher runs first), and the change points still
+    /// ahead, latest first (the next is the last: taking it is a `pop`, where the earliest
+    /// first made it a `remove(0)`, a call to `memmove`).
     priorities: Vec<u64>,
     change_points: Vec<u64>,
     next_low: u64,
@@ -209,7 +211,7 @@ impl Chooser {
             for _ in 1..*depth {
                 change_points.push(rng.gen_range(0..steps_estimate.max(1)));
             }
-            change_points.sort_unstable();
+            change_points.sort_unstable_by(|a, b| b.cmp(a));
         }
         Chooser {
             policy: policy.clone(),
@@ -243,7 +245,7 @@ impl Chooser {
             }
             // (One change point under `pct:2`, and nothing to sort.)
             if self.change_points.len() > 1 {
-                self.change_points.sort_unstable();
+                self.change_points.sort_unstable_by(|a, b| b.cmp(a));
             }
         }
         // (Priorities are written at admission: no need to clear them.)
@@ -384,7 +386,7 @@ impl Chooser {
             Kind::Pct
                 if version.is_some()
                     && self.pct_version == version
-                    && self.change_points.first().is_none_or(|&c| c > step) =>
+                    && self.change_points.last().is_none_or(|&c| c > step) =>
             {
                 self.pct_best
             }
@@ -415,8 +417,8 @@ impl Chooser {
                     best
                 };
                 let mut best = pick(&self.priorities);
-                while self.change_points.first().is_some_and(|&c| c <= step) {
-                    self.change_points.remove(0);
+                while self.change_points.last().is_some_and(|&c| c <= step) {
+                    self.change_points.pop();
                     // The running invocation drops below everyone admitted so far.
                     self.next_low += 1;
                     let low = (self.change_points.len() as u64 + 1).saturating_sub(self.next_low);

@@ -297,3 +297,67 @@ fn lost_updates_are_found_among_many_loads_of_an_invocation() {
     let c = r.counts();
     assert_eq!(c.lost_updates, written.len() as u64 - 1, "{c:?}");
 }
+
+#[test]
+fn hotspots_off_change_no_hazard_and_report_no_hotspot() {
+    use rand::rngs::SmallRng;
+    use rand::{Rng, SeedableRng};
+    // Random passes (invocations started and finished in 3 lanes, every kind of access on
+    // 4 words, some in a critical section) through two detectors, hotspots kept and not:
+    // the same hazards, in the same order; only the first reports hotspots.
+    let ops = [
+        OpKind::Load,
+        OpKind::Store,
+        OpKind::AtomicLoad,
+        OpKind::AtomicStore,
+        OpKind::Add,
+        OpKind::Exchange,
+        OpKind::CompareExchange,
+    ];
+    let mut found = 0;
+    for seed in 0..40 {
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let mut kept = Detector::new(4, 4);
+        let mut off = Detector::new(4, 4);
+        off.keep_hotspots(false);
+        for d in [&mut kept, &mut off] {
+            d.set_base(0);
+        }
+        let (mut lanes, mut next) = ([None::<u64>; 3], 0u64);
+        for step in 0..200 {
+            let lane = rng.gen_range(0..3);
+            let seq = match lanes[lane] {
+                Some(seq) if rng.gen_bool(0.1) => {
+                    kept.finish(seq, step);
+                    off.finish(seq, step);
+                    lanes[lane] = None;
+                    continue;
+                }
+                Some(seq) => seq,
+                None => {
+                    let seq = next;
+                    next += 1;
+                    kept.start(id(seq), step, lane);
+                    off.start(id(seq), step, lane);
+                    lanes[lane] = Some(seq);
+                    seq
+                }
+            };
+            let (op, addr) = (
+                ops[rng.gen_range(0..ops.len())],
+                Addr::new(1, rng.gen_range(0..4)),
+            );
+            let value = rng.gen_range(0..3);
+            let lock = rng.gen_bool(0.3).then(|| LockKey::new(0, 0xff));
+            kept.access(lane, seq, addr, op, value, step, lock, None);
+            off.access(lane, seq, addr, op, value, step, lock, None);
+        }
+        assert_eq!(kept.counts(), off.counts(), "seed {seed}");
+        let name = |b: u32| b.to_string();
+        assert_eq!(kept.hazards(name), off.hazards(name), "seed {seed}");
+        assert!(!kept.hotspots(4).is_empty());
+        assert!(off.hotspots(4).is_empty());
+        found += kept.counts().total();
+    }
+    assert!(found > 0, "the passes found hazards to compare");
+}
