@@ -106,8 +106,9 @@ pub struct Graph {
 }
 
 /// A bound on the bytes of the graphs being built at once (one per partition, as many at
-/// once as the up-front estimate lets fit, at most `threads`): each graph charges its nodes and every row of edges as it grows,
-/// and building stops with [`GraphError::Memory`] rather than exceeding the bound.
+/// once as the up-front estimate lets fit, at most `threads`): each graph charges its nodes
+/// and every row of edges as it grows, and building stops with [`GraphError::Memory`]
+/// rather than exceeding the bound.
 #[derive(Debug)]
 pub struct MemoryBudget {
     limit: Option<u64>,
@@ -310,12 +311,11 @@ pub enum RowWork {
     Parallel,
 }
 
-/// The edges one row found ([`Graph::row`]): the nodes it occludes, in increasing order.
+/// The edges one row found ([`Graph::row`]): the nodes it occludes, in increasing order,
+/// and how its pairs were decided (`charged` stays 0: the caller charges the row).
 struct Row {
     to: Vec<u32>,
-    pairs: u64,
-    witnessed: u64,
-    clipped: u64,
+    stats: RowStats,
 }
 
 /// What every row reads besides the graph's nodes: per node its facing plane and region
@@ -425,14 +425,9 @@ impl Graph {
         // Units of work: the rows of one triangle's copies (consecutive), which share the
         // occlusion planes of their triangle's pairs.
         let rows: Vec<usize> = rows.collect();
-        let mut units: Vec<&[usize]> = Vec::new();
-        let mut start = 0;
-        for k in 1..=rows.len() {
-            if k == rows.len() || self.nodes[rows[k]].tri != self.nodes[rows[start]].tri {
-                units.push(&rows[start..k]);
-                start = k;
-            }
-        }
+        let units: Vec<&[usize]> = rows
+            .chunk_by(|&a, &b| self.nodes[a].tri == self.nodes[b].tri)
+            .collect();
         let per_batch = match work {
             RowWork::Sequential => 1,
             RowWork::Parallel => ROWS_PER_TASK * rayon::current_num_threads().max(1),
@@ -464,9 +459,9 @@ impl Graph {
                     for &j in &row.to {
                         self.push_edge(i, j as usize);
                     }
-                    stats.pairs += row.pairs;
-                    stats.witnessed += row.witnessed;
-                    stats.clipped += row.clipped;
+                    stats.pairs += row.stats.pairs;
+                    stats.witnessed += row.stats.witnessed;
+                    stats.clipped += row.stats.clipped;
                     // The row's out-list at its length (it is complete), and its bytes
                     // charged.
                     self.out[i].shrink_to_fit();
@@ -514,9 +509,7 @@ impl Graph {
         let tris = &self.tris;
         let mut row = Row {
             to: Vec::new(),
-            pairs: 0,
-            witnessed: 0,
-            clipped: 0,
+            stats: RowStats::default(),
         };
         let ti = self.nodes[i].tri;
         let a = &tris[ti as usize];
@@ -548,14 +541,14 @@ impl Graph {
             let occl = occl_cache
                 .entry((ti, tj))
                 .or_insert_with(|| occlusion_planes(a, b));
-            row.pairs += 1;
+            row.stats.pairs += 1;
             let (ri, rj) = (&self.nodes[i].region, &self.nodes[j].region);
             if has_witness(centroids[ti as usize], centroids[tj as usize], occl, ri, rj) {
                 row.to.push(j as u32);
-                row.witnessed += 1;
-            } else if !self.reduced(i, j, occl).is_empty() {
+                row.stats.witnessed += 1;
+            } else if self.occludes(i, j, occl) {
                 row.to.push(j as u32);
-                row.clipped += 1;
+                row.stats.clipped += 1;
             }
         }
         row
@@ -593,11 +586,16 @@ impl Graph {
     /// Adds `from -> to` if its reduced occlusion region has an interior (`occl`: the
     /// occlusion region of their triangles).
     pub fn try_edge(&mut self, from: usize, to: usize, occl: &[Plane]) -> bool {
-        if self.reduced(from, to, occl).is_empty() {
+        if !self.occludes(from, to, occl) {
             return false;
         }
         self.push_edge(from, to);
         true
+    }
+
+    /// Whether `from -> to` is an edge: its reduced occlusion region has an interior.
+    fn occludes(&self, from: usize, to: usize, occl: &[Plane]) -> bool {
+        !self.reduced(from, to, occl).is_empty()
     }
 
     /// Adds the edge `from -> to`.

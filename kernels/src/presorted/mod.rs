@@ -276,7 +276,8 @@ fn prepare(mesh: &Mesh, cfg: &PresortConfig) -> Result<Prepared, PresortError> {
     })
 }
 
-/// Preprocesses `mesh` (sections 3-4.2): every partition in parallel, one per task.
+/// Preprocesses `mesh` (sections 3-4.2): as many partitions at once as their graphs fit the
+/// memory limit (at most `cfg.threads`), each graph's rows on every thread.
 pub fn presort(
     mesh: &Mesh,
     cfg: &PresortConfig,
@@ -672,7 +673,16 @@ fn segment_of(g: &graph::Graph, order: &[cells::Placed], frame: &Frame3) -> Segm
 /// The tests' fixed random numbers in [-1, 1): a 64-bit LCG from a fixed seed.
 #[cfg(test)]
 fn test_lcg() -> impl FnMut() -> f64 {
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    test_lcg_from(TEST_LCG_SEED)
+}
+
+/// [`test_lcg`]'s seed.
+#[cfg(test)]
+const TEST_LCG_SEED: u64 = 0x2545_f491_4f6c_dd1d;
+
+/// [`test_lcg`] from `seed`.
+#[cfg(test)]
+fn test_lcg_from(mut seed: u64) -> impl FnMut() -> f64 {
     move || {
         seed = seed
             .wrapping_mul(6_364_136_223_846_793_005)

@@ -110,23 +110,23 @@ fn a_witness_is_found_only_for_edges_and_for_most_of_them() {
     );
 }
 
+/// `count` triangles of the tests' LCG from `seed`: centres in a cube of half-side 0.5,
+/// vertices within `size` of their centre in each coordinate.
+fn random_tris(seed: u64, count: usize, size: f64) -> Arc<[[DVec3; 3]]> {
+    let mut rnd = super::super::test_lcg_from(seed);
+    (0..count)
+        .map(|_| {
+            let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;
+            [0, 1, 2].map(|_| c + DVec3::new(rnd(), rnd(), rnd()) * size)
+        })
+        .collect()
+}
+
 #[test]
 fn a_sample_of_rows_has_the_full_graphs_edges_of_those_rows() {
     // The estimate's rows (every third node) against the whole graph: the same edges
     // leave each sampled node, in the same order.
-    let mut seed = 0x1234_5678_9abc_def1u64;
-    let mut rnd = || {
-        seed = seed
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    };
-    let tris: Arc<[[DVec3; 3]]> = (0..24)
-        .map(|_| {
-            let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;
-            [0, 1, 2].map(|_| c + DVec3::new(rnd(), rnd(), rnd()) * 0.1)
-        })
-        .collect();
+    let tris = random_tris(0x1234_5678_9abc_def1, 24, 0.1);
     let dirs = directions(6).unwrap();
     let part = partition_region(&dirs, 0);
     let budget = MemoryBudget::new(None);
@@ -157,19 +157,7 @@ fn a_sample_of_rows_has_the_full_graphs_edges_of_those_rows() {
 fn rows_on_many_threads_give_the_graph_of_rows_one_after_another() {
     // The same edges in the same order (ids, out-lists) and the same counts, on a pool of
     // 3 threads taking batches of rows, as one thread taking them in order.
-    let mut seed = 0x0bad_cafe_f00d_1234u64;
-    let mut rnd = || {
-        seed = seed
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    };
-    let tris: Arc<[[DVec3; 3]]> = (0..60)
-        .map(|_| {
-            let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;
-            [0, 1, 2].map(|_| c + DVec3::new(rnd(), rnd(), rnd()) * 0.15)
-        })
-        .collect();
+    let tris = random_tris(0x0bad_cafe_f00d_1234, 60, 0.15);
     let dirs = directions(6).unwrap();
     let part = partition_region(&dirs, 1);
     let budget = MemoryBudget::new(None);
@@ -222,19 +210,10 @@ fn alive_bits_round_trip_across_words() {
 }
 
 /// Random small triangles in the unit ball (a fixed LCG).
-fn random_tris(count: usize) -> Arc<[[DVec3; 3]]> {
-    let mut rnd = super::super::test_lcg();
-    (0..count)
-        .map(|_| {
-            let c = DVec3::new(rnd(), rnd(), rnd()) * 0.5;
-            [0, 1, 2].map(|_| c + DVec3::new(rnd(), rnd(), rnd()) * 0.1)
-        })
-        .collect()
-}
 
 #[test]
 fn a_graph_charges_its_bytes_and_stops_at_the_budget() {
-    let tris = random_tris(30);
+    let tris = random_tris(super::super::TEST_LCG_SEED, 30, 0.1);
     let part = partition_region(&directions(6).unwrap(), 0);
     let free = MemoryBudget::new(None);
     let (g, stats) = Graph::build(tris.clone(), &part, &free, &|_, _| {}).unwrap();
@@ -270,7 +249,7 @@ fn a_graph_charges_its_bytes_and_stops_at_the_budget() {
 
 #[test]
 fn in_edges_indexed_or_not_are_the_same_and_follow_splits() {
-    let tris = random_tris(24);
+    let tris = random_tris(super::super::TEST_LCG_SEED, 24, 0.1);
     let part = partition_region(&directions(6).unwrap(), 1);
     let budget = MemoryBudget::new(None);
     let (mut g, _) = Graph::build(tris, &part, &budget, &|_, _| {}).unwrap();
