@@ -168,16 +168,23 @@ impl KernelInfo {
     /// Declares, for a full-screen pass, that its invocation at a pixel where no geometry
     /// pass of the device has rasterized a fragment does nothing but write `bits` to target
     /// 0 (as [`Fragment::output_u32`] would; no other target, no discard, no fault, no
-    /// memory write): a resolve at an empty pixel, which writes the background. The fused
+    /// memory write, and no read of a word another invocation of the pass may write: its
+    /// pixel's own words, which nothing else in a resolve touches, are what it reads): a
+    /// resolve at an empty pixel, which writes the background. The fused
     /// path of the `ordered` and `parallel` executors then writes `bits` to such pixels
     /// without running the kernel, by screen blocks of 8 x 8 pixels that no fragment
     /// reached (a coverage mask the geometry passes mark as they rasterize, as a GPU's
     /// hierarchical stencil; `crate::pipeline::BlockMask`), and counts them in
     /// [`Stats::skipped`](crate::Stats::skipped) instead of
-    /// [`Stats::shaded`](crate::Stats::shaded). The scheduled executor runs every pixel,
-    /// so a wrong declaration shows as a difference between executors, and in the image
-    /// the oracle compares with the truth. Ignored by geometry passes, and by full-screen
-    /// passes with more than one target.
+    /// [`Stats::shaded`](crate::Stats::shaded). The general path (the scheduled executor,
+    /// interlock without tile ownership, contention counting) marks and skips the same
+    /// blocks: by the declaration the skipped invocation could take part in no hazard the
+    /// scheduled executor's detector reports (it writes nothing, and reads nothing another
+    /// invocation writes; docs/fuzzing.md). A device that does not track coverage runs
+    /// every pixel, and the oracle
+    /// checks every empty pixel's image against the declared output, so a wrong
+    /// declaration shows there. Ignored by geometry passes, and by full-screen passes with
+    /// more than one target, a depth or stencil test, or no covered sample.
     ///
     /// [`Fragment::output_u32`]: crate::Fragment::output_u32
     pub const fn with_untouched_output(mut self, bits: [u32; 4]) -> KernelInfo {

@@ -1,12 +1,14 @@
 //! The fixed-function stages of one tile: rasterization and early tests before shading
 //! ([`RasterFront`]), late tests, blending and writes after ([`RasterBack`]), in API order.
 
+use crate::exec::fused::{block_end, FusedCounts, Untouched};
 use crate::exec::FragOut;
 use crate::framebuffer::TileMemory;
 use crate::kernel::FragInput;
 use crate::state::FragmentState;
 use crate::sync::pool;
 
+use super::touched::{BlockMask, BLOCK_SHIFT};
 use super::waves::Geometry;
 
 /// Runs `f` on every (tile, item) pair with up to `threads` threads; returns the results
@@ -53,16 +55,27 @@ pub(super) struct RasterFront<'a> {
     pub(super) state: &'a FragmentState,
     pub(super) early: bool,
     pub(super) samples: u32,
+    /// Geometry: the device's coverage mask, in which the rasterizer's fragments mark their
+    /// blocks before any test or sample mask, as the fused path marks its covered runs.
+    pub(super) marks: Option<&'a BlockMask>,
+    /// Full screen: the blocks no geometry reached and the kernel's declared output there
+    /// (`KernelInfo::untouched_output`; only where the pass tests nothing and covers a
+    /// sample: `fused::fullscreen_fuses`). Their pixels get the output, written as the
+    /// fused path writes it ([`Untouched`]), instead of an invocation.
+    pub(super) skip: Option<(&'a BlockMask, [u32; 4])>,
+    pub(super) targets: usize,
 }
 
 impl RasterFront<'_> {
-    /// Returns (fragments generated, early-culled).
+    /// Returns the counts of fragments generated, early-culled and, full screen, of the
+    /// invocations skipped (with their samples, as passed).
     pub(super) fn tile(
         &self,
         tile_index: usize,
         tile: &mut TileMemory,
         list: &mut Vec<FragInput>,
-    ) -> (u64, u64) {
+    ) -> FusedCounts {
+        let mut counts = FusedCounts::default();
         let mut generated = 0u64;
         let mut culled = 0u64;
         let ts = tile.tile_size;
@@ -86,7 +99,16 @@ impl RasterFront<'_> {
                     .map(|c| c.positions())
                     .unwrap_or(&[(0.5, 0.5)]);
                 let per_sample_depth = self.samples > 1 && !*single;
+                // The block last marked (fragments come in runs along rows).
+                let mut marked = (u32::MAX, u32::MAX);
                 binned.raster_tile(tile_index, |f| {
+                    if let Some(mask) = self.marks {
+                        let block = (f.x >> BLOCK_SHIFT, f.y >> BLOCK_SHIFT);
+                        if block != marked {
+                            mask.mark_run(f.y, f.x, f.x + 1);
+                            marked = block;
+                        }
+                    }
                     let f_cov = if *single && f.coverage & 1 != 0 {
                         all
                     } else {
@@ -145,36 +167,67 @@ impl RasterFront<'_> {
                 unreachable!("unbinned geometry runs on the fused path only (Device::draw)")
             }
             Geometry::FullScreen => {
+                let untouched = self.skip.map(|(mask, bits)| {
+                    let untouched = Untouched {
+                        state: self.state,
+                        cov: sample_mask,
+                        bits,
+                        targets: self.targets.min(8),
+                    };
+                    (mask, untouched)
+                });
+                if let Some((mask, untouched)) = untouched {
+                    if untouched.fast_clear(tile, mask, &mut counts) {
+                        return counts;
+                    }
+                }
                 for ly in 0..tile.h {
-                    for lx in 0..tile.w {
-                        // Full-screen invocations are not rasterized fragments: not counted as generated.
-
-                        let mut cov = sample_mask;
-                        if tests {
-                            cov =
-                                tile.depth_stencil(self.state, lx, ly, cov, &[0.5; 8], true, true);
-                            if cov == 0 {
-                                culled += 1;
+                    let mut lx = 0;
+                    while lx < tile.w {
+                        // The pixels up to the next block boundary: skipped together or run.
+                        let end = block_end(tile.x0, lx, tile.w);
+                        if let Some((mask, untouched)) = untouched {
+                            let (bx, by) =
+                                ((tile.x0 + lx) >> BLOCK_SHIFT, (tile.y0 + ly) >> BLOCK_SHIFT);
+                            if !mask.touched(bx, by) {
+                                untouched.skip_run(tile, ly, lx..end, &mut counts);
+                                lx = end;
                                 continue;
                             }
                         }
-                        list.push(FragInput {
-                            seq: 0,
-                            x: tile.x0 + lx,
-                            y: tile.y0 + ly,
-                            tri: u32::MAX,
-                            primitive_id: 0,
-                            instance_id: 0,
-                            coverage: cov,
-                            front_facing: true,
-                            depth: 0.5,
-                            ticket: 0,
-                        });
+                        let run = lx..end;
+                        lx = end;
+                        for lx in run {
+                            // Full-screen invocations are not rasterized fragments: not counted as generated.
+                            let mut cov = sample_mask;
+                            if tests {
+                                cov = tile
+                                    .depth_stencil(self.state, lx, ly, cov, &[0.5; 8], true, true);
+                                if cov == 0 {
+                                    culled += 1;
+                                    continue;
+                                }
+                            }
+                            list.push(FragInput {
+                                seq: 0,
+                                x: tile.x0 + lx,
+                                y: tile.y0 + ly,
+                                tri: u32::MAX,
+                                primitive_id: 0,
+                                instance_id: 0,
+                                coverage: cov,
+                                front_facing: true,
+                                depth: 0.5,
+                                ticket: 0,
+                            });
+                        }
                     }
                 }
             }
         }
-        (generated, culled)
+        counts.generated += generated;
+        counts.early_culled += culled;
+        counts
     }
 }
 

@@ -6,10 +6,12 @@
 //!
 //! The mask is conservative: a block is marked when the rasterizer produced a covered run in
 //! it, before any test or sample mask, so a marked block may hold no shaded fragment, but an
-//! unmarked one surely holds none. A geometry pass that does not mark (the general path:
-//! the scheduled executor, interlock, contention counting) and explicit invocations, which
-//! reach pixels the rasterizer did not, make the mask unknown for the rest of the device's
-//! life, and then no pass skips anything. This module knows no algorithm.
+//! unmarked one surely holds none. Geometry passes mark on every path (the fused path its
+//! covered runs, the general path of the scheduled executor, interlock and contention
+//! counting each rasterized fragment's block), and full-screen passes skip on both. Explicit
+//! invocations, which reach pixels the rasterizer did not, make the mask unknown for the
+//! rest of the device's life, and then no pass skips anything. This module knows no
+//! algorithm.
 //!
 //! [`KernelInfo::untouched_output`]: crate::kernel::KernelInfo::untouched_output
 
@@ -98,8 +100,8 @@ pub enum Coverage {
     /// Geometry passes mark nothing; after one, no full-screen pass skips a pixel.
     #[default]
     Untracked,
-    /// Geometry passes on the fused path mark their blocks, and a declaring full-screen
-    /// pass skips the unmarked ones.
+    /// Geometry passes mark their blocks, and a declaring full-screen pass skips the
+    /// unmarked ones (under every executor).
     Tracked,
 }
 

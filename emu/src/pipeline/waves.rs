@@ -204,12 +204,30 @@ impl Device {
                 return;
             }
         }
-        if !matches!(geo, Geometry::FullScreen) {
-            // The general path's fragments mark no block.
-            if let Some(t) = touched {
-                t.forget();
-            }
-        }
+        // The general path's geometry marks the blocks its rasterizer reaches, as the fused
+        // path does; its full-screen passes skip the unmarked ones under the same terms as
+        // the fused full-screen path's (the kernel's declared output, target 0 at most,
+        // nothing tested, a sample covered), whatever the executor: the invocation such a
+        // pixel would have run accesses nothing another invocation of the pass writes
+        // (`KernelInfo::with_untouched_output`; docs/fuzzing.md), so no schedule of it
+        // shows a hazard the others' schedules do not.
+        let marks = match geo {
+            Geometry::FullScreen => None,
+            _ => marking(),
+        };
+        let skip = match geo {
+            Geometry::FullScreen => info
+                .untouched_output
+                .filter(|_| {
+                    targets <= 1 && crate::exec::fused::fullscreen_fuses(state, env_base.samples)
+                })
+                .and_then(|bits| {
+                    touched
+                        .and_then(|t| t.for_reading(fw, fh))
+                        .map(|m| (m, bits))
+                }),
+            _ => None,
+        };
         let tile_count = fb.tiles().len();
         let mut waves = crate::exec::Waves::default();
         let mut lists: Vec<Vec<FragInput>> = Vec::new();
@@ -226,14 +244,16 @@ impl Device {
                 state,
                 early,
                 samples: env_base.samples,
+                marks: marks.as_deref(),
+                skip: skip.as_ref().map(|(m, bits)| (&**m, *bits)),
+                targets,
             };
             let counts =
                 for_each_tile(tiles, &mut lists, exec.threads, |tile_index, tile, list| {
                     front.tile(first + tile_index, tile, list)
                 });
             for c in &counts {
-                report.stats.fragments_generated += c.0;
-                report.stats.early_culled += c.1;
+                c.add_to(&mut report.stats);
             }
             // 2. Shade the wave with the executor.
             let direct = !per_sample_ordered && !matches!(exec.mode, ExecMode::Scheduled(_));

@@ -3,8 +3,8 @@
 //! lists and counts as the two passes one after the other, under every executor.
 
 use fragrace_emu::{
-    Buf, Coverage, Device, Draw, ExecConfig, Format, Fragment, FragmentKernel, FragmentState,
-    Framebuffer, KernelInfo, PassReport, PassState, SampleCount, TargetState,
+    Buf, Coverage, Device, Draw, ExecConfig, ExecMode, Format, Fragment, FragmentKernel,
+    FragmentState, Framebuffer, KernelInfo, PassReport, PassState, SampleCount, TargetState,
 };
 use glam::Vec3;
 
@@ -248,4 +248,41 @@ fn empty_tiles_hold_the_declared_output_when_read_back_and_when_written_again() 
     assert!((0..W * H)
         .filter(|p| p % W >= 32)
         .all(|p| r.lists[p as usize].is_empty()));
+}
+
+#[test]
+fn the_general_path_marks_the_blocks_its_geometry_reaches_and_its_resolve_skips_the_rest() {
+    // The scheduled executor (and contention counting) run a draw and a full-screen pass on
+    // the general path, not the fused one: its rasterizer marks the blocks the draw reaches,
+    // and the resolve then runs only there, writing its declared output to the other
+    // blocks' pixels as the fused path does: the ordered executor's image, lists and counts.
+    let empty = [7, 8, 9, 10];
+    let truth = run_with(&ExecConfig::ordered(), false, false, empty, None);
+    let (skipped, shaded) = (truth.full.stats.skipped, truth.full.stats.shaded);
+    assert!(skipped > 0 && shaded > 0, "{skipped} skipped, {shaded} run");
+    let mut execs: Vec<ExecConfig> = all_execs()
+        .into_iter()
+        .filter(|e| matches!(e.mode, ExecMode::Scheduled(_)))
+        .collect();
+    execs.push(ExecConfig {
+        contention: true,
+        lockstep: false,
+        ..ExecConfig::parallel(2)
+    });
+    assert!(execs.len() >= 3);
+    for exec in &execs {
+        let r = run_with(exec, false, false, empty, None);
+        let what = format!("{:?}", exec.mode);
+        assert_eq!(r.lists, truth.lists, "{what}");
+        assert_eq!(r.image, truth.image, "{what}");
+        let f = &r.full.stats;
+        assert_eq!((f.skipped, f.shaded), (skipped, shaded), "{what}");
+        assert_eq!(f.samples_passed, truth.full.stats.samples_passed, "{what}");
+        // The declared output at every pixel no fragment reached, skipped or run.
+        for (p, (texel, list)) in r.image.iter().zip(&r.lists).enumerate() {
+            if list.is_empty() {
+                assert_eq!(*texel, empty, "{what}: pixel {p}");
+            }
+        }
+    }
 }

@@ -729,6 +729,7 @@ impl Row<'_> {
 mod worker;
 
 use worker::Worker;
+pub(crate) use worker::{block_end, Untouched};
 
 /// The tiles of an exclusive pass, each handed out once to the worker that takes its
 /// index (`SplitRange`): a tile's lock is never contended, it only moves the `&mut` to

@@ -702,7 +702,7 @@ fn late(
 /// The end (tile-relative, exclusive) of the run of pixels from `lx` to the next block
 /// boundary of the touched mask (or the tile's end).
 #[inline(always)]
-pub(super) fn block_end(x0: u32, lx: u32, w: u32) -> u32 {
+pub(crate) fn block_end(x0: u32, lx: u32, w: u32) -> u32 {
     let x = x0 + lx;
     ((((x >> BLOCK_SHIFT) + 1) << BLOCK_SHIFT) - x0).min(w)
 }
@@ -711,12 +711,12 @@ pub(super) fn block_end(x0: u32, lx: u32, w: u32) -> u32 {
 /// running its kernel there: the kernel's declared output ([`crate::kernel::KernelInfo`]'s
 /// untouched output, target 0) written as the invocations' target writes would.
 #[derive(Clone, Copy)]
-pub(super) struct Untouched<'s> {
-    pub(super) state: &'s crate::state::FragmentState,
+pub(crate) struct Untouched<'s> {
+    pub(crate) state: &'s crate::state::FragmentState,
     /// Every pixel's coverage (the pass's, as its invocations would have had).
-    pub(super) cov: u8,
-    pub(super) bits: [u32; 4],
-    pub(super) targets: usize,
+    pub(crate) cov: u8,
+    pub(crate) bits: [u32; 4],
+    pub(crate) targets: usize,
 }
 
 impl Untouched<'_> {
@@ -727,7 +727,7 @@ impl Untouched<'_> {
     /// read back, counted as [`Self::skip_run`] counts its pixels. What a resolve does at
     /// the empty tiles of a frame (three in four of the bunny's at 2048 x 2048). False,
     /// with nothing done, otherwise.
-    pub(super) fn fast_clear(
+    pub(crate) fn fast_clear(
         &self,
         tile: &mut TileMemory,
         mask: &BlockMask,
@@ -763,7 +763,7 @@ impl Untouched<'_> {
     /// `tile`, counts them as skipped and their samples as passed (as the kernel's
     /// invocations, which would not have discarded, would have been).
     #[inline]
-    pub(super) fn skip_run(
+    pub(crate) fn skip_run(
         &self,
         tile: &mut TileMemory,
         ly: u32,
