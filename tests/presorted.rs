@@ -237,6 +237,64 @@ fn the_papers_scan_is_exact_on_the_torus() {
 }
 
 #[test]
+fn an_interrupted_presort_resumes_from_its_finished_partitions() {
+    use presorted::checkpoint::Checkpoints;
+    let (pos, idx) = torus(12, 6);
+    let mesh = loaded_mesh(&scene_of(&pos, &idx));
+    let config = PresortConfig {
+        partitions: 6,
+        threads: 2,
+        ..Default::default()
+    };
+    let fresh = presorted::presort(&mesh, &config, &Silent).unwrap();
+    let dir = tmp("torus-checkpoints");
+    let _ = std::fs::remove_dir_all(&dir);
+    let store = Checkpoints::new(&dir);
+    let first = presorted::presort_with(&mesh, &config, Some(&store), &Silent).unwrap();
+    assert_eq!(first.segments, fresh.segments);
+    assert!(first.stats.iter().all(|s| !s.resumed));
+    let files = |dir: &Path| -> Vec<PathBuf> {
+        let mut f: Vec<PathBuf> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        f.sort();
+        f
+    };
+    let saved = files(&dir);
+    assert_eq!(saved.len(), 6, "{saved:?}");
+    // An interruption that lost partitions 1 and 4 and damaged 2 (one byte flipped): those
+    // are computed again, the others read, and the lists are the same.
+    std::fs::remove_file(&saved[1]).unwrap();
+    std::fs::remove_file(&saved[4]).unwrap();
+    let mut bytes = std::fs::read(&saved[2]).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x10;
+    std::fs::write(&saved[2], bytes).unwrap();
+    let again = presorted::presort_with(&mesh, &config, Some(&store), &Silent).unwrap();
+    assert_eq!(again.segments, fresh.segments);
+    let resumed: Vec<bool> = again.stats.iter().map(|s| s.resumed).collect();
+    assert_eq!(resumed, [true, false, false, true, false, true]);
+    for k in [0, 3, 5] {
+        let mut s = again.stats[k].clone();
+        s.resumed = false;
+        assert_eq!(
+            s, first.stats[k],
+            "partition {k}'s statistics as they were made"
+        );
+    }
+    assert_eq!(files(&dir), saved);
+    // Another mesh uses none of them.
+    let (pos, idx) = torus(13, 6);
+    let other = loaded_mesh(&scene_of(&pos, &idx));
+    let o = presorted::presort_with(&other, &config, Some(&store), &Silent).unwrap();
+    assert!(o.stats.iter().all(|s| !s.resumed));
+    assert_eq!(files(&dir).len(), 12);
+    store.remove().unwrap();
+    assert!(!dir.exists());
+}
+
+#[test]
 fn every_partition_count_gives_exact_lists() {
     let (pos, idx) = torus(8, 4);
     let scene = scene_of(&pos, &idx);

@@ -19,6 +19,10 @@ pub struct PresortOptions {
     #[arg(long, default_value_t = 6)]
     pub partitions: u32,
     /// Where to write the lists (written to a temporary file and renamed when complete).
+    /// Each partition that finishes is kept in the directory `OUT.partitions` until the
+    /// lists are written: the same command run again after an interruption resumes with
+    /// the partitions kept there (each checked against the mesh, the partition count and
+    /// the method: a checkpoint of anything else is not used).
     #[arg(long, required_unless_present = "estimate_graph")]
     pub out: Option<PathBuf>,
     /// Worker threads (default: all cores): each partition's occlusion graph is built on all
@@ -89,7 +93,9 @@ impl Progress for Bar {
         });
         if due {
             self.bar.suspend(|| {
-                if done == total {
+                if !matches!(phase, "graph" | "scan") {
+                    eprintln!("partition {partition}: {phase} at {now:.1} s");
+                } else if done == total {
                     eprintln!("partition {partition}: {phase} done at {now:.1} s");
                 } else {
                     eprintln!("partition {partition}: {phase} {done} of {total} at {now:.1} s");
@@ -181,11 +187,21 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
             .into())
         }
     };
+    let mut dir = out.clone().into_os_string();
+    dir.push(".partitions");
+    let checkpoints = presorted::checkpoint::Checkpoints::new(dir);
+    if !a.json && checkpoints.dir().exists() {
+        eprintln!(
+            "resuming: partitions finished by an earlier run are read from {}",
+            checkpoints.dir().display()
+        );
+    }
     let t = Instant::now();
-    let lists = presorted::presort(&mesh, &cfg, &bar)?;
+    let lists = presorted::presort_with(&mesh, &cfg, Some(&checkpoints), &bar)?;
     let secs = t.elapsed().as_secs_f64();
     bar.bar.finish_and_clear();
     file::save(&lists, out)?;
+    checkpoints.remove()?;
     let per: Vec<serde_json::Value> = lists
         .stats
         .iter()
@@ -211,6 +227,7 @@ pub fn cmd_presort(a: &PresortOptions) -> Result<(), CliError> {
                 "max_cell_depth": s.cells.max_depth,
                 "graph_s": s.graph_time.as_secs_f64(),
                 "scan_s": s.scan_time.as_secs_f64(),
+                "resumed": s.resumed,
             })
         })
         .collect();

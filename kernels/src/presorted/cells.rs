@@ -27,8 +27,10 @@
 
 use glam::DVec3;
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use super::geom::{Plane, Region};
-use super::graph::Graph;
+use super::graph::{Graph, GraphError, MemoryBudget};
 use super::scc;
 use super::separate::{self, Shape};
 
@@ -89,6 +91,20 @@ pub enum CellError {
     TooDeep { tris: Vec<u32> },
     #[error("more than {MAX_COPIES} instances per instance of the graph ({instances} instances)")]
     TooMany { instances: usize },
+    #[error(
+        "resolving a cyclic component of {instances} instances ({edges} edges among them) \
+         would hold {} with the rest of preprocessing, over the memory limit of {}: use \
+         --threads 1 (one partition at a time), more partitions (smaller regions, fewer \
+         edges), a simpler mesh, or a higher --memory-limit if the machine has the memory",
+        super::graph::gib(*bytes),
+        super::graph::gib(*limit)
+    )]
+    Memory {
+        instances: usize,
+        edges: usize,
+        bytes: u64,
+        limit: u64,
+    },
 }
 
 /// One instance of the result: a graph node and the planes of its cell.
@@ -103,18 +119,63 @@ struct CellEdge {
 }
 
 /// The draw order of `g`'s nodes with the planes of each instance's cell.
+///
+/// Memory: the cells' structures are charged to `budget` while they live, so that a
+/// component too large for the limit stops with [`CellError::Memory`] instead of being
+/// killed. Once the strongly connected components are known, the edges inside the cyclic
+/// ones are kept (8 bytes each) and the graph's own edges are dropped
+/// ([`Graph::drop_edges`]; their bytes, which the graph's builder charged, are returned
+/// in [`Resolved::freed`] for the caller to release): the cells need no other edge. Each
+/// cyclic component then holds a reduced region per edge (about 2 KB each) only while it
+/// is being resolved.
 pub fn resolve(
-    g: &Graph,
+    g: &mut Graph,
+    budget: &MemoryBudget,
     stats: &mut CellStats,
     tick: &dyn Fn(u64, u64),
-) -> Result<Vec<Placed>, CellError> {
+) -> Result<Resolved, CellError> {
     let n = g.nodes.len();
     let comps = scc::components(n, |x| g.out_edges(x).map(|e| e.to as usize));
+    // The edges inside each cyclic component, as indices into it.
+    let mut local = vec![u32::MAX; n];
+    let mut inner: Vec<Vec<(u32, u32)>> = Vec::with_capacity(comps.len());
+    // (Held until the end: an upper bound of what the lists take as they are dropped.)
+    let held = Charge::new(budget);
+    for comp in &comps {
+        if comp.len() == 1 {
+            inner.push(Vec::new());
+            continue;
+        }
+        for (i, &x) in comp.iter().enumerate() {
+            local[x] = i as u32;
+        }
+        let mut edges: Vec<(u32, u32)> = Vec::new();
+        for (i, &x) in comp.iter().enumerate() {
+            edges.extend(
+                g.out_edges(x)
+                    .map(|e| local[e.to as usize])
+                    .filter(|&j| j != u32::MAX)
+                    .map(|j| (i as u32, j)),
+            );
+        }
+        for &x in comp {
+            local[x] = u32::MAX;
+        }
+        edges.shrink_to_fit();
+        held.add(
+            (edges.len() * std::mem::size_of::<(u32, u32)>()) as u64,
+            comp.len(),
+            edges.len(),
+        )?;
+        inner.push(edges);
+    }
+    drop(local);
+    let freed = g.drop_edges();
     let tri: Vec<u32> = g.nodes.iter().map(|x| x.tri).collect();
     let mut out: Vec<Placed> = Vec::with_capacity(n);
     let limit = MAX_COPIES * n.max(1);
     let mut done = 0u64;
-    for comp in comps {
+    for (comp, edges) in comps.into_iter().zip(inner) {
         done += comp.len() as u64;
         if comp.len() == 1 {
             out.push((comp[0], Vec::new()));
@@ -122,37 +183,8 @@ pub fn resolve(
         }
         stats.cyclic_components += 1;
         stats.largest_component = stats.largest_component.max(comp.len() as u64);
-        // The component's edges with their reduced regions (eq. 1).
-        let mut idx = vec![usize::MAX; n];
-        for (i, &x) in comp.iter().enumerate() {
-            idx[x] = i;
-        }
-        let mut edges: Vec<CellEdge> = Vec::new();
-        for (i, &x) in comp.iter().enumerate() {
-            for e in g.out_edges(x) {
-                let j = idx[e.to as usize];
-                if j == usize::MAX {
-                    continue;
-                }
-                let region = g.nodes[x]
-                    .region
-                    .cut(&g.occl(e))
-                    .intersect(&g.nodes[e.to as usize].region);
-                if !region.is_empty() {
-                    edges.push(CellEdge {
-                        from: i,
-                        to: j,
-                        region,
-                    });
-                }
-            }
-        }
-        let regions: Vec<Region> = comp.iter().map(|&x| g.nodes[x].region.clone()).collect();
-        let cell = Cell {
-            nodes: comp.clone(),
-            regions,
-            edges,
-        };
+        let cell = component_cell(g, &comp, &edges, budget)?;
+        drop(edges);
         subdivide(&cell, &tri, &mut Vec::new(), &mut out, stats, limit)?;
         tick(done, n as u64);
     }
@@ -166,21 +198,165 @@ pub fn resolve(
             cycles: stats.visible.iter().map(|v| v.tris.clone()).collect(),
         });
     }
-    Ok(out)
+    Ok(Resolved { placed: out, freed })
+}
+
+/// What [`resolve`] returns: the instances in draw order, and the bytes of the graph's
+/// edges it dropped (charged by the graph's builder, released by its caller).
+pub struct Resolved {
+    pub placed: Vec<Placed>,
+    pub freed: u64,
+}
+
+/// The cell of a whole cyclic component: its instances, and its edges (`edges`, indices
+/// into `comp`) with their reduced regions (eq. 1), computed on the current rayon pool and
+/// charged to `budget` as they are made (the cell's [`Charge`] holds them).
+fn component_cell<'b>(
+    g: &Graph,
+    comp: &[usize],
+    edges: &[(u32, u32)],
+    budget: &'b MemoryBudget,
+) -> Result<Cell<'b>, CellError> {
+    use rayon::prelude::*;
+    let charge = Charge::new(budget);
+    let refused = std::sync::Mutex::new(None);
+    // (Kept edges only: `filter_map` collects each thread's in order, then joins them.)
+    let edges_made: Vec<CellEdge> = edges
+        .par_iter()
+        .filter_map(|&(i, j)| {
+            let (x, y) = (comp[i as usize], comp[j as usize]);
+            let edge = super::graph::Edge {
+                from: x as u32,
+                to: y as u32,
+            };
+            let region = g.nodes[x]
+                .region
+                .cut(&g.occl(&edge))
+                .intersect(&g.nodes[y].region);
+            if region.is_empty() {
+                return None;
+            }
+            let e = CellEdge {
+                from: i as usize,
+                to: j as usize,
+                region,
+            };
+            if let Err(err) = charge.add(e.bytes(), comp.len(), edges.len()) {
+                refused
+                    .lock()
+                    .expect("no panic holds it")
+                    .get_or_insert(err);
+                return None;
+            }
+            Some(e)
+        })
+        .collect();
+    if let Some(err) = refused.into_inner().expect("no panic holds it") {
+        return Err(err);
+    }
+    let edges = edges_made;
+    let regions: Vec<Region> = comp.iter().map(|&x| g.nodes[x].region.clone()).collect();
+    charge.add(
+        Cell::bytes_of(comp.len(), &regions, &[]),
+        comp.len(),
+        edges.len(),
+    )?;
+    Ok(Cell {
+        nodes: comp.to_vec(),
+        regions,
+        edges,
+        charge,
+    })
+}
+
+/// Bytes of the cells' structures charged to a [`MemoryBudget`], given back when dropped.
+struct Charge<'b> {
+    budget: &'b MemoryBudget,
+    bytes: AtomicU64,
+}
+
+impl<'b> Charge<'b> {
+    fn new(budget: &'b MemoryBudget) -> Charge<'b> {
+        Charge {
+            budget,
+            bytes: AtomicU64::new(0),
+        }
+    }
+
+    /// Charges `bytes` more, for a cell of `instances` instances and `edges` edges (named
+    /// in the error).
+    fn add(&self, bytes: u64, instances: usize, edges: usize) -> Result<(), CellError> {
+        match self.budget.charge(bytes) {
+            Ok(()) => {
+                self.bytes.fetch_add(bytes, Ordering::Relaxed);
+                Ok(())
+            }
+            Err(GraphError::Memory { bytes, limit }) => Err(CellError::Memory {
+                instances,
+                edges,
+                bytes,
+                limit,
+            }),
+            Err(GraphError::TooManyEdges) => unreachable!("a charge only fails for memory"),
+        }
+    }
+}
+
+impl Drop for Charge<'_> {
+    fn drop(&mut self) {
+        self.budget.release(*self.bytes.get_mut());
+    }
 }
 
 /// The instances of a cyclic component restricted to one cell of viewpoint space.
-struct Cell {
+struct Cell<'b> {
     /// Graph nodes.
     nodes: Vec<usize>,
     /// Their rendering regions within the cell.
     regions: Vec<Region>,
     edges: Vec<CellEdge>,
+    /// Its bytes, charged while it lives.
+    charge: Charge<'b>,
 }
 
-impl Cell {
+impl CellEdge {
+    /// Bytes the edge holds (with its region's heap).
+    fn bytes(&self) -> u64 {
+        (std::mem::size_of::<CellEdge>() + self.region.footprint()) as u64
+    }
+}
+
+impl<'b> Cell<'b> {
+    /// Bytes of a cell's nodes, their `regions` and `edges`.
+    fn bytes_of(nodes: usize, regions: &[Region], edges: &[CellEdge]) -> u64 {
+        let per_node = std::mem::size_of::<usize>() + std::mem::size_of::<Region>();
+        (nodes * per_node + regions.iter().map(Region::footprint).sum::<usize>()) as u64
+            + edges.iter().map(CellEdge::bytes).sum::<u64>()
+    }
+
+    /// A cell of these parts, its bytes charged to the budget `self` is charged to.
+    fn charged(
+        &self,
+        nodes: Vec<usize>,
+        regions: Vec<Region>,
+        edges: Vec<CellEdge>,
+    ) -> Result<Cell<'b>, CellError> {
+        let charge = Charge::new(self.charge.budget);
+        charge.add(
+            Cell::bytes_of(nodes.len(), &regions, &edges),
+            nodes.len(),
+            edges.len(),
+        )?;
+        Ok(Cell {
+            nodes,
+            regions,
+            edges,
+            charge,
+        })
+    }
+
     /// The part on the positive side of `p`: instances and edges whose regions reach there.
-    fn cut(&self, p: Plane) -> Cell {
+    fn cut(&self, p: Plane) -> Result<Cell<'b>, CellError> {
         let mut keep = vec![usize::MAX; self.nodes.len()];
         let mut nodes = Vec::new();
         let mut regions = Vec::new();
@@ -205,11 +381,7 @@ impl Cell {
                 })
             })
             .collect();
-        Cell {
-            nodes,
-            regions,
-            edges,
-        }
+        self.charged(nodes, regions, edges)
     }
 }
 
@@ -217,7 +389,7 @@ impl Cell {
 /// `planes`), appending its instances in draw order to `out`. `tri` names each graph
 /// node's triangle (for errors).
 fn subdivide(
-    cell: &Cell,
+    cell: &Cell<'_>,
     tri: &[u32],
     planes: &mut Vec<Plane>,
     out: &mut Vec<Placed>,
@@ -278,11 +450,11 @@ fn subdivide(
         stats.cuts += 1;
         stats.prefix_cuts += u64::from(prefix);
         // The component alone, then each side of the plane.
-        let sub = restrict(cell, &comp);
+        let sub = restrict(cell, &comp)?;
         for side in [p, p.flip()] {
             planes.push(side);
             stats.max_depth = stats.max_depth.max(planes.len() as u64);
-            subdivide(&sub.cut(side), tri, planes, out, stats, limit)?;
+            subdivide(&sub.cut(side)?, tri, planes, out, stats, limit)?;
             planes.pop();
         }
     }
@@ -290,16 +462,15 @@ fn subdivide(
 }
 
 /// The cell's instances `comp` (indices into the cell) with the edges among them.
-fn restrict(cell: &Cell, comp: &[usize]) -> Cell {
+fn restrict<'b>(cell: &Cell<'b>, comp: &[usize]) -> Result<Cell<'b>, CellError> {
     let mut keep = vec![usize::MAX; cell.nodes.len()];
     for (k, &i) in comp.iter().enumerate() {
         keep[i] = k;
     }
-    Cell {
-        nodes: comp.iter().map(|&i| cell.nodes[i]).collect(),
-        regions: comp.iter().map(|&i| cell.regions[i].clone()).collect(),
-        edges: cell
-            .edges
+    cell.charged(
+        comp.iter().map(|&i| cell.nodes[i]).collect(),
+        comp.iter().map(|&i| cell.regions[i].clone()).collect(),
+        cell.edges
             .iter()
             .filter(|e| keep[e.from] != usize::MAX && keep[e.to] != usize::MAX)
             .map(|e| CellEdge {
@@ -308,7 +479,7 @@ fn restrict(cell: &Cell, comp: &[usize]) -> Cell {
                 region: e.region.clone(),
             })
             .collect(),
-    }
+    )
 }
 
 /// The edges of a shortest cycle through the component's first instance (breadth-first
@@ -393,13 +564,79 @@ mod tests {
 
     #[test]
     fn an_acyclic_graph_keeps_one_instance_per_node() {
-        let g = super::super::graph::tests::stacked_pair();
+        let mut g = super::super::graph::tests::stacked_pair();
         let mut stats = CellStats::default();
-        let out = resolve(&g, &mut stats, &|_, _| {}).unwrap();
+        let out = resolve(&mut g, &MemoryBudget::new(None), &mut stats, &|_, _| {})
+            .unwrap()
+            .placed;
         // b (occluded) is drawn before a.
         let order: Vec<u32> = out.iter().map(|(x, _)| g.nodes[*x].tri).collect();
         assert_eq!(order, vec![1, 0]);
         assert!(out.iter().all(|(_, p)| p.is_empty()));
         assert_eq!(stats.cuts, 0);
+    }
+
+    #[test]
+    fn the_cells_charge_what_they_hold_and_stop_at_the_budget() {
+        use super::super::partition::{directions, partition_region};
+        use std::f64::consts::TAU;
+        // A torus of 12 x 6 quads (occlusion cycles across the viewpoints of a partition,
+        // none seen whole from one), in the first partition whose graph has a cycle.
+        let at = |i: usize, j: usize| {
+            let (u, v) = (TAU * i as f64 / 12.0, TAU * j as f64 / 6.0);
+            let r = 0.6 + 0.25 * v.cos();
+            DVec3::new(r * u.cos(), r * u.sin(), 0.25 * v.sin()) * 0.8
+        };
+        let tris: std::sync::Arc<[[DVec3; 3]]> = (0..12)
+            .flat_map(|i| {
+                (0..6).flat_map(move |j| {
+                    let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                    [[a, b, c], [a, c, d]]
+                })
+            })
+            .collect();
+        let dirs = directions(6).unwrap();
+        let free = MemoryBudget::new(None);
+        let found = (0..dirs.len()).find_map(|k| {
+            let part = partition_region(&dirs, k);
+            let (g, rows) = Graph::build(tris.clone(), &part, &free, &|_, _| {}).unwrap();
+            let mut stats = CellStats::default();
+            let mut h = g.clone();
+            let r = resolve(&mut h, &free, &mut stats, &|_, _| {}).unwrap();
+            (stats.cyclic_components > 0).then_some((g, rows.charged, r, stats))
+        });
+        let (g, charged, resolved, stats) = found.expect("a partition with a cycle");
+        assert!(stats.cuts > 0 && resolved.placed.len() > g.nodes.len());
+        // Every cell's bytes were given back; what is left charged is the graphs' (this
+        // one's edges are returned as `freed` for the caller).
+        let graphs = free.used();
+        assert!(resolved.freed > 0 && resolved.freed < charged);
+        // A budget the graph fills refuses the cells' first bytes, names the component,
+        // and keeps nothing of the cells charged.
+        let tight = MemoryBudget::new(Some(charged));
+        tight.charge(charged).unwrap();
+        let mut h = g.clone();
+        let mut s = CellStats::default();
+        let e = match resolve(&mut h, &tight, &mut s, &|_, _| {}) {
+            Err(e) => e,
+            Ok(_) => panic!("resolved within the graph's own bytes"),
+        };
+        let CellError::Memory {
+            instances, limit, ..
+        } = e
+        else {
+            panic!("{e}")
+        };
+        assert!(instances >= 2 && limit == charged);
+        assert!(e.to_string().contains("memory limit"), "{e}");
+        assert_eq!(tight.used(), charged);
+        // With room for the cells, the same order as unbounded.
+        let roomy = MemoryBudget::new(Some(charged + (64 << 20)));
+        roomy.charge(charged).unwrap();
+        let mut h = g.clone();
+        let again = resolve(&mut h, &roomy, &mut CellStats::default(), &|_, _| {}).unwrap();
+        assert_eq!(again.placed, resolved.placed);
+        assert_eq!(roomy.used(), charged);
+        assert_eq!(free.used(), graphs);
     }
 }

@@ -49,7 +49,7 @@ pub enum FileError {
     },
 }
 
-fn fnv(bytes: &[u8]) -> u64 {
+pub(super) fn fnv(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for &b in bytes {
         h ^= u64::from(b);
@@ -87,22 +87,28 @@ pub fn encode(p: &Presorted) -> Vec<u8> {
         }
     }
     for s in &p.segments {
-        b.extend_from_slice(&(s.instances.len() as u32).to_le_bytes());
-        for i in &s.instances {
-            b.extend_from_slice(&i.piece.to_le_bytes());
-            let flags = u32::from(i.back) | (u32::from(i.last) << 1);
-            b.extend_from_slice(&flags.to_le_bytes());
-            b.extend_from_slice(&(i.planes.len() as u32).to_le_bytes());
-            for pl in &i.planes {
-                for c in pl {
-                    b.extend_from_slice(&c.to_le_bytes());
-                }
-            }
-        }
+        encode_segment(s, &mut b);
     }
     let sum = fnv(&b);
     b.extend_from_slice(&sum.to_le_bytes());
     b
+}
+
+/// Appends a segment's bytes: its instance count, then per instance its piece, flags
+/// (back, last) and test planes.
+pub(super) fn encode_segment(s: &Segment, b: &mut Vec<u8>) {
+    b.extend_from_slice(&(s.instances.len() as u32).to_le_bytes());
+    for i in &s.instances {
+        b.extend_from_slice(&i.piece.to_le_bytes());
+        let flags = u32::from(i.back) | (u32::from(i.last) << 1);
+        b.extend_from_slice(&flags.to_le_bytes());
+        b.extend_from_slice(&(i.planes.len() as u32).to_le_bytes());
+        for pl in &i.planes {
+            for c in pl {
+                b.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+    }
 }
 
 /// Whether `path` names a gzip file (ends in `.gz`): [`save`] compresses it.
@@ -151,11 +157,6 @@ pub fn save(p: &Presorted, path: &Path) -> Result<(), FileError> {
         path: path.to_path_buf(),
         source,
     };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
     let bytes = if is_gz_name(path) {
         let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
         gz.write_all(&encode(p)).map_err(io)?;
@@ -163,9 +164,24 @@ pub fn save(p: &Presorted, path: &Path) -> Result<(), FileError> {
     } else {
         encode(p)
     };
+    write_atomic(path, &bytes)
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same directory, synced,
+/// then renamed over `path` (an interrupted write leaves at most the temporary file).
+pub(super) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
+    let io = |source| FileError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
     let write = || -> std::io::Result<()> {
         let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(&bytes)?;
+        f.write_all(bytes)?;
         f.sync_all()?;
         std::fs::rename(&tmp, path)
     };
@@ -175,13 +191,20 @@ pub fn save(p: &Presorted, path: &Path) -> Result<(), FileError> {
     })
 }
 
-struct Reader<'a> {
+pub(super) struct Reader<'a> {
     b: &'a [u8],
     at: usize,
     path: &'a Path,
 }
 
-impl Reader<'_> {
+impl<'a> Reader<'a> {
+    pub(super) fn new(b: &'a [u8], at: usize, path: &'a Path) -> Reader<'a> {
+        Reader { b, at, path }
+    }
+    /// Bytes read so far.
+    pub(super) fn at(&self) -> usize {
+        self.at
+    }
     fn take(&mut self, n: usize) -> Result<&[u8], FileError> {
         let end = self.at.checked_add(n).filter(|&e| e <= self.b.len());
         let Some(end) = end else {
@@ -194,12 +217,12 @@ impl Reader<'_> {
         self.at = end;
         Ok(s)
     }
-    fn u32(&mut self) -> Result<u32, FileError> {
+    pub(super) fn u32(&mut self) -> Result<u32, FileError> {
         Ok(u32::from_le_bytes(
             self.take(4)?.try_into().expect("4 bytes"),
         ))
     }
-    fn u64(&mut self) -> Result<u64, FileError> {
+    pub(super) fn u64(&mut self) -> Result<u64, FileError> {
         Ok(u64::from_le_bytes(
             self.take(8)?.try_into().expect("8 bytes"),
         ))
@@ -209,6 +232,34 @@ impl Reader<'_> {
     }
     fn f32(&mut self) -> Result<f32, FileError> {
         Ok(f32::from_bits(self.u32()?))
+    }
+
+    /// A segment ([`encode_segment`]) of pieces below `npieces`.
+    pub(super) fn segment(&mut self, npieces: u32) -> Result<Segment, FileError> {
+        let n = self.u32()? as usize;
+        let mut instances = Vec::with_capacity(n.min(self.b.len() / 12));
+        for _ in 0..n {
+            let piece = self.u32()?;
+            if piece >= npieces {
+                return Err(FileError::Corrupt {
+                    path: self.path.to_path_buf(),
+                    what: format!("piece {piece} of {npieces}"),
+                });
+            }
+            let flags = self.u32()?;
+            let np = self.u32()? as usize;
+            let mut planes = Vec::with_capacity(np.min(64));
+            for _ in 0..np {
+                planes.push([self.f32()?, self.f32()?, self.f32()?, self.f32()?]);
+            }
+            instances.push(Instance {
+                piece,
+                back: flags & 1 != 0,
+                last: flags & 2 != 0,
+                planes,
+            });
+        }
+        Ok(Segment { instances })
     }
 }
 
@@ -274,27 +325,7 @@ pub fn decode(bytes: &[u8], path: &Path) -> Result<Presorted, FileError> {
     }
     let mut segments = Vec::with_capacity(nd);
     for _ in 0..nd {
-        let n = r.u32()? as usize;
-        let mut instances = Vec::with_capacity(n.min(body.len() / 12));
-        for _ in 0..n {
-            let piece = r.u32()?;
-            if piece >= npieces {
-                return Err(corrupt(format!("piece {piece} of {npieces}")));
-            }
-            let flags = r.u32()?;
-            let np = r.u32()? as usize;
-            let mut planes = Vec::with_capacity(np.min(64));
-            for _ in 0..np {
-                planes.push([r.f32()?, r.f32()?, r.f32()?, r.f32()?]);
-            }
-            instances.push(Instance {
-                piece,
-                back: flags & 1 != 0,
-                last: flags & 2 != 0,
-                planes,
-            });
-        }
-        segments.push(Segment { instances });
+        segments.push(r.segment(npieces)?);
     }
     if r.at != body.len() {
         return Err(corrupt(format!("{} trailing bytes", body.len() - r.at)));

@@ -122,6 +122,21 @@ impl Region {
             + self.verts.capacity() * std::mem::size_of::<DVec3>()
     }
 
+    /// Bytes the region takes from the allocator: [`Region::heap_bytes`] and, per heap
+    /// block, the allocator's own bookkeeping (16 bytes, glibc's on 64-bit).
+    pub fn footprint(&self) -> usize {
+        let blocks = [
+            self.planes.capacity(),
+            self.loops.capacity(),
+            self.verts.capacity(),
+        ]
+        .into_iter()
+        .chain(self.loops.iter().map(Vec::capacity))
+        .filter(|&c| c > 0)
+        .count();
+        self.heap_bytes() + 16 * blocks
+    }
+
     /// Whether the region has an interior.
     pub fn is_empty(&self) -> bool {
         self.verts.is_empty()

@@ -141,6 +141,11 @@ impl MemoryBudget {
         }
     }
 
+    /// Bytes charged now.
+    pub fn used(&self) -> u64 {
+        self.used.load(Ordering::Relaxed)
+    }
+
     /// Gives `bytes` back.
     pub fn release(&self, bytes: u64) {
         self.used.fetch_sub(bytes, Ordering::Relaxed);
@@ -664,6 +669,19 @@ impl Graph {
             return Region::default();
         }
         ef.cut(occl).intersect(et)
+    }
+
+    /// Drops every edge (the edges, their alive bits, the out-lists and any index of
+    /// in-edges), keeping the nodes; returns the bytes [`Graph::add_rows`] charged for them.
+    pub fn drop_edges(&mut self) -> u64 {
+        let edges = self.edges.len() as u64;
+        let in_edges = self.inn.is_some();
+        let freed = self.bytes_for(edges, in_edges) - self.bytes_for(0, false);
+        self.edges = Vec::new();
+        self.alive = Bits::default();
+        self.out = vec![Vec::new(); self.nodes.len()];
+        self.inn = None;
+        freed
     }
 
     /// The occlusion region of the triangles of an edge's endpoints (section 4.1.1).

@@ -16,12 +16,13 @@
 //! - [`scc`], [`cells`]: the default in place of the scan: cyclic components resolved by
 //!   subdividing viewpoint space with the same cutting planes;
 //! - [`input`]: what meshes are accepted; [`split`]: intersecting triangles split apart;
-//!   [`file`]: the stored result.
+//!   [`file`]: the stored result; [`checkpoint`]: finished partitions kept for a rerun.
 //!
 //! Run time (section 5): [`runtime`] (`presorted`, `presorted-vs`, `presorted-ssbo`,
 //! `presorted-ssbo-interlock`).
 
 pub mod cells;
+pub mod checkpoint;
 pub mod file;
 pub mod geom;
 pub mod graph;
@@ -120,6 +121,8 @@ pub struct PartitionStats {
     pub cells: cells::CellStats,
     pub graph_time: Duration,
     pub scan_time: Duration,
+    /// Read from a checkpoint of an earlier run ([`checkpoint`]; its times are that run's).
+    pub resumed: bool,
 }
 
 /// A piece of an input triangle: the whole triangle, or a part of one that crossed another
@@ -202,6 +205,8 @@ pub enum PresortError {
         partition: usize,
         error: cells::CellError,
     },
+    #[error("saving a finished partition for a rerun: {0}")]
+    Checkpoint(file::FileError),
     #[error("partition {partition}: {error}")]
     Graph {
         partition: usize,
@@ -283,6 +288,20 @@ pub fn presort(
     cfg: &PresortConfig,
     progress: &dyn Progress,
 ) -> Result<Presorted, PresortError> {
+    presort_with(mesh, cfg, None, progress)
+}
+
+/// [`presort`], each partition that finishes saved to `checkpoints`, and each partition
+/// whose valid checkpoint is there read instead of computed ([`checkpoint`]: an
+/// interrupted run resumes). A checkpoint that is there but not valid is reported to
+/// `progress` (phase `"checkpoint ignored"`) and its partition computed again; a resumed
+/// one is reported as phase `"resumed"`.
+pub fn presort_with(
+    mesh: &Mesh,
+    cfg: &PresortConfig,
+    checkpoints: Option<&checkpoint::Checkpoints>,
+    progress: &dyn Progress,
+) -> Result<Presorted, PresortError> {
     let Prepared {
         dirs,
         frame,
@@ -313,7 +332,28 @@ pub fn presort(
                                 k,
                                 frame: &frame,
                             };
-                            presort_partition(&part, cfg.method, &budget, progress)
+                            let Some(store) = checkpoints else {
+                                return presort_partition(&part, cfg.method, &budget, progress);
+                            };
+                            let key = checkpoint::Checkpoints::key(&checkpoint::KeyInput {
+                                tris: &tris,
+                                partitions: dirs.len(),
+                                partition: k,
+                                method: cfg.method,
+                            });
+                            match store.load(k, key, tris.len() as u32) {
+                                Some(Ok(done)) => {
+                                    progress.update(k, "resumed", 1, 1);
+                                    return Ok(done);
+                                }
+                                Some(Err(_)) => progress.update(k, "checkpoint ignored", 1, 1),
+                                None => {}
+                            }
+                            let done = presort_partition(&part, cfg.method, &budget, progress)?;
+                            store
+                                .save(k, key, &done.0, &done.1)
+                                .map_err(PresortError::Checkpoint)?;
+                            Ok(done)
                         })
                         .collect::<Vec<_>>()
                 })
@@ -576,24 +616,31 @@ fn presort_partition(
         Method::Cells => 0,
         Method::Scan => g.edges.len() as u64 * graph::IN_EDGE_BYTES,
     };
+    // What the graph still holds charged (the cells drop its edges once they have what
+    // they need, and release them at once).
+    let mut charged = rows.charged;
     let result = match budget.charge(in_bytes) {
         Ok(()) => {
-            let r = order_partition(&mut g, part, method, t0, progress);
+            let r = order_partition(&mut g, part, method, t0, budget, &mut charged, progress);
             budget.release(in_bytes);
             r
         }
         Err(e) => Err(graph_error(e)),
     };
-    budget.release(rows.charged);
+    budget.release(charged);
     result
 }
 
 /// A built partition graph resolved (cells or scan) into its segment.
+/// `charged`: the bytes the graph holds charged to `budget`; whatever this releases early
+/// is taken off.
 fn order_partition(
     g: &mut graph::Graph,
     part: &Part,
     method: Method,
     t0: Instant,
+    budget: &graph::MemoryBudget,
+    charged: &mut u64,
     progress: &dyn Progress,
 ) -> Result<(Segment, PartitionStats), PresortError> {
     let (k, dirs, frame) = (part.k, part.dirs, part.frame);
@@ -607,13 +654,18 @@ fn order_partition(
     let placed: Vec<cells::Placed> = match method {
         Method::Cells => {
             let mut cstats = cells::CellStats::default();
-            let placed = cells::resolve(g, &mut cstats, &|d, t| progress.update(k, "scan", d, t))
-                .map_err(|error| PresortError::Cells {
+            let resolved = cells::resolve(g, budget, &mut cstats, &|d, t| {
+                progress.update(k, "scan", d, t)
+            });
+            let resolved = resolved.map_err(|error| PresortError::Cells {
                 partition: k,
                 error,
             })?;
+            let freed = resolved.freed.min(*charged);
+            budget.release(freed);
+            *charged -= freed;
             stats.cells = cstats;
-            placed
+            resolved.placed
         }
         Method::Scan => {
             // A viewpoint of the partition: out along its face normal.

@@ -1,0 +1,230 @@
+//! Partitions saved as they finish, so that an interrupted preprocessing resumes where it
+//! stopped instead of starting over: each partition's graph of a 48K-triangle mesh takes
+//! hours (the occlusion graph is most of the work, and partitions are independent).
+//!
+//! A partition's file holds its segment and its statistics under a key: a hash of
+//! everything its result depends on (this format's version, the method, the partition
+//! count, which partition, and every piece's coordinates in the mesh's normalized frame, so
+//! another mesh, another split of crossing triangles or another round of cutting cycles
+//! gives another key). A file is used only when its name and stored key match, its checksum
+//! passes and it decodes whole; anything else is ignored and the partition computed again:
+//! a checkpoint is never trusted on its name alone. Files are written atomically (temporary
+//! file, sync, rename, as [`super::file::save`]), so an interrupted write leaves none under
+//! a checkpoint's name. Only partitions that succeeded are saved.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use glam::DVec3;
+
+use super::file::{encode_segment, fnv, write_atomic, FileError, Reader};
+use super::{Method, PartitionStats, Segment};
+
+const MAGIC: &[u8; 8] = b"FRPRPART";
+const VERSION: u32 = 1;
+
+/// A directory of finished partitions.
+#[derive(Clone, Debug)]
+pub struct Checkpoints {
+    dir: PathBuf,
+}
+
+/// What a partition's result depends on, hashed ([`Checkpoints::key`]).
+pub struct KeyInput<'a> {
+    /// The pieces in the mesh's normalized frame (what the graphs are built from).
+    pub tris: &'a [[DVec3; 3]],
+    pub partitions: usize,
+    pub partition: usize,
+    pub method: Method,
+}
+
+impl Checkpoints {
+    /// Partitions kept in `dir` (created when the first is saved).
+    pub fn new(dir: impl Into<PathBuf>) -> Checkpoints {
+        Checkpoints { dir: dir.into() }
+    }
+
+    /// The directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The key of one partition's result.
+    pub fn key(k: &KeyInput) -> u64 {
+        let mut b: Vec<u8> = Vec::with_capacity(16 + k.tris.len() * 72);
+        b.extend_from_slice(&VERSION.to_le_bytes());
+        b.push(match k.method {
+            Method::Cells => 0,
+            Method::Scan => 1,
+        });
+        b.extend_from_slice(&(k.partitions as u32).to_le_bytes());
+        b.extend_from_slice(&(k.partition as u32).to_le_bytes());
+        for t in k.tris {
+            for v in t {
+                for c in v.to_array() {
+                    b.extend_from_slice(&c.to_bits().to_le_bytes());
+                }
+            }
+        }
+        fnv(&b)
+    }
+
+    fn path(&self, partition: usize, key: u64) -> PathBuf {
+        self.dir.join(format!("partition-{partition}-{key:016x}"))
+    }
+
+    /// The saved result of `partition` under `key`, if a valid one is there; `Err` only
+    /// names why a file that is there was not used (the caller computes it again).
+    pub fn load(
+        &self,
+        partition: usize,
+        key: u64,
+        npieces: u32,
+    ) -> Option<Result<(Segment, PartitionStats), FileError>> {
+        let path = self.path(partition, key);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return None,
+            Err(source) => return Some(Err(FileError::Io { path, source })),
+        };
+        Some(decode(&bytes, &path, key, npieces))
+    }
+
+    /// Saves `partition`'s result under `key`.
+    pub fn save(
+        &self,
+        partition: usize,
+        key: u64,
+        segment: &Segment,
+        stats: &PartitionStats,
+    ) -> Result<(), FileError> {
+        std::fs::create_dir_all(&self.dir).map_err(|source| FileError::Io {
+            path: self.dir.clone(),
+            source,
+        })?;
+        let mut b: Vec<u8> = Vec::new();
+        b.extend_from_slice(MAGIC);
+        b.extend_from_slice(&VERSION.to_le_bytes());
+        b.extend_from_slice(&key.to_le_bytes());
+        encode_segment(segment, &mut b);
+        for x in stat_words(stats) {
+            b.extend_from_slice(&x.to_le_bytes());
+        }
+        let sum = fnv(&b);
+        b.extend_from_slice(&sum.to_le_bytes());
+        write_atomic(&self.path(partition, key), &b)
+    }
+
+    /// Removes the directory and every checkpoint in it (once the whole result is saved).
+    pub fn remove(&self) -> Result<(), FileError> {
+        match std::fs::remove_dir_all(&self.dir) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(FileError::Io {
+                path: self.dir.clone(),
+                source: e,
+            }),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// Statistics stored with a segment, as words in a fixed order ([`stats_of`] reads them).
+const STAT_WORDS: usize = 18;
+
+fn stat_words(s: &PartitionStats) -> [u64; STAT_WORDS] {
+    let c = &s.cells;
+    let n = &s.scan;
+    [
+        s.initial_nodes as u64,
+        s.edges as u64,
+        s.back_edges as u64,
+        n.moves,
+        n.splits,
+        n.pairwise,
+        n.bf_dups,
+        n.whole_moves,
+        n.lp_calls,
+        n.touching_tests,
+        n.touching_planes,
+        c.cyclic_components,
+        c.largest_component,
+        c.cuts,
+        c.prefix_cuts,
+        c.max_depth,
+        s.graph_time.as_nanos().min(u128::from(u64::MAX)) as u64,
+        s.scan_time.as_nanos().min(u128::from(u64::MAX)) as u64,
+    ]
+}
+
+fn stats_of(w: [u64; STAT_WORDS]) -> PartitionStats {
+    let mut s = PartitionStats {
+        initial_nodes: w[0] as usize,
+        edges: w[1] as usize,
+        back_edges: w[2] as usize,
+        graph_time: Duration::from_nanos(w[16]),
+        scan_time: Duration::from_nanos(w[17]),
+        resumed: true,
+        ..Default::default()
+    };
+    let n = &mut s.scan;
+    [
+        n.moves,
+        n.splits,
+        n.pairwise,
+        n.bf_dups,
+        n.whole_moves,
+        n.lp_calls,
+        n.touching_tests,
+        n.touching_planes,
+    ] = w[3..11].try_into().expect("8 words");
+    let c = &mut s.cells;
+    [
+        c.cyclic_components,
+        c.largest_component,
+        c.cuts,
+        c.prefix_cuts,
+        c.max_depth,
+    ] = w[11..16].try_into().expect("5 words");
+    s
+}
+
+fn decode(
+    bytes: &[u8],
+    path: &Path,
+    key: u64,
+    npieces: u32,
+) -> Result<(Segment, PartitionStats), FileError> {
+    let corrupt = |what: String| FileError::Corrupt {
+        path: path.to_path_buf(),
+        what,
+    };
+    if bytes.len() < 28 || &bytes[..8] != MAGIC {
+        return Err(FileError::Format {
+            path: path.to_path_buf(),
+            version: 0,
+        });
+    }
+    let (body, sum) = bytes.split_at(bytes.len() - 8);
+    if fnv(body) != u64::from_le_bytes(sum.try_into().expect("8 bytes")) {
+        return Err(corrupt("checksum mismatch".into()));
+    }
+    let mut r = Reader::new(body, 8, path);
+    let version = r.u32()?;
+    if version != VERSION {
+        return Err(corrupt(format!(
+            "checkpoint version {version}, expected {VERSION}"
+        )));
+    }
+    let stored = r.u64()?;
+    if stored != key {
+        return Err(corrupt(format!("key {stored:016x}, expected {key:016x}")));
+    }
+    let segment = r.segment(npieces)?;
+    let mut w = [0u64; STAT_WORDS];
+    for x in &mut w {
+        *x = r.u64()?;
+    }
+    if r.at() != body.len() {
+        return Err(corrupt(format!("{} trailing bytes", body.len() - r.at())));
+    }
+    Ok((segment, stats_of(w)))
+}
