@@ -112,7 +112,7 @@ fn a_witness_is_found_only_for_edges_and_for_most_of_them() {
 
 /// `count` triangles of the tests' LCG from `seed`: centres in a cube of half-side 0.5,
 /// vertices within `size` of their centre in each coordinate.
-pub(in crate::presorted) fn random_tris(seed: u64, count: usize, size: f64) -> Arc<[[DVec3; 3]]> {
+fn random_tris(seed: u64, count: usize, size: f64) -> Arc<[[DVec3; 3]]> {
     let mut rnd = super::super::test_lcg_from(seed);
     (0..count)
         .map(|_| {
