@@ -185,7 +185,7 @@ pub fn resolve(
         stats.largest_component = stats.largest_component.max(comp.len() as u64);
         let cell = component_cell(g, &comp, &edges, budget)?;
         drop(edges);
-        subdivide(&cell, &tri, &mut Vec::new(), &mut out, stats, limit)?;
+        subdivide(cell, &tri, &mut Vec::new(), &mut out, stats, limit)?;
         tick(done, n as u64);
     }
     tick(n as u64, n as u64);
@@ -327,6 +327,16 @@ impl CellEdge {
 }
 
 impl<'b> Cell<'b> {
+    /// A cell of nothing, charging nothing.
+    fn empty(budget: &'b MemoryBudget) -> Cell<'b> {
+        Cell {
+            nodes: Vec::new(),
+            regions: Vec::new(),
+            edges: Vec::new(),
+            charge: Charge::new(budget),
+        }
+    }
+
     /// Bytes of a cell's nodes, their `regions` and `edges`.
     fn bytes_of(nodes: usize, regions: &[Region], edges: &[CellEdge]) -> u64 {
         let per_node = std::mem::size_of::<usize>() + std::mem::size_of::<Region>();
@@ -389,7 +399,7 @@ impl<'b> Cell<'b> {
 /// `planes`), appending its instances in draw order to `out`. `tri` names each graph
 /// node's triangle (for errors).
 fn subdivide(
-    cell: &Cell<'_>,
+    mut cell: Cell<'_>,
     tri: &[u32],
     planes: &mut Vec<Plane>,
     out: &mut Vec<Placed>,
@@ -449,16 +459,51 @@ fn subdivide(
         };
         stats.cuts += 1;
         stats.prefix_cuts += u64::from(prefix);
-        // The component alone, then each side of the plane.
-        let sub = restrict(cell, &comp)?;
+        // The component alone (the cell itself when it is the only one: moved, not
+        // copied), then each side of the plane.
+        let sub = if comp.len() == m {
+            let empty = Cell::empty(cell.charge.budget);
+            reorder(std::mem::replace(&mut cell, empty), &comp)
+        } else {
+            restrict(&cell, &comp)?
+        };
         for side in [p, p.flip()] {
             planes.push(side);
             stats.max_depth = stats.max_depth.max(planes.len() as u64);
-            subdivide(&sub.cut(side)?, tri, planes, out, stats, limit)?;
+            subdivide(sub.cut(side)?, tri, planes, out, stats, limit)?;
             planes.pop();
         }
     }
     Ok(())
+}
+
+/// [`restrict`] to every instance of the cell (`comp` orders them all): the same cell,
+/// reordered in place instead of copied (its bytes stay charged as they were).
+fn reorder<'b>(cell: Cell<'b>, comp: &[usize]) -> Cell<'b> {
+    let Cell {
+        nodes,
+        regions,
+        mut edges,
+        charge,
+    } = cell;
+    let mut keep = vec![usize::MAX; nodes.len()];
+    for (k, &i) in comp.iter().enumerate() {
+        keep[i] = k;
+    }
+    let mut regions: Vec<Option<Region>> = regions.into_iter().map(Some).collect();
+    let regions = comp
+        .iter()
+        .map(|&i| regions[i].take().expect("comp names each instance once"))
+        .collect();
+    for e in &mut edges {
+        (e.from, e.to) = (keep[e.from], keep[e.to]);
+    }
+    Cell {
+        nodes: comp.iter().map(|&i| nodes[i]).collect(),
+        regions,
+        edges,
+        charge,
+    }
 }
 
 /// The cell's instances `comp` (indices into the cell) with the edges among them.

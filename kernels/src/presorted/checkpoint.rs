@@ -130,29 +130,39 @@ impl Checkpoints {
 /// Statistics stored with a segment, as words in a fixed order ([`stats_of`] reads them).
 const STAT_WORDS: usize = 18;
 
-fn stat_words(s: &PartitionStats) -> [u64; STAT_WORDS] {
-    let c = &s.cells;
-    let n = &s.scan;
+/// The scan's and the cells' counts, in the order they are stored.
+fn count_words(s: &mut PartitionStats) -> [&mut u64; 13] {
+    let (n, c) = (&mut s.scan, &mut s.cells);
     [
-        s.initial_nodes as u64,
-        s.edges as u64,
-        s.back_edges as u64,
-        n.moves,
-        n.splits,
-        n.pairwise,
-        n.bf_dups,
-        n.whole_moves,
-        n.lp_calls,
-        n.touching_tests,
-        n.touching_planes,
-        c.cyclic_components,
-        c.largest_component,
-        c.cuts,
-        c.prefix_cuts,
-        c.max_depth,
-        s.graph_time.as_nanos().min(u128::from(u64::MAX)) as u64,
-        s.scan_time.as_nanos().min(u128::from(u64::MAX)) as u64,
+        &mut n.moves,
+        &mut n.splits,
+        &mut n.pairwise,
+        &mut n.bf_dups,
+        &mut n.whole_moves,
+        &mut n.lp_calls,
+        &mut n.touching_tests,
+        &mut n.touching_planes,
+        &mut c.cyclic_components,
+        &mut c.largest_component,
+        &mut c.cuts,
+        &mut c.prefix_cuts,
+        &mut c.max_depth,
     ]
+}
+
+fn stat_words(s: &PartitionStats) -> [u64; STAT_WORDS] {
+    let nanos = |d: Duration| d.as_nanos().min(u128::from(u64::MAX)) as u64;
+    let mut w = [0u64; STAT_WORDS];
+    w[0] = s.initial_nodes as u64;
+    w[1] = s.edges as u64;
+    w[2] = s.back_edges as u64;
+    w[3] = nanos(s.graph_time);
+    w[4] = nanos(s.scan_time);
+    let mut copy = s.clone();
+    for (to, from) in w[5..].iter_mut().zip(count_words(&mut copy)) {
+        *to = *from;
+    }
+    w
 }
 
 fn stats_of(w: [u64; STAT_WORDS]) -> PartitionStats {
@@ -160,30 +170,14 @@ fn stats_of(w: [u64; STAT_WORDS]) -> PartitionStats {
         initial_nodes: w[0] as usize,
         edges: w[1] as usize,
         back_edges: w[2] as usize,
-        graph_time: Duration::from_nanos(w[16]),
-        scan_time: Duration::from_nanos(w[17]),
+        graph_time: Duration::from_nanos(w[3]),
+        scan_time: Duration::from_nanos(w[4]),
         resumed: true,
         ..Default::default()
     };
-    let n = &mut s.scan;
-    [
-        n.moves,
-        n.splits,
-        n.pairwise,
-        n.bf_dups,
-        n.whole_moves,
-        n.lp_calls,
-        n.touching_tests,
-        n.touching_planes,
-    ] = w[3..11].try_into().expect("8 words");
-    let c = &mut s.cells;
-    [
-        c.cyclic_components,
-        c.largest_component,
-        c.cuts,
-        c.prefix_cuts,
-        c.max_depth,
-    ] = w[11..16].try_into().expect("5 words");
+    for (to, from) in count_words(&mut s).into_iter().zip(&w[5..]) {
+        *to = *from;
+    }
     s
 }
 
