@@ -127,7 +127,9 @@ impl Checkpoints {
     }
 }
 
-/// Statistics stored with a segment, as words in a fixed order ([`stats_of`] reads them).
+/// Statistics stored with a segment, as words in a fixed order ([`stats_of`] reads them):
+/// the node, edge and back-edge counts, the scan's and the cells' counts
+/// ([`count_words`]), the graph's and the scan's times in nanoseconds.
 const STAT_WORDS: usize = 18;
 
 /// The scan's and the cells' counts, in the order they are stored.
@@ -156,12 +158,12 @@ fn stat_words(s: &PartitionStats) -> [u64; STAT_WORDS] {
     w[0] = s.initial_nodes as u64;
     w[1] = s.edges as u64;
     w[2] = s.back_edges as u64;
-    w[3] = nanos(s.graph_time);
-    w[4] = nanos(s.scan_time);
     let mut copy = s.clone();
-    for (to, from) in w[5..].iter_mut().zip(count_words(&mut copy)) {
+    for (to, from) in w[3..16].iter_mut().zip(count_words(&mut copy)) {
         *to = *from;
     }
+    w[16] = nanos(s.graph_time);
+    w[17] = nanos(s.scan_time);
     w
 }
 
@@ -170,12 +172,12 @@ fn stats_of(w: [u64; STAT_WORDS]) -> PartitionStats {
         initial_nodes: w[0] as usize,
         edges: w[1] as usize,
         back_edges: w[2] as usize,
-        graph_time: Duration::from_nanos(w[3]),
-        scan_time: Duration::from_nanos(w[4]),
+        graph_time: Duration::from_nanos(w[16]),
+        scan_time: Duration::from_nanos(w[17]),
         resumed: true,
         ..Default::default()
     };
-    for (to, from) in count_words(&mut s).into_iter().zip(&w[5..]) {
+    for (to, from) in count_words(&mut s).into_iter().zip(&w[3..16]) {
         *to = *from;
     }
     s
