@@ -68,6 +68,13 @@ struct Bar {
 }
 
 impl Progress for Bar {
+    fn failed(&self, partition: usize, error: &presorted::PresortError) {
+        let now = self.start.elapsed().as_secs_f64();
+        self.bar.suspend(|| {
+            eprintln!("partition {partition}: failed at {now:.1} s: {error}");
+        });
+    }
+
     fn update(&self, partition: usize, phase: &'static str, done: u64, total: u64) {
         let frac = if total == 0 {
             1.0

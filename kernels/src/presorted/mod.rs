@@ -232,6 +232,14 @@ pub enum PresortError {
 /// `"scan"`. Called from the worker threads.
 pub trait Progress: Sync {
     fn update(&self, partition: usize, phase: &'static str, done: u64, total: u64);
+
+    /// Partition `partition` failed with `error` (the other partitions go on, and the
+    /// finished ones are kept when checkpoints are on; [`presort`] returns the first error,
+    /// or starts a round that cuts cycles seen whole, once all have run). Called as it
+    /// happens, so that a long run shows it hours before its end. Nothing by default.
+    fn failed(&self, partition: usize, error: &PresortError) {
+        let _ = (partition, error);
+    }
 }
 
 /// No progress reporting.
@@ -332,8 +340,15 @@ pub fn presort_with(
                                 k,
                                 frame: &frame,
                             };
+                            let run = || {
+                                let r = presort_partition(&part, cfg.method, &budget, progress);
+                                if let Err(e) = &r {
+                                    progress.failed(k, e);
+                                }
+                                r
+                            };
                             let Some(store) = checkpoints else {
-                                return presort_partition(&part, cfg.method, &budget, progress);
+                                return run();
                             };
                             let key = checkpoint::Checkpoints::key(&checkpoint::KeyInput {
                                 tris: &tris,
@@ -349,7 +364,7 @@ pub fn presort_with(
                                 Some(Err(_)) => progress.update(k, "checkpoint ignored", 1, 1),
                                 None => {}
                             }
-                            let done = presort_partition(&part, cfg.method, &budget, progress)?;
+                            let done = run()?;
                             store
                                 .save(k, key, &done.0, &done.1)
                                 .map_err(PresortError::Checkpoint)?;
