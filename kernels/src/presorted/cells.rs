@@ -93,7 +93,8 @@ pub enum CellError {
     TooMany { instances: usize },
     #[error(
         "resolving a cyclic component of {instances} instances ({edges} edges among them) \
-         would hold {} with the rest of preprocessing, over the memory limit of {}: use \
+         needs more than the memory limit of {1} (refused when preprocessing would hold {0}, \
+         its cells' reduced regions only partly made): use \
          --threads 1 (one partition at a time), more partitions (smaller regions, fewer \
          edges), a simpler mesh, or a higher --memory-limit if the machine has the memory",
         super::graph::gib(*bytes),
