@@ -340,35 +340,7 @@ pub fn presort_with(
                                 k,
                                 frame: &frame,
                             };
-                            let run = || {
-                                let r = presort_partition(&part, cfg.method, &budget, progress);
-                                if let Err(e) = &r {
-                                    progress.failed(k, e);
-                                }
-                                r
-                            };
-                            let Some(store) = checkpoints else {
-                                return run();
-                            };
-                            let key = checkpoint::Checkpoints::key(&checkpoint::KeyInput {
-                                tris: &tris,
-                                partitions: dirs.len(),
-                                partition: k,
-                                method: cfg.method,
-                            });
-                            match store.load(k, key, tris.len() as u32) {
-                                Some(Ok(done)) => {
-                                    progress.update(k, "resumed", 1, 1);
-                                    return Ok(done);
-                                }
-                                Some(Err(_)) => progress.update(k, "checkpoint ignored", 1, 1),
-                                None => {}
-                            }
-                            let done = run()?;
-                            store
-                                .save(k, key, &done.0, &done.1)
-                                .map_err(PresortError::Checkpoint)?;
-                            Ok(done)
+                            partition_with(&part, cfg.method, &budget, checkpoints, progress)
                         })
                         .collect::<Vec<_>>()
                 })
@@ -605,6 +577,47 @@ struct Part<'a> {
     dirs: &'a [DVec3],
     k: usize,
     frame: &'a Frame3,
+}
+
+/// One partition read from its checkpoint when a valid one is there, else computed
+/// (its failure reported to `progress` as it happens) and, when it succeeds, saved.
+fn partition_with(
+    part: &Part,
+    method: Method,
+    budget: &graph::MemoryBudget,
+    checkpoints: Option<&checkpoint::Checkpoints>,
+    progress: &dyn Progress,
+) -> Result<(Segment, PartitionStats), PresortError> {
+    let k = part.k;
+    let run = || {
+        let r = presort_partition(part, method, budget, progress);
+        if let Err(e) = &r {
+            progress.failed(k, e);
+        }
+        r
+    };
+    let Some(store) = checkpoints else {
+        return run();
+    };
+    let key = checkpoint::Checkpoints::key(&checkpoint::KeyInput {
+        tris: part.tris,
+        partitions: part.dirs.len(),
+        partition: k,
+        method,
+    });
+    match store.load(k, key, part.tris.len() as u32) {
+        Some(Ok(done)) => {
+            progress.update(k, "resumed", 1, 1);
+            return Ok(done);
+        }
+        Some(Err(_)) => progress.update(k, "checkpoint ignored", 1, 1),
+        None => {}
+    }
+    let done = run()?;
+    store
+        .save(k, key, &done.0, &done.1)
+        .map_err(PresortError::Checkpoint)?;
+    Ok(done)
 }
 
 /// One partition: graph (its bytes charged to `budget` until the segment is made),
