@@ -29,7 +29,7 @@ use glam::DVec3;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use super::geom::{Plane, Region};
+use super::geom::{Plane, Region, EPS, MIN_WIDTH};
 use super::graph::{Graph, GraphError, MemoryBudget};
 use super::scc;
 use super::separate::{self, Shape};
@@ -94,7 +94,7 @@ pub enum CellError {
     #[error(
         "resolving a cyclic component of {instances} instances ({edges} edges among them) \
          needs more than the memory limit of {1} (refused when preprocessing would hold {0}, \
-         its cells' reduced regions only partly made): use \
+         the component's cells not all made): use \
          --threads 1 (one partition at a time), more partitions (smaller regions, fewer \
          edges), a simpler mesh, or a higher --memory-limit if the machine has the memory",
         super::graph::gib(*bytes),
@@ -111,30 +111,156 @@ pub enum CellError {
 /// One instance of the result: a graph node and the planes of its cell.
 pub type Placed = (usize, Vec<Plane>);
 
-/// An edge of a cell: endpoints (indices into the cell's nodes) and its reduced occlusion
-/// region within the cell.
+/// An edge of a cell: endpoints (indices into the cell's nodes) and the bounding box of its
+/// reduced occlusion region within the cell (eq. 1), rounded outward to `f32`: 32 bytes. The
+/// region itself is not kept (a cyclic component of the 48K dragon has 14.7 M edges, and a
+/// region takes about 2 KB): [`edge_region`] recomputes it where it is needed, for the
+/// cycle being cut and the edges a cutting plane may cross, and the box decides the rest
+/// ([`Cell::cut`]).
+#[derive(Clone, Copy)]
 struct CellEdge {
-    from: usize,
-    to: usize,
-    region: Region,
+    from: u32,
+    to: u32,
+    lo: [f32; 3],
+    hi: [f32; 3],
 }
 
-/// The draw order of `g`'s nodes with the planes of each instance's cell.
+impl CellEdge {
+    /// The edge `from -> to` with the box of `region`'s vertices.
+    fn new(from: usize, to: usize, region: &Region) -> CellEdge {
+        let (lo, hi) = region
+            .verts
+            .iter()
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(*v), hi.max(*v))
+            });
+        // Rounded outward, so that the box still holds every vertex.
+        let down = |x: f64| {
+            let y = x as f32;
+            if f64::from(y) > x {
+                y.next_down()
+            } else {
+                y
+            }
+        };
+        let up = |x: f64| {
+            let y = x as f32;
+            if f64::from(y) < x {
+                y.next_up()
+            } else {
+                y
+            }
+        };
+        let id = |x: usize| u32::try_from(x).expect("a cell's nodes are graph nodes (u32 ids)");
+        CellEdge {
+            from: id(from),
+            to: id(to),
+            lo: lo.to_array().map(down),
+            hi: hi.to_array().map(up),
+        }
+    }
+
+    fn ends(&self) -> (usize, usize) {
+        (self.from as usize, self.to as usize)
+    }
+
+    /// The smallest and largest value of `p` over the box (rounding aside: [`BOX_SLACK`]).
+    fn range(&self, p: &Plane) -> (f64, f64) {
+        let (mut a, mut b) = (p.d, p.d);
+        for c in 0..3 {
+            let x = p.n[c] * f64::from(self.lo[c]);
+            let y = p.n[c] * f64::from(self.hi[c]);
+            a += x.min(y);
+            b += x.max(y);
+        }
+        (a, b)
+    }
+}
+
+/// Absolute error allowed for a plane evaluated at a box's corner instead of at the
+/// region's vertices (coordinates in the viewpoint box are below 100, so rounding is about
+/// 1e-14): [`Cell::cut`] decides from the box only beyond it.
+const BOX_SLACK: f64 = 1e-12;
+
+/// The reduced occlusion region of graph nodes `x -> y` (eq. 1) within the cell cut by
+/// `path`: computed as the cells have always computed it, the region of the whole
+/// partition cut by each plane in turn, so that the same plane is found for every cycle as
+/// when regions were kept.
+fn edge_region(g: &Graph, x: usize, y: usize, path: &[Plane]) -> Region {
+    let edge = super::graph::Edge {
+        from: x as u32,
+        to: y as u32,
+    };
+    let mut r = g.nodes[x]
+        .region
+        .cut(&g.occl(&edge))
+        .intersect(&g.nodes[y].region);
+    for p in path {
+        if r.is_empty() {
+            break;
+        }
+        r = r.cut(std::slice::from_ref(p));
+    }
+    r
+}
+
+/// The draw order of `g`'s nodes with the planes of each instance's cell:
+/// [`components`], then [`resolve_components`].
 ///
 /// Memory: the cells' structures are charged to `budget` while they live, so that a
 /// component too large for the limit stops with [`CellError::Memory`] instead of being
 /// killed. Once the strongly connected components are known, the edges inside the cyclic
 /// ones are kept (8 bytes each) and the graph's own edges are dropped
 /// ([`Graph::drop_edges`]; their bytes, which the graph's builder charged, are returned
-/// in [`Resolved::freed`] for the caller to release): the cells need no other edge. Each
-/// cyclic component then holds a reduced region per edge (about 2 KB each) only while it
-/// is being resolved.
+/// in [`Resolved::freed`] for the caller to release): the cells need no other edge.
 pub fn resolve(
     g: &mut Graph,
     budget: &MemoryBudget,
     stats: &mut CellStats,
     tick: &dyn Fn(u64, u64),
 ) -> Result<Resolved, CellError> {
+    let (parts, freed) = components(g, budget)?;
+    let placed = resolve_components(g, parts, stats, tick)?;
+    Ok(Resolved { placed, freed })
+}
+
+/// The strongly connected components of a partition's graph, in the draw order of the
+/// condensation, with the edges inside each: all the cells need of the graph's edges
+/// (a checkpoint can hold them, [`super::checkpoint`]). Their bytes stay charged while
+/// they live.
+pub struct Components<'b> {
+    /// Graph nodes of each component.
+    pub comps: Vec<Vec<usize>>,
+    /// The edges inside each component, as indices into it (none for one instance).
+    pub inner: Vec<Vec<(u32, u32)>>,
+    held: Charge<'b>,
+}
+
+impl<'b> Components<'b> {
+    /// Components read back (from a checkpoint), their edges' bytes charged to `budget`.
+    pub fn charged(
+        comps: Vec<Vec<usize>>,
+        inner: Vec<Vec<(u32, u32)>>,
+        budget: &'b MemoryBudget,
+    ) -> Result<Components<'b>, CellError> {
+        let held = Charge::new(budget);
+        for (comp, edges) in comps.iter().zip(&inner) {
+            held.add(Components::bytes(edges), comp.len(), edges.len())?;
+        }
+        Ok(Components { comps, inner, held })
+    }
+
+    fn bytes(edges: &[(u32, u32)]) -> u64 {
+        std::mem::size_of_val(edges) as u64
+    }
+}
+
+/// The strongly connected components of `g` ([`Components`]); then `g`'s edges are
+/// dropped, their bytes returned for the caller to release.
+pub fn components<'b>(
+    g: &mut Graph,
+    budget: &'b MemoryBudget,
+) -> Result<(Components<'b>, u64), CellError> {
     let n = g.nodes.len();
     let comps = scc::components(n, |x| g.out_edges(x).map(|e| e.to as usize));
     // The edges inside each cyclic component, as indices into it.
@@ -163,15 +289,26 @@ pub fn resolve(
             local[x] = u32::MAX;
         }
         edges.shrink_to_fit();
-        held.add(
-            (edges.len() * std::mem::size_of::<(u32, u32)>()) as u64,
-            comp.len(),
-            edges.len(),
-        )?;
+        held.add(Components::bytes(&edges), comp.len(), edges.len())?;
         inner.push(edges);
     }
     drop(local);
     let freed = g.drop_edges();
+    Ok((Components { comps, inner, held }, freed))
+}
+
+/// The draw order of the nodes of `parts` (every node of `g`) with the planes of each
+/// instance's cell: each cyclic component subdivided ([`subdivide`]), its cells charged
+/// to the budget `parts` is charged to. `g` needs its nodes only.
+pub fn resolve_components(
+    g: &Graph,
+    parts: Components<'_>,
+    stats: &mut CellStats,
+    tick: &dyn Fn(u64, u64),
+) -> Result<Vec<Placed>, CellError> {
+    let n = g.nodes.len();
+    let Components { comps, inner, held } = parts;
+    let budget = held.budget;
     let tri: Vec<u32> = g.nodes.iter().map(|x| x.tri).collect();
     let mut out: Vec<Placed> = Vec::with_capacity(n);
     let limit = MAX_COPIES * n.max(1);
@@ -186,9 +323,10 @@ pub fn resolve(
         stats.largest_component = stats.largest_component.max(comp.len() as u64);
         let cell = component_cell(g, &comp, &edges, budget)?;
         drop(edges);
-        subdivide(cell, &tri, &mut Vec::new(), &mut out, stats, limit)?;
+        subdivide(g, cell, &tri, &mut Vec::new(), &mut out, stats, limit)?;
         tick(done, n as u64);
     }
+    drop(held);
     tick(n as u64, n as u64);
     if let Some(first) = stats.visible.first() {
         return Err(CellError::Visible {
@@ -199,7 +337,7 @@ pub fn resolve(
             cycles: stats.visible.iter().map(|v| v.tris.clone()).collect(),
         });
     }
-    Ok(Resolved { placed: out, freed })
+    Ok(out)
 }
 
 /// What [`resolve`] returns: the instances in draw order, and the bytes of the graph's
@@ -210,8 +348,9 @@ pub struct Resolved {
 }
 
 /// The cell of a whole cyclic component: its instances, and its edges (`edges`, indices
-/// into `comp`) with their reduced regions (eq. 1), computed on the current rayon pool and
-/// charged to `budget` as they are made (the cell's [`Charge`] holds them).
+/// into `comp`) whose reduced regions (eq. 1) have an interior, with their bounding boxes,
+/// computed on the current rayon pool. Its bytes are charged to `budget` (at most every
+/// edge kept) before the regions are computed.
 fn component_cell<'b>(
     g: &Graph,
     comp: &[usize],
@@ -219,53 +358,26 @@ fn component_cell<'b>(
     budget: &'b MemoryBudget,
 ) -> Result<Cell<'b>, CellError> {
     use rayon::prelude::*;
-    let charge = Charge::new(budget);
-    let refused = std::sync::Mutex::new(None);
-    // (Kept edges only: `filter_map` collects each thread's in order, then joins them.)
-    let edges_made: Vec<CellEdge> = edges
-        .par_iter()
-        .filter_map(|&(i, j)| {
-            let (x, y) = (comp[i as usize], comp[j as usize]);
-            let edge = super::graph::Edge {
-                from: x as u32,
-                to: y as u32,
-            };
-            let region = g.nodes[x]
-                .region
-                .cut(&g.occl(&edge))
-                .intersect(&g.nodes[y].region);
-            if region.is_empty() {
-                return None;
-            }
-            let e = CellEdge {
-                from: i as usize,
-                to: j as usize,
-                region,
-            };
-            if let Err(err) = charge.add(e.bytes(), comp.len(), edges.len()) {
-                refused
-                    .lock()
-                    .expect("no panic holds it")
-                    .get_or_insert(err);
-                return None;
-            }
-            Some(e)
-        })
-        .collect();
-    if let Some(err) = refused.into_inner().expect("no panic holds it") {
-        return Err(err);
-    }
-    let edges = edges_made;
     let regions: Vec<Region> = comp.iter().map(|&x| g.nodes[x].region.clone()).collect();
+    let charge = Charge::new(budget);
     charge.add(
-        Cell::bytes_of(comp.len(), &regions, &[]),
+        Cell::bytes_of(comp.len(), &regions, edges.len()),
         comp.len(),
         edges.len(),
     )?;
+    // (`filter_map` collects each thread's edges in order, then joins them.)
+    let kept: Vec<CellEdge> = edges
+        .par_iter()
+        .filter_map(|&(i, j)| {
+            let (i, j) = (i as usize, j as usize);
+            let region = edge_region(g, comp[i], comp[j], &[]);
+            (!region.is_empty()).then(|| CellEdge::new(i, j, &region))
+        })
+        .collect();
     Ok(Cell {
         nodes: comp.to_vec(),
         regions,
-        edges,
+        edges: kept,
         charge,
     })
 }
@@ -320,13 +432,6 @@ struct Cell<'b> {
     charge: Charge<'b>,
 }
 
-impl CellEdge {
-    /// Bytes the edge holds (with its region's heap).
-    fn bytes(&self) -> u64 {
-        (std::mem::size_of::<CellEdge>() + self.region.footprint()) as u64
-    }
-}
-
 impl<'b> Cell<'b> {
     /// A cell of nothing, charging nothing.
     fn empty(budget: &'b MemoryBudget) -> Cell<'b> {
@@ -338,11 +443,12 @@ impl<'b> Cell<'b> {
         }
     }
 
-    /// Bytes of a cell's nodes, their `regions` and `edges`.
-    fn bytes_of(nodes: usize, regions: &[Region], edges: &[CellEdge]) -> u64 {
+    /// Bytes of a cell's nodes, their `regions` and `edges` edges.
+    fn bytes_of(nodes: usize, regions: &[Region], edges: usize) -> u64 {
         let per_node = std::mem::size_of::<usize>() + std::mem::size_of::<Region>();
-        (nodes * per_node + regions.iter().map(Region::footprint).sum::<usize>()) as u64
-            + edges.iter().map(CellEdge::bytes).sum::<u64>()
+        (nodes * per_node
+            + regions.iter().map(Region::footprint).sum::<usize>()
+            + edges * std::mem::size_of::<CellEdge>()) as u64
     }
 
     /// A cell of these parts, its bytes charged to the budget `self` is charged to.
@@ -354,7 +460,7 @@ impl<'b> Cell<'b> {
     ) -> Result<Cell<'b>, CellError> {
         let charge = Charge::new(self.charge.budget);
         charge.add(
-            Cell::bytes_of(nodes.len(), &regions, &edges),
+            Cell::bytes_of(nodes.len(), &regions, edges.len()),
             nodes.len(),
             edges.len(),
         )?;
@@ -366,8 +472,13 @@ impl<'b> Cell<'b> {
         })
     }
 
-    /// The part on the positive side of `p`: instances and edges whose regions reach there.
-    fn cut(&self, p: Plane) -> Result<Cell<'b>, CellError> {
+    /// The part on the positive side of `p`, the last plane of `path` (the planes of the
+    /// cell made): instances and edges whose regions reach there. An edge whose box lies on
+    /// one side of `p` is kept as it is or dropped, as cutting its region would; the
+    /// others' regions are computed ([`edge_region`], on the current rayon pool).
+    fn cut(&self, g: &Graph, path: &[Plane]) -> Result<Cell<'b>, CellError> {
+        use rayon::prelude::*;
+        let p = *path.last().expect("a cut has a plane");
         let mut keep = vec![usize::MAX; self.nodes.len()];
         let mut nodes = Vec::new();
         let mut regions = Vec::new();
@@ -381,15 +492,27 @@ impl<'b> Cell<'b> {
         }
         let edges = self
             .edges
-            .iter()
-            .filter(|e| keep[e.from] != usize::MAX && keep[e.to] != usize::MAX)
+            .par_iter()
             .filter_map(|e| {
-                let region = e.region.cut(&[p]);
-                (!region.is_empty()).then(|| CellEdge {
-                    from: keep[e.from],
-                    to: keep[e.to],
-                    region,
-                })
+                let (i, j) = e.ends();
+                if keep[i] == usize::MAX || keep[j] == usize::MAX {
+                    return None;
+                }
+                let (lo, hi) = e.range(&p);
+                // As `Region::cut` decides from the vertices: all inside, nothing changes;
+                // all outside (beyond a sliver), nothing is left.
+                if lo >= -EPS + BOX_SLACK {
+                    return Some(CellEdge {
+                        from: keep[i] as u32,
+                        to: keep[j] as u32,
+                        ..*e
+                    });
+                }
+                if hi < MIN_WIDTH - BOX_SLACK {
+                    return None;
+                }
+                let region = edge_region(g, self.nodes[i], self.nodes[j], path);
+                (!region.is_empty()).then(|| CellEdge::new(keep[i], keep[j], &region))
             })
             .collect();
         self.charged(nodes, regions, edges)
@@ -400,6 +523,7 @@ impl<'b> Cell<'b> {
 /// `planes`), appending its instances in draw order to `out`. `tri` names each graph
 /// node's triangle (for errors).
 fn subdivide(
+    g: &Graph,
     mut cell: Cell<'_>,
     tri: &[u32],
     planes: &mut Vec<Plane>,
@@ -411,8 +535,9 @@ fn subdivide(
     let mut adj: Vec<Vec<usize>> = vec![Vec::new(); m];
     let mut eout: Vec<Vec<usize>> = vec![Vec::new(); m];
     for (k, e) in cell.edges.iter().enumerate() {
-        adj[e.from].push(e.to);
-        eout[e.from].push(k);
+        let (i, j) = e.ends();
+        adj[i].push(j);
+        eout[i].push(k);
     }
     for comp in scc::components(m, |v| adj[v].iter().copied()) {
         if comp.len() == 1 {
@@ -434,11 +559,18 @@ fn subdivide(
             return Err(CellError::TooDeep { tris: names() });
         }
         let cycle = shortest_cycle(&comp, &cell.edges, &eout);
-        let regions: Vec<&Region> = cycle.iter().map(|&k| &cell.edges[k].region).collect();
+        let regions: Vec<Region> = cycle
+            .iter()
+            .map(|&k| {
+                let (i, j) = cell.edges[k].ends();
+                edge_region(g, cell.nodes[i], cell.nodes[j], planes)
+            })
+            .collect();
+        let regions: Vec<&Region> = regions.iter().collect();
         let Some((p, prefix)) = cutting_plane(&regions) else {
             let t: Vec<u32> = cycle
                 .iter()
-                .map(|&k| tri[cell.nodes[cell.edges[k].from]])
+                .map(|&k| tri[cell.nodes[cell.edges[k].ends().0]])
                 .collect();
             let common = regions
                 .iter()
@@ -471,7 +603,7 @@ fn subdivide(
         for side in [p, p.flip()] {
             planes.push(side);
             stats.max_depth = stats.max_depth.max(planes.len() as u64);
-            subdivide(sub.cut(side)?, tri, planes, out, stats, limit)?;
+            subdivide(g, sub.cut(g, planes)?, tri, planes, out, stats, limit)?;
             planes.pop();
         }
     }
@@ -497,7 +629,8 @@ fn reorder<'b>(cell: Cell<'b>, comp: &[usize]) -> Cell<'b> {
         .map(|&i| regions[i].take().expect("comp names each instance once"))
         .collect();
     for e in &mut edges {
-        (e.from, e.to) = (keep[e.from], keep[e.to]);
+        let (i, j) = e.ends();
+        (e.from, e.to) = (keep[i] as u32, keep[j] as u32);
     }
     Cell {
         nodes: comp.iter().map(|&i| nodes[i]).collect(),
@@ -518,11 +651,11 @@ fn restrict<'b>(cell: &Cell<'b>, comp: &[usize]) -> Result<Cell<'b>, CellError> 
         comp.iter().map(|&i| cell.regions[i].clone()).collect(),
         cell.edges
             .iter()
-            .filter(|e| keep[e.from] != usize::MAX && keep[e.to] != usize::MAX)
+            .filter(|e| keep[e.ends().0] != usize::MAX && keep[e.ends().1] != usize::MAX)
             .map(|e| CellEdge {
-                from: keep[e.from],
-                to: keep[e.to],
-                region: e.region.clone(),
+                from: keep[e.ends().0] as u32,
+                to: keep[e.ends().1] as u32,
+                ..*e
             })
             .collect(),
     )
@@ -543,7 +676,7 @@ fn shortest_cycle(comp: &[usize], edges: &[CellEdge], eout: &[Vec<usize>]) -> Ve
     seen[start] = true;
     while let Some(v) = queue.pop_front() {
         for &k in &eout[v] {
-            let w = edges[k].to;
+            let w = edges[k].ends().1;
             if !member[w] {
                 continue;
             }
@@ -553,7 +686,7 @@ fn shortest_cycle(comp: &[usize], edges: &[CellEdge], eout: &[Vec<usize>]) -> Ve
                 while u != start {
                     let e = via[u];
                     cycle.push(e);
-                    u = edges[e].from;
+                    u = edges[e].ends().0;
                 }
                 cycle.reverse();
                 return cycle;

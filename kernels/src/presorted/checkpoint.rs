@@ -11,6 +11,11 @@
 //! a checkpoint is never trusted on its name alone. Files are written atomically (temporary
 //! file, sync, rename, as [`super::file::save`]), so an interrupted write leaves none under
 //! a checkpoint's name. Only partitions that succeeded are saved.
+//!
+//! A partition resolved by cells ([`super::Method::Cells`]) also keeps its occlusion
+//! graph's strongly connected components, with the edges inside each
+//! ([`super::cells::Components`]), as soon as they are known: the graph is the hours of
+//! the work, so a partition whose cells fail (for memory, say) is resumed at its cells.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -20,7 +25,24 @@ use glam::DVec3;
 use super::file::{encode_segment, fnv, write_atomic, FileError, Reader};
 use super::{Method, PartitionStats, Segment};
 
+/// What a components checkpoint keeps of a partition's graph besides its components:
+/// what the partition's statistics need.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GraphFacts {
+    /// The graph's nodes and edges.
+    pub nodes: usize,
+    pub edges: usize,
+    /// The time the graph took.
+    pub graph_time: Duration,
+}
+
+/// A partition's graph as a components checkpoint keeps it: the graph nodes of each
+/// strongly connected component (in the draw order of the condensation) and the edges
+/// inside each, as indices into it ([`super::cells::Components`]).
+pub type SavedComponents = (GraphFacts, Vec<Vec<usize>>, Vec<Vec<(u32, u32)>>);
+
 const MAGIC: &[u8; 8] = b"FRPRPART";
+const COMPONENTS_MAGIC: &[u8; 8] = b"FRPRCOMP";
 const VERSION: u32 = 1;
 
 /// A directory of finished partitions.
@@ -73,6 +95,87 @@ impl Checkpoints {
         self.dir.join(format!("partition-{partition}-{key:016x}"))
     }
 
+    fn components_path(&self, partition: usize, key: u64) -> PathBuf {
+        self.dir.join(format!("components-{partition}-{key:016x}"))
+    }
+
+    /// The file at `path`, `None` when there is none.
+    fn read(path: &Path) -> Option<Result<Vec<u8>, FileError>> {
+        match std::fs::read(path) {
+            Ok(b) => Some(Ok(b)),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+            Err(source) => Some(Err(FileError::Io {
+                path: path.to_path_buf(),
+                source,
+            })),
+        }
+    }
+
+    /// `body` under a header (magic, version, key) and followed by its checksum, written
+    /// atomically to `path` (the directory made first).
+    fn write(&self, path: &Path, magic: &[u8; 8], key: u64, body: &[u8]) -> Result<(), FileError> {
+        std::fs::create_dir_all(&self.dir).map_err(|source| FileError::Io {
+            path: self.dir.clone(),
+            source,
+        })?;
+        let mut b: Vec<u8> = Vec::with_capacity(body.len() + 28);
+        b.extend_from_slice(magic);
+        b.extend_from_slice(&VERSION.to_le_bytes());
+        b.extend_from_slice(&key.to_le_bytes());
+        b.extend_from_slice(body);
+        let sum = fnv(&b);
+        b.extend_from_slice(&sum.to_le_bytes());
+        write_atomic(path, &b)
+    }
+
+    /// The saved components of `partition`'s graph under `key`, if a valid file is there
+    /// for a graph of `nodes` nodes; `Err` only names why a file that is there was not used.
+    pub fn load_components(
+        &self,
+        partition: usize,
+        key: u64,
+        nodes: usize,
+    ) -> Option<Result<SavedComponents, FileError>> {
+        let path = self.components_path(partition, key);
+        let bytes = match Checkpoints::read(&path)? {
+            Ok(b) => b,
+            Err(e) => return Some(Err(e)),
+        };
+        Some(decode_components(&bytes, &path, key, nodes))
+    }
+
+    /// Saves the components of `partition`'s graph under `key` (`comps` and `inner` as
+    /// [`SavedComponents`] holds them).
+    pub fn save_components(
+        &self,
+        partition: usize,
+        key: u64,
+        facts: &GraphFacts,
+        comps: &[Vec<usize>],
+        inner: &[Vec<(u32, u32)>],
+    ) -> Result<(), FileError> {
+        let edges: usize = inner.iter().map(Vec::len).sum();
+        let mut b: Vec<u8> = Vec::with_capacity(28 + 4 * (facts.nodes + comps.len()) + 8 * edges);
+        let nanos = facts.graph_time.as_nanos().min(u128::from(u64::MAX)) as u64;
+        for w in [facts.nodes as u64, facts.edges as u64, nanos] {
+            b.extend_from_slice(&w.to_le_bytes());
+        }
+        b.extend_from_slice(&(comps.len() as u32).to_le_bytes());
+        for (comp, inner) in comps.iter().zip(inner) {
+            b.extend_from_slice(&(comp.len() as u32).to_le_bytes());
+            for &x in comp {
+                b.extend_from_slice(&(x as u32).to_le_bytes());
+            }
+            b.extend_from_slice(&(inner.len() as u32).to_le_bytes());
+            for &(i, j) in inner {
+                b.extend_from_slice(&i.to_le_bytes());
+                b.extend_from_slice(&j.to_le_bytes());
+            }
+        }
+        let path = self.components_path(partition, key);
+        self.write(&path, COMPONENTS_MAGIC, key, &b)
+    }
+
     /// The saved result of `partition` under `key`, if a valid one is there; `Err` only
     /// names why a file that is there was not used (the caller computes it again).
     pub fn load(
@@ -82,10 +185,9 @@ impl Checkpoints {
         npieces: u32,
     ) -> Option<Result<(Segment, PartitionStats), FileError>> {
         let path = self.path(partition, key);
-        let bytes = match std::fs::read(&path) {
+        let bytes = match Checkpoints::read(&path)? {
             Ok(b) => b,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return None,
-            Err(source) => return Some(Err(FileError::Io { path, source })),
+            Err(e) => return Some(Err(e)),
         };
         Some(decode(&bytes, &path, key, npieces))
     }
@@ -98,21 +200,12 @@ impl Checkpoints {
         segment: &Segment,
         stats: &PartitionStats,
     ) -> Result<(), FileError> {
-        std::fs::create_dir_all(&self.dir).map_err(|source| FileError::Io {
-            path: self.dir.clone(),
-            source,
-        })?;
         let mut b: Vec<u8> = Vec::new();
-        b.extend_from_slice(MAGIC);
-        b.extend_from_slice(&VERSION.to_le_bytes());
-        b.extend_from_slice(&key.to_le_bytes());
         encode_segment(segment, &mut b);
         for x in stat_words(stats) {
             b.extend_from_slice(&x.to_le_bytes());
         }
-        let sum = fnv(&b);
-        b.extend_from_slice(&sum.to_le_bytes());
-        write_atomic(&self.path(partition, key), &b)
+        self.write(&self.path(partition, key), MAGIC, key, &b)
     }
 
     /// Removes the directory and every checkpoint in it (once the whole result is saved).
@@ -183,17 +276,19 @@ fn stats_of(w: [u64; STAT_WORDS]) -> PartitionStats {
     s
 }
 
-fn decode(
-    bytes: &[u8],
-    path: &Path,
+/// The body of a checkpoint file after its header (`magic`, version, `key`), its checksum
+/// checked; a reader over the whole file positioned after the header, and the body's end.
+fn open<'a>(
+    bytes: &'a [u8],
+    path: &'a Path,
+    magic: &[u8; 8],
     key: u64,
-    npieces: u32,
-) -> Result<(Segment, PartitionStats), FileError> {
+) -> Result<(Reader<'a>, usize), FileError> {
     let corrupt = |what: String| FileError::Corrupt {
         path: path.to_path_buf(),
         what,
     };
-    if bytes.len() < 28 || &bytes[..8] != MAGIC {
+    if bytes.len() < 28 || &bytes[..8] != magic {
         return Err(FileError::Format {
             path: path.to_path_buf(),
             version: 0,
@@ -214,13 +309,92 @@ fn decode(
     if stored != key {
         return Err(corrupt(format!("key {stored:016x}, expected {key:016x}")));
     }
+    Ok((r, body.len()))
+}
+
+/// That `r` has read the whole body.
+fn at_end(r: &Reader, end: usize, path: &Path) -> Result<(), FileError> {
+    if r.at() != end {
+        return Err(FileError::Corrupt {
+            path: path.to_path_buf(),
+            what: format!("{} trailing bytes", end - r.at()),
+        });
+    }
+    Ok(())
+}
+
+fn decode(
+    bytes: &[u8],
+    path: &Path,
+    key: u64,
+    npieces: u32,
+) -> Result<(Segment, PartitionStats), FileError> {
+    let (mut r, end) = open(bytes, path, MAGIC, key)?;
     let segment = r.segment(npieces)?;
     let mut w = [0u64; STAT_WORDS];
     for x in &mut w {
         *x = r.u64()?;
     }
-    if r.at() != body.len() {
-        return Err(corrupt(format!("{} trailing bytes", body.len() - r.at())));
-    }
+    at_end(&r, end, path)?;
     Ok((segment, stats_of(w)))
+}
+
+fn decode_components(
+    bytes: &[u8],
+    path: &Path,
+    key: u64,
+    nodes: usize,
+) -> Result<SavedComponents, FileError> {
+    let corrupt = |what: String| FileError::Corrupt {
+        path: path.to_path_buf(),
+        what,
+    };
+    let (mut r, end) = open(bytes, path, COMPONENTS_MAGIC, key)?;
+    let stored_nodes = r.u64()?;
+    if stored_nodes != nodes as u64 {
+        return Err(corrupt(format!(
+            "a graph of {stored_nodes} nodes, expected {nodes}"
+        )));
+    }
+    let edges = r.u64()? as usize;
+    let graph_time = Duration::from_nanos(r.u64()?);
+    let count = r.u32()? as usize;
+    // Every node in exactly one component, every edge between two of its nodes.
+    let mut seen = vec![false; nodes];
+    let (mut comps, mut inner) = (Vec::new(), Vec::new());
+    for _ in 0..count {
+        let len = r.u32()? as usize;
+        if len == 0 || len > nodes {
+            return Err(corrupt(format!("a component of {len} nodes")));
+        }
+        let mut comp = Vec::with_capacity(len);
+        for _ in 0..len {
+            let x = r.u32()? as usize;
+            if x >= nodes || std::mem::replace(&mut seen[x], true) {
+                return Err(corrupt(format!("node {x} out of range or twice")));
+            }
+            comp.push(x);
+        }
+        let m = r.u32()? as usize;
+        let mut es = Vec::with_capacity(m.min((end - r.at()) / 8));
+        for _ in 0..m {
+            let (i, j) = (r.u32()?, r.u32()?);
+            if i as usize >= len || j as usize >= len {
+                return Err(corrupt(format!("edge {i} -> {j} in a component of {len}")));
+            }
+            es.push((i, j));
+        }
+        comps.push(comp);
+        inner.push(es);
+    }
+    if seen.iter().any(|s| !s) {
+        return Err(corrupt("a node in no component".into()));
+    }
+    at_end(&r, end, path)?;
+    let facts = GraphFacts {
+        nodes,
+        edges,
+        graph_time,
+    };
+    Ok((facts, comps, inner))
 }

@@ -589,22 +589,28 @@ fn partition_with(
     progress: &dyn Progress,
 ) -> Result<(Segment, PartitionStats), PresortError> {
     let k = part.k;
+    let key = checkpoints.map(|store| {
+        let key = checkpoint::Checkpoints::key(&checkpoint::KeyInput {
+            tris: part.tris,
+            partitions: part.dirs.len(),
+            partition: k,
+            method,
+        });
+        (store, key)
+    });
     let run = || {
-        let r = presort_partition(part, method, budget, progress);
+        let r = match method {
+            Method::Cells => cells_partition(part, budget, key, progress),
+            Method::Scan => scan_partition(part, budget, progress),
+        };
         if let Err(e) = &r {
             progress.failed(k, e);
         }
         r
     };
-    let Some(store) = checkpoints else {
+    let Some((store, key)) = key else {
         return run();
     };
-    let key = checkpoint::Checkpoints::key(&checkpoint::KeyInput {
-        tris: part.tris,
-        partitions: part.dirs.len(),
-        partition: k,
-        method,
-    });
     match store.load(k, key, part.tris.len() as u32) {
         Some(Ok(done)) => {
             progress.update(k, "resumed", 1, 1);
@@ -620,12 +626,67 @@ fn partition_with(
     Ok(done)
 }
 
-/// One partition: graph (its bytes charged to `budget` until the segment is made),
-/// preliminary order, scan, and the segment.
-fn presort_partition(
+/// One partition by the paper's scan: graph (its bytes charged to `budget` until the
+/// segment is made, with the scan's index of in-edges), preliminary order, scan, and the
+/// segment.
+fn scan_partition(
     part: &Part,
-    method: Method,
     budget: &graph::MemoryBudget,
+    progress: &dyn Progress,
+) -> Result<(Segment, PartitionStats), PresortError> {
+    let (k, dirs) = (part.k, part.dirs);
+    let t0 = Instant::now();
+    let region = partition::partition_region(dirs, k);
+    let graph_error = |error| PresortError::Graph {
+        partition: k,
+        error,
+    };
+    let (mut g, rows) = graph::Graph::build(part.tris.clone(), &region, budget, &|d, t| {
+        progress.update(k, "graph", d, t)
+    })
+    .map_err(graph_error)?;
+    let in_bytes = g.edges.len() as u64 * graph::IN_EDGE_BYTES;
+    let charged = rows.charged;
+    let result = budget.charge(in_bytes).map_err(graph_error).and_then(|()| {
+        let mut stats = PartitionStats {
+            initial_nodes: g.nodes.len(),
+            edges: g.edge_count(),
+            graph_time: t0.elapsed(),
+            ..Default::default()
+        };
+        let t1 = Instant::now();
+        // A viewpoint of the partition: out along its face normal.
+        let eye = dirs[k] * 3.0;
+        g.index_in_edges();
+        let prelim = order::preliminary(&g, eye);
+        stats.back_edges = order::back_edges(&g, &prelim);
+        let mut sstats = scan::ScanStats::default();
+        let final_order = scan::scan(&mut g, prelim, &mut sstats, &|d, t| {
+            progress.update(k, "scan", d, t)
+        });
+        budget.release(in_bytes);
+        let final_order = final_order.map_err(|error| PresortError::Scan {
+            partition: k,
+            error,
+        })?;
+        stats.scan = sstats;
+        stats.scan_time = t1.elapsed();
+        let placed: Vec<cells::Placed> = final_order.into_iter().map(|x| (x, Vec::new())).collect();
+        Ok((segment_of(&g, &placed, part.frame), stats))
+    });
+    budget.release(charged);
+    result
+}
+
+/// One partition by cells: the graph's strongly connected components (read from a
+/// components checkpoint when a valid one is there, else from the graph built here, and
+/// then saved), each cyclic one resolved into cells ([`cells`]), and the segment. The
+/// graph's nodes stay charged to `budget` until the segment is made; its edges only until
+/// the components are known.
+fn cells_partition(
+    part: &Part,
+    budget: &graph::MemoryBudget,
+    store: Option<(&checkpoint::Checkpoints, u64)>,
     progress: &dyn Progress,
 ) -> Result<(Segment, PartitionStats), PresortError> {
     let k = part.k;
@@ -635,86 +696,83 @@ fn presort_partition(
         partition: k,
         error,
     };
-    let (mut g, rows) = graph::Graph::build(part.tris.clone(), &region, budget, &|d, t| {
-        progress.update(k, "graph", d, t)
-    })
-    .map_err(graph_error)?;
-    // The scan's index of in-edges, charged too.
-    let in_bytes = match method {
-        Method::Cells => 0,
-        Method::Scan => g.edges.len() as u64 * graph::IN_EDGE_BYTES,
+    let cells_error = |error| PresortError::Cells {
+        partition: k,
+        error,
     };
-    // What the graph still holds charged (the cells drop its edges once they have what
-    // they need, and release them at once).
-    let mut charged = rows.charged;
-    let result = match budget.charge(in_bytes) {
-        Ok(()) => {
-            let r = order_partition(&mut g, part, method, t0, budget, &mut charged, progress);
-            budget.release(in_bytes);
-            r
+    let nodes = graph::Graph::nodes_of(part.tris.clone(), &region);
+    let loaded = store.and_then(
+        |(s, key)| match s.load_components(k, key, nodes.nodes.len()) {
+            Some(Ok(saved)) => {
+                progress.update(k, "graph resumed", 1, 1);
+                Some(saved)
+            }
+            Some(Err(_)) => {
+                progress.update(k, "checkpoint ignored", 1, 1);
+                None
+            }
+            None => None,
+        },
+    );
+    let (g, parts, facts, charged) = match loaded {
+        Some((facts, comps, inner)) => {
+            let charged = nodes.bytes_for(0, false);
+            budget.charge(charged).map_err(graph_error)?;
+            match cells::Components::charged(comps, inner, budget) {
+                Ok(parts) => (nodes, parts, facts, charged),
+                Err(e) => {
+                    budget.release(charged);
+                    return Err(cells_error(e));
+                }
+            }
         }
-        Err(e) => Err(graph_error(e)),
+        None => {
+            drop(nodes);
+            let (mut g, rows) = graph::Graph::build(part.tris.clone(), &region, budget, &|d, t| {
+                progress.update(k, "graph", d, t)
+            })
+            .map_err(graph_error)?;
+            let facts = checkpoint::GraphFacts {
+                nodes: g.nodes.len(),
+                edges: g.edge_count(),
+                graph_time: t0.elapsed(),
+            };
+            let (parts, freed) = match cells::components(&mut g, budget) {
+                Ok(found) => found,
+                Err(e) => {
+                    budget.release(rows.charged);
+                    return Err(cells_error(e));
+                }
+            };
+            let freed = freed.min(rows.charged);
+            budget.release(freed);
+            let charged = rows.charged - freed;
+            if let Some((s, key)) = store {
+                let saved = s.save_components(k, key, &facts, &parts.comps, &parts.inner);
+                if let Err(e) = saved {
+                    budget.release(charged);
+                    return Err(PresortError::Checkpoint(e));
+                }
+            }
+            (g, parts, facts, charged)
+        }
     };
-    budget.release(charged);
-    result
-}
-
-/// A built partition graph resolved (cells or scan) into its segment.
-/// `charged`: the bytes the graph holds charged to `budget`; whatever this releases early
-/// is taken off.
-fn order_partition(
-    g: &mut graph::Graph,
-    part: &Part,
-    method: Method,
-    t0: Instant,
-    budget: &graph::MemoryBudget,
-    charged: &mut u64,
-    progress: &dyn Progress,
-) -> Result<(Segment, PartitionStats), PresortError> {
-    let (k, dirs, frame) = (part.k, part.dirs, part.frame);
     let mut stats = PartitionStats {
-        initial_nodes: g.nodes.len(),
-        edges: g.edge_count(),
-        graph_time: t0.elapsed(),
+        initial_nodes: facts.nodes,
+        edges: facts.edges,
+        graph_time: facts.graph_time,
         ..Default::default()
     };
     let t1 = Instant::now();
-    let placed: Vec<cells::Placed> = match method {
-        Method::Cells => {
-            let mut cstats = cells::CellStats::default();
-            let resolved = cells::resolve(g, budget, &mut cstats, &|d, t| {
-                progress.update(k, "scan", d, t)
-            });
-            let resolved = resolved.map_err(|error| PresortError::Cells {
-                partition: k,
-                error,
-            })?;
-            let freed = resolved.freed.min(*charged);
-            budget.release(freed);
-            *charged -= freed;
-            stats.cells = cstats;
-            resolved.placed
-        }
-        Method::Scan => {
-            // A viewpoint of the partition: out along its face normal.
-            let eye = dirs[k] * 3.0;
-            g.index_in_edges();
-            let prelim = order::preliminary(g, eye);
-            stats.back_edges = order::back_edges(g, &prelim);
-            let mut sstats = scan::ScanStats::default();
-            let final_order = scan::scan(g, prelim, &mut sstats, &|d, t| {
-                progress.update(k, "scan", d, t)
-            })
-            .map_err(|error| PresortError::Scan {
-                partition: k,
-                error,
-            })?;
-            stats.scan = sstats;
-            final_order.into_iter().map(|x| (x, Vec::new())).collect()
-        }
-    };
-    stats.scan_time = t1.elapsed();
-    Ok((segment_of(g, &placed, frame), stats))
+    let placed = cells::resolve_components(&g, parts, &mut stats.cells, &|d, t| {
+        progress.update(k, "scan", d, t)
+    });
+    let result = placed.map_err(cells_error).map(|placed| {
+        stats.scan_time = t1.elapsed();
+        (segment_of(&g, &placed, part.frame), stats)
+    });
+    budget.release(charged);
+    result
 }
 
 /// The segment of a resolved graph: instances in draw order with their test planes (the
