@@ -777,3 +777,66 @@ fn reversed_lists_are_caught() {
     let msg = e.downcast_ref::<String>().cloned().unwrap_or_default();
     assert!(msg.contains("nearer along the pixel centre's ray"), "{msg}");
 }
+
+/// Three thin triangles along the sides of a triangle, extended past its corners and
+/// sloped so that each lies over the next where they cross: a cycle of occlusions seen
+/// whole from above (and, reversed, from below).
+fn pinwheel() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    use std::f32::consts::TAU;
+    let corner = |i: usize| {
+        let a = TAU * i as f32 / 3.0;
+        Vec3::new(a.cos(), a.sin(), 0.0)
+    };
+    let (h, w) = (0.3, 0.12);
+    let mut pos = Vec::new();
+    let mut idx = Vec::new();
+    for i in 0..3 {
+        let (v, u) = (corner(i), corner(i + 1));
+        let d = u - v;
+        let (a, b) = (v - 0.3 * d, u + 0.3 * d);
+        let across = Vec3::new(-d.y, d.x, 0.0).normalize() * w;
+        // Low where it passes under the side before, high where it passes over the next.
+        let (a, b) = (a - Vec3::Z * h, b + Vec3::Z * h);
+        let n = pos.len() as u32;
+        pos.extend([a, b - across, b + across].map(|p| p.to_array()));
+        idx.push([n, n + 1, n + 2]);
+    }
+    (pos, idx)
+}
+
+#[test]
+fn a_cycle_seen_whole_is_cut_and_the_next_round_carries_the_graphs() {
+    use presorted::checkpoint::Checkpoints;
+    let (pos, idx) = pinwheel();
+    let scene = scene_of(&pos, &idx);
+    let mesh = loaded_mesh(&scene);
+    let config = PresortConfig {
+        partitions: 6,
+        threads: 2,
+        ..Default::default()
+    };
+    // Without checkpoints each round builds its graphs.
+    let fresh = presorted::presort(&mesh, &config, &Silent).unwrap();
+    assert!(fresh.split.cycle_cuts > 0, "{:?}", fresh.split);
+    // With them, the rounds after the first carry the previous round's components.
+    let dir = tmp("pinwheel-checkpoints");
+    let _ = std::fs::remove_dir_all(&dir);
+    let store = Checkpoints::new(&dir);
+    let phases = Phases::default();
+    let carried = presorted::presort_with(&mesh, &config, Some(&store), &phases).unwrap();
+    assert_eq!(carried.split, fresh.split);
+    assert_eq!(carried.pieces, fresh.pieces);
+    let seen = phases.0.into_inner().unwrap();
+    let carried_parts = seen.iter().filter(|(_, p)| *p == "graph carried").count();
+    assert!(carried_parts > 0, "{seen:?}");
+    // Both are exact, from random viewpoints and from above and below, where the cycle is
+    // seen whole.
+    let views = [(30.0, 80.0), (200.0, 75.0), (110.0, -80.0), (300.0, -70.0)];
+    for (name, lists) in [("fresh", &fresh), ("carried", &carried)] {
+        let f = tmp(&format!("pinwheel-{name}.bin"));
+        file::save(lists, &f).unwrap();
+        exact_from_random_views(&scene, &f, &["presorted"], 12);
+        exact_from_views(&scene, &f, &["presorted"], &views);
+    }
+    store.remove().unwrap();
+}

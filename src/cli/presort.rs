@@ -82,7 +82,7 @@ impl Progress for Bar {
             done as f64 / total as f64
         };
         let v = match phase {
-            "graph" | "graph resumed" => (frac * 500.0) as u64,
+            "graph" | "graph resumed" | "graph carried" => (frac * 500.0) as u64,
             _ => 500 + (frac * 500.0) as u64,
         };
         let now = self.start.elapsed().as_secs_f64();

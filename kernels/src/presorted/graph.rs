@@ -505,6 +505,28 @@ impl Graph {
         inputs: &RowInputs,
         occl_cache: &mut HashMap<(u32, u32), Vec<Plane>>,
     ) -> Row {
+        let mut row = Row {
+            to: Vec::new(),
+            stats: RowStats::default(),
+        };
+        for j in 0..self.nodes.len() {
+            if self.pair(i, j, inputs, occl_cache, &mut row.stats) {
+                row.to.push(j as u32);
+            }
+        }
+        row
+    }
+
+    /// Whether `i -> j` is an edge: the cheap rejections, then a witness viewpoint or the
+    /// clip of the reduced region (counted in `stats`).
+    fn pair(
+        &self,
+        i: usize,
+        j: usize,
+        inputs: &RowInputs,
+        occl_cache: &mut HashMap<(u32, u32), Vec<Plane>>,
+        stats: &mut RowStats,
+    ) -> bool {
         let RowInputs {
             planes,
             spheres,
@@ -512,51 +534,56 @@ impl Graph {
             centres,
         } = inputs;
         let tris = &self.tris;
-        let mut row = Row {
-            to: Vec::new(),
-            stats: RowStats::default(),
-        };
-        let ti = self.nodes[i].tri;
-        let a = &tris[ti as usize];
-        for j in 0..self.nodes.len() {
-            let tj = self.nodes[j].tri;
-            if ti == tj {
-                continue;
-            }
-            let b = &tris[tj as usize];
-            // j must reach behind i, and i in front of j (see module docs of geom).
-            if !b.iter().any(|q| planes[i].eval(*q) < -EPS)
-                || !a.iter().any(|p| planes[j].eval(*p) > EPS)
-            {
-                continue;
-            }
-            // Each region must reach into the other's facing half-space.
-            if self.nodes[i].region.outside_any(&planes[j..=j])
-                || self.nodes[j].region.outside_any(&planes[i..=i])
-            {
-                continue;
-            }
-            let (sa, sb) = (spheres[ti as usize], spheres[tj as usize]);
-            if cone_misses(sa, sb, &self.nodes[i].region, centres[i])
-                || cone_misses(sa, sb, &self.nodes[j].region, centres[j])
-                || !may_occlude(a, b, &self.nodes[i].region, &self.nodes[j].region)
-            {
-                continue;
-            }
-            let occl = occl_cache
-                .entry((ti, tj))
-                .or_insert_with(|| occlusion_planes(a, b));
-            row.stats.pairs += 1;
-            let (ri, rj) = (&self.nodes[i].region, &self.nodes[j].region);
-            if has_witness(centroids[ti as usize], centroids[tj as usize], occl, ri, rj) {
-                row.to.push(j as u32);
-                row.stats.witnessed += 1;
-            } else if self.occludes(i, j, occl) {
-                row.to.push(j as u32);
-                row.stats.clipped += 1;
-            }
+        let (ti, tj) = (self.nodes[i].tri, self.nodes[j].tri);
+        if ti == tj {
+            return false;
         }
-        row
+        let (a, b) = (&tris[ti as usize], &tris[tj as usize]);
+        // j must reach behind i, and i in front of j (see module docs of geom).
+        if !b.iter().any(|q| planes[i].eval(*q) < -EPS)
+            || !a.iter().any(|p| planes[j].eval(*p) > EPS)
+        {
+            return false;
+        }
+        // Each region must reach into the other's facing half-space.
+        let (ri, rj) = (&self.nodes[i].region, &self.nodes[j].region);
+        if ri.outside_any(&planes[j..=j]) || rj.outside_any(&planes[i..=i]) {
+            return false;
+        }
+        let (sa, sb) = (spheres[ti as usize], spheres[tj as usize]);
+        if cone_misses(sa, sb, ri, centres[i])
+            || cone_misses(sa, sb, rj, centres[j])
+            || !may_occlude(a, b, ri, rj)
+        {
+            return false;
+        }
+        let occl = occl_cache
+            .entry((ti, tj))
+            .or_insert_with(|| occlusion_planes(a, b));
+        stats.pairs += 1;
+        if has_witness(centroids[ti as usize], centroids[tj as usize], occl, ri, rj) {
+            stats.witnessed += 1;
+            true
+        } else if self.occludes(i, j, occl) {
+            stats.clipped += 1;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Whether each of `pairs` (`from`, `to`) is an edge, decided as building the graph
+    /// decides it (on the current rayon pool): for a few pairs, where building every row
+    /// would cost the whole graph.
+    pub fn pair_edges(&self, pairs: &[(usize, usize)]) -> Vec<bool> {
+        use rayon::prelude::*;
+        let inputs = self.row_inputs();
+        pairs
+            .par_iter()
+            .map_init(HashMap::new, |cache, &(i, j)| {
+                self.pair(i, j, &inputs, cache, &mut RowStats::default())
+            })
+            .collect()
     }
 
     pub fn add_node(&mut self, node: Node) -> usize {

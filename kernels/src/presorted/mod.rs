@@ -21,6 +21,7 @@
 //! Run time (section 5): [`runtime`] (`presorted`, `presorted-vs`, `presorted-ssbo`,
 //! `presorted-ssbo-interlock`).
 
+pub mod carry;
 pub mod cells;
 pub mod checkpoint;
 pub mod file;
@@ -323,6 +324,8 @@ pub fn presort_with(
     // Rounds: a cycle seen whole from some viewpoint is broken by cutting one of its pieces
     // by another's plane, and every partition runs again on the new pieces.
     let mut round = 0;
+    // The previous round's pieces and how this round's came from them ([`carry`]).
+    let mut previous: Option<Previous> = None;
     let results: Vec<(Segment, PartitionStats)> = loop {
         let tris: Arc<[[DVec3; 3]]> = split_pieces.iter().map(|p| p.pos).collect();
         // `at_once` partitions at a time (each graph's rows also run on every thread).
@@ -340,7 +343,11 @@ pub fn presort_with(
                                 k,
                                 frame: &frame,
                             };
-                            partition_with(&part, cfg.method, &budget, checkpoints, progress)
+                            let store = Store {
+                                checkpoints,
+                                previous: previous.as_ref(),
+                            };
+                            partition_with(&part, cfg.method, &budget, store, progress)
                         })
                         .collect::<Vec<_>>()
                 })
@@ -350,7 +357,8 @@ pub fn presort_with(
             break all.into_iter().map(|r| r.expect("checked")).collect();
         }
         round += 1;
-        let mut cut = 0u64;
+        let before = split_pieces.len();
+        let (mut cut, mut parts): (Vec<usize>, Vec<usize>) = (Vec::new(), Vec::new());
         let mut first_err: Option<PresortError> = None;
         for r in all {
             let Err(e) = r else { continue };
@@ -361,16 +369,24 @@ pub fn presort_with(
             {
                 if round <= MAX_CYCLE_ROUNDS {
                     for c in cycles {
-                        cut += u64::from(split::break_cycle(&mut split_pieces, c));
+                        let n = split_pieces.len();
+                        if let Some(a) = split::break_cycle(&mut split_pieces, c) {
+                            cut.push(a);
+                            parts.extend(std::iter::repeat_n(a, split_pieces.len() - n));
+                        }
                     }
                 }
             }
             first_err.get_or_insert(e);
         }
-        if cut == 0 {
+        if cut.is_empty() {
             return Err(first_err.expect("some partition failed"));
         }
-        split_stats.cycle_cuts += cut;
+        split_stats.cycle_cuts += cut.len() as u64;
+        previous = Some(Previous {
+            tris,
+            lineage: carry::Lineage::new(before, &cut, &parts),
+        });
         split_stats.extra_pieces = (split_pieces.len() - input.len()) as u64;
     };
     let pieces = world_pieces(&frame, &split_pieces);
@@ -579,28 +595,42 @@ struct Part<'a> {
     frame: &'a Frame3,
 }
 
+/// The previous round's pieces, and how this round's came from them.
+struct Previous {
+    tris: Arc<[[DVec3; 3]]>,
+    lineage: carry::Lineage,
+}
+
+/// Where a partition's work can be read from: the checkpoints, and (with them) the
+/// previous round's components to carry.
+#[derive(Clone, Copy)]
+struct Store<'a> {
+    checkpoints: Option<&'a checkpoint::Checkpoints>,
+    previous: Option<&'a Previous>,
+}
+
 /// One partition read from its checkpoint when a valid one is there, else computed
 /// (its failure reported to `progress` as it happens) and, when it succeeds, saved.
 fn partition_with(
     part: &Part,
     method: Method,
     budget: &graph::MemoryBudget,
-    checkpoints: Option<&checkpoint::Checkpoints>,
+    store: Store,
     progress: &dyn Progress,
 ) -> Result<(Segment, PartitionStats), PresortError> {
     let k = part.k;
-    let key = checkpoints.map(|store| {
+    let key = store.checkpoints.map(|checkpoints| {
         let key = checkpoint::Checkpoints::key(&checkpoint::KeyInput {
             tris: part.tris,
             partitions: part.dirs.len(),
             partition: k,
             method,
         });
-        (store, key)
+        (checkpoints, key)
     });
     let run = || {
         let r = match method {
-            Method::Cells => cells_partition(part, budget, key, progress),
+            Method::Cells => cells_partition(part, budget, key, store.previous, progress),
             Method::Scan => scan_partition(part, budget, progress),
         };
         if let Err(e) = &r {
@@ -679,14 +709,16 @@ fn scan_partition(
 }
 
 /// One partition by cells: the graph's strongly connected components (read from a
-/// components checkpoint when a valid one is there, else from the graph built here, and
-/// then saved), each cyclic one resolved into cells ([`cells`]), and the segment. The
-/// graph's nodes stay charged to `budget` until the segment is made; its edges only until
-/// the components are known.
+/// components checkpoint when a valid one is there, else carried from the previous
+/// round's checkpoint ([`carry`]), else from the graph built here; saved when not read),
+/// each cyclic one resolved into cells ([`cells`]), and the segment. The graph's nodes
+/// stay charged to `budget` until the segment is made; its edges only until the
+/// components are known.
 fn cells_partition(
     part: &Part,
     budget: &graph::MemoryBudget,
     store: Option<(&checkpoint::Checkpoints, u64)>,
+    previous: Option<&Previous>,
     progress: &dyn Progress,
 ) -> Result<(Segment, PartitionStats), PresortError> {
     let k = part.k;
@@ -714,8 +746,21 @@ fn cells_partition(
             None => None,
         },
     );
-    let (g, parts, facts, charged) = match loaded {
-        Some((facts, comps, inner)) => {
+    let carried = match (store, previous, &loaded) {
+        (Some((s, _)), Some(p), None) => carried(part, &region, &nodes, s, p, t0, progress),
+        _ => None,
+    };
+    let found = match (loaded, carried) {
+        (Some(saved), _) => Some((saved, None)),
+        (None, Some(saved)) => Some((saved, store)),
+        (None, None) => None,
+    };
+    let (g, parts, facts, charged) = match found {
+        Some(((facts, comps, inner), save)) => {
+            if let Some((s, key)) = save {
+                s.save_components(k, key, &facts, &comps, &inner)
+                    .map_err(PresortError::Checkpoint)?;
+            }
             let charged = nodes.bytes_for(0, false);
             budget.charge(charged).map_err(graph_error)?;
             match cells::Components::charged(comps, inner, budget) {
@@ -773,6 +818,39 @@ fn cells_partition(
     });
     budget.release(charged);
     result
+}
+
+/// The components of partition `part` (nodes `nodes` over `region`) carried from the
+/// previous round's components checkpoint, if it is there and valid and every node comes
+/// from one of that round's ([`carry::carry`]); reported as phase `"graph carried"`.
+fn carried(
+    part: &Part,
+    region: &geom::Region,
+    nodes: &graph::Graph,
+    store: &checkpoint::Checkpoints,
+    previous: &Previous,
+    t0: Instant,
+    progress: &dyn Progress,
+) -> Option<checkpoint::SavedComponents> {
+    let key = checkpoint::Checkpoints::key(&checkpoint::KeyInput {
+        tris: &previous.tris,
+        partitions: part.dirs.len(),
+        partition: part.k,
+        method: Method::Cells,
+    });
+    let before = graph::Graph::nodes_of(previous.tris.clone(), region);
+    let (facts, comps, inner) = store
+        .load_components(part.k, key, before.nodes.len())?
+        .ok()?;
+    let before: Vec<(u32, bool)> = before.nodes.iter().map(|x| (x.tri, x.back)).collect();
+    let (comps, inner) = carry::carry(&comps, &inner, &before, nodes, &previous.lineage)?;
+    progress.update(part.k, "graph carried", 1, 1);
+    let facts = checkpoint::GraphFacts {
+        nodes: nodes.nodes.len(),
+        edges: facts.edges,
+        graph_time: facts.graph_time + t0.elapsed(),
+    };
+    Some((facts, comps, inner))
 }
 
 /// The segment of a resolved graph: instances in draw order with their test planes (the

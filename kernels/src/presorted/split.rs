@@ -136,8 +136,9 @@ pub fn split_crossing(tris: &[[DVec3; 3]]) -> Result<(Vec<Piece>, SplitStats), S
 /// when needed"): the first piece of the cycle (in cycle order, neighbours first) that
 /// reaches across another's plane by more than [`CYCLE_CUT_MIN`] on both sides is cut by
 /// that plane, as a crossing pair is. The pieces stay in place (the cut piece's first part
-/// keeps its index, the others go last). False when no piece straddles another's plane.
-pub fn break_cycle(pieces: &mut Vec<Piece>, cycle: &[u32]) -> bool {
+/// keeps its index, the others go last). Returns the piece cut, `None` when no piece
+/// straddles another's plane.
+pub fn break_cycle(pieces: &mut Vec<Piece>, cycle: &[u32]) -> Option<usize> {
     let k = cycle.len();
     let mut pairs: Vec<(usize, usize)> = (0..k)
         .flat_map(|i| (0..k).filter(move |&j| j != i).map(move |j| (i, j)))
@@ -158,11 +159,11 @@ pub fn break_cycle(pieces: &mut Vec<Piece>, cycle: &[u32]) -> bool {
             if let Some(first) = parts.next() {
                 pieces[a] = first;
                 pieces.extend(parts);
-                return true;
+                return Some(a);
             }
         }
     }
-    false
+    None
 }
 
 /// How far (normalized frame) a piece must reach to both sides of a plane for
