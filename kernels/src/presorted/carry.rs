@@ -47,6 +47,9 @@ impl Lineage {
     }
 }
 
+/// Components and the edges inside each, as [`super::cells::Components`] holds them.
+pub type Carried = (Vec<Vec<usize>>, Vec<Vec<(u32, u32)>>);
+
 /// The components of `g` (this round's nodes, no edges needed) carried from the previous
 /// round's `comps` and `inner` edges (as [`super::cells::Components`] holds them) over the
 /// previous round's nodes `previous` (triangle and facing of each). `None` when a node of
@@ -58,7 +61,7 @@ pub fn carry(
     previous: &[(u32, bool)],
     g: &Graph,
     lineage: &Lineage,
-) -> Option<(Vec<Vec<usize>>, Vec<Vec<(u32, u32)>>)> {
+) -> Option<Carried> {
     let id: HashMap<(u32, bool), usize> =
         previous.iter().enumerate().map(|(i, &k)| (k, i)).collect();
     // The nodes of `g` that each previous node became (none if its region is now empty).
