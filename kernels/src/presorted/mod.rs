@@ -16,7 +16,8 @@
 //! - [`scc`], [`cells`]: the default in place of the scan: cyclic components resolved by
 //!   subdividing viewpoint space with the same cutting planes;
 //! - [`input`]: what meshes are accepted; [`split`]: intersecting triangles split apart;
-//!   [`file`]: the stored result; [`checkpoint`]: finished partitions kept for a rerun.
+//!   [`file`]: the stored result; [`checkpoint`]: finished partitions kept for a rerun;
+//!   [`carry`]: a round after cutting cycles reuses the previous round's components.
 //!
 //! Run time (section 5): [`runtime`] (`presorted`, `presorted-vs`, `presorted-ssbo`,
 //! `presorted-ssbo-interlock`).
