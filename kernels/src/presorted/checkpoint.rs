@@ -99,10 +99,13 @@ impl Checkpoints {
         self.dir.join(format!("components-{partition}-{key:016x}"))
     }
 
-    /// The file at `path`, `None` when there is none.
-    fn read(path: &Path) -> Option<Result<Vec<u8>, FileError>> {
+    /// The file at `path` decoded by `decode`, `None` when there is none.
+    fn read<T>(
+        path: &Path,
+        decode: impl FnOnce(&[u8], &Path) -> Result<T, FileError>,
+    ) -> Option<Result<T, FileError>> {
         match std::fs::read(path) {
-            Ok(b) => Some(Ok(b)),
+            Ok(b) => Some(decode(&b, path)),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
             Err(source) => Some(Err(FileError::Io {
                 path: path.to_path_buf(),
@@ -136,12 +139,9 @@ impl Checkpoints {
         key: u64,
         nodes: usize,
     ) -> Option<Result<SavedComponents, FileError>> {
-        let path = self.components_path(partition, key);
-        let bytes = match Checkpoints::read(&path)? {
-            Ok(b) => b,
-            Err(e) => return Some(Err(e)),
-        };
-        Some(decode_components(&bytes, &path, key, nodes))
+        Checkpoints::read(&self.components_path(partition, key), |b, path| {
+            decode_components(b, path, key, nodes)
+        })
     }
 
     /// Saves the components of `partition`'s graph under `key` (`comps` and `inner` as
@@ -184,12 +184,9 @@ impl Checkpoints {
         key: u64,
         npieces: u32,
     ) -> Option<Result<(Segment, PartitionStats), FileError>> {
-        let path = self.path(partition, key);
-        let bytes = match Checkpoints::read(&path)? {
-            Ok(b) => b,
-            Err(e) => return Some(Err(e)),
-        };
-        Some(decode(&bytes, &path, key, npieces))
+        Checkpoints::read(&self.path(partition, key), |b, path| {
+            decode(b, path, key, npieces)
+        })
     }
 
     /// Saves `partition`'s result under `key`.
