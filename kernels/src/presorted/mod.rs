@@ -211,7 +211,9 @@ pub enum PresortError {
         partition: usize,
         error: cells::CellError,
     },
-    #[error("saving a finished partition for a rerun: {0}")]
+    #[error(
+        "saving a partition's checkpoint (its graph's components or its result) for a rerun: {0}"
+    )]
     Checkpoint(file::FileError),
     #[error("partition {partition}: {error}")]
     Graph {
