@@ -651,11 +651,13 @@ fn restrict<'b>(cell: &Cell<'b>, comp: &[usize]) -> Result<Cell<'b>, CellError> 
         comp.iter().map(|&i| cell.regions[i].clone()).collect(),
         cell.edges
             .iter()
-            .filter(|e| keep[e.ends().0] != usize::MAX && keep[e.ends().1] != usize::MAX)
-            .map(|e| CellEdge {
-                from: keep[e.ends().0] as u32,
-                to: keep[e.ends().1] as u32,
-                ..*e
+            .filter_map(|e| {
+                let (i, j) = e.ends();
+                (keep[i] != usize::MAX && keep[j] != usize::MAX).then(|| CellEdge {
+                    from: keep[i] as u32,
+                    to: keep[j] as u32,
+                    ..*e
+                })
             })
             .collect(),
     )

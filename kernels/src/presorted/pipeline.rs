@@ -200,11 +200,14 @@ fn cells_partition(
             }
         }
         None => {
-            drop(nodes);
-            let (mut g, rows) = graph::Graph::build(part.tris.clone(), &region, budget, &|d, t| {
-                progress.update(k, "graph", d, t)
-            })
-            .map_err(graph_error)?;
+            // The graph of these nodes (as `Graph::build` makes it, without making them again).
+            let mut g = nodes;
+            let n = g.nodes.len();
+            let rows = g
+                .add_rows(0..n, graph::RowWork::Parallel, budget, &|d, t| {
+                    progress.update(k, "graph", d, t)
+                })
+                .map_err(graph_error)?;
             let facts = checkpoint::GraphFacts {
                 nodes: g.nodes.len(),
                 edges: g.edge_count(),
