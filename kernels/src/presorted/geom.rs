@@ -7,6 +7,7 @@
 //! one absolute tolerance, [`EPS`], serves every test.
 
 use glam::DVec3;
+use smallvec::SmallVec;
 
 /// Distance below which a point counts as on a plane, in the normalized frame.
 pub const EPS: f64 = 1e-9;
@@ -358,10 +359,17 @@ fn farthest(pts: &[DVec3], f: impl Fn(DVec3) -> f64) -> Option<DVec3> {
     pts.iter().copied().max_by(|a, b| f(*a).total_cmp(&f(*b)))
 }
 
+/// Facets an occlusion region keeps without touching the heap: its generators (three
+/// points, nine directions) give at most about twenty, near-coincident planes apart.
+pub const OCCL_INLINE: usize = 24;
+
+/// The half-spaces of an occlusion region ([`occlusion_planes`]).
+pub type OcclPlanes = SmallVec<[Plane; OCCL_INLINE]>;
+
 /// The directions `p - q` (normalized) from every vertex `q` of `b` to every vertex `p` of
 /// `a`, leaving out coincident vertices: the generators of the occlusion cone.
-fn occlusion_rays(a: &[DVec3; 3], b: &[DVec3; 3]) -> Vec<DVec3> {
-    let mut rays: Vec<DVec3> = Vec::with_capacity(9);
+fn occlusion_rays(a: &[DVec3; 3], b: &[DVec3; 3]) -> SmallVec<[DVec3; 9]> {
+    let mut rays: SmallVec<[DVec3; 9]> = SmallVec::new();
     for p in a {
         for q in b {
             let r = *p - *q;
@@ -380,13 +388,17 @@ fn occlusion_rays(a: &[DVec3; 3], b: &[DVec3; 3]) -> Vec<DVec3> {
 /// directions `a_k - b_l`. Its facets are among the planes spanned by three points, two
 /// points and a direction, or a point and two directions; those with every generator on
 /// one side are kept. Unbounded: the caller intersects it with bounded regions.
-pub fn occlusion_planes(a: &[DVec3; 3], b: &[DVec3; 3]) -> Vec<Plane> {
+///
+/// Computed for every pair of triangles that passes the graph's cheap tests (billions on a
+/// 48K-triangle mesh), so nothing here touches the heap unless a region has more than
+/// [`OCCL_INLINE`] facets.
+pub fn occlusion_planes(a: &[DVec3; 3], b: &[DVec3; 3]) -> OcclPlanes {
     let rays = occlusion_rays(a, b);
-    let mut out: Vec<Plane> = Vec::new();
+    let mut out = OcclPlanes::new();
     // A candidate half-space is kept iff every generator lies on one side of it: `lo` and
     // `hi` are the extreme values of the plane over the generators (0 included), and a
     // candidate with values beyond EPS on both sides is a facet of nothing.
-    let keep = |out: &mut Vec<Plane>, pl: Plane, lo: f64, hi: f64| {
+    let keep = |out: &mut OcclPlanes, pl: Plane, lo: f64, hi: f64| {
         let k = if lo >= -EPS {
             pl
         } else if hi <= EPS {
@@ -417,7 +429,7 @@ pub fn occlusion_planes(a: &[DVec3; 3], b: &[DVec3; 3]) -> Vec<Plane> {
         }
         (lo >= -EPS || hi <= EPS).then_some((lo, hi))
     };
-    let consider = |out: &mut Vec<Plane>, n: DVec3, p: DVec3| {
+    let consider = |out: &mut OcclPlanes, n: DVec3, p: DVec3| {
         let Some(pl) = Plane::through(n, p) else {
             return;
         };
@@ -430,23 +442,24 @@ pub fn occlusion_planes(a: &[DVec3; 3], b: &[DVec3; 3]) -> Vec<Plane> {
     // on the vertex the plane goes through (computed once per pair of directions, not once
     // per vertex; the planes and their order are those of trying every vertex with every
     // pair).
-    let pairs: Vec<Option<(DVec3, f64, f64)>> = rays
-        .iter()
-        .enumerate()
-        .flat_map(|(i, r1)| rays[i + 1..].iter().map(move |r2| (*r1, *r2)))
-        .map(|(r1, r2)| {
-            let pl = Plane::through(r1.cross(r2), DVec3::ZERO)?;
-            let (lo, hi) = span(&pl, false)?;
-            Some((pl.n, lo, hi))
-        })
-        .collect();
+    // (Only the pairs with every direction on one side: the others make no facet.)
+    let mut pairs: SmallVec<[(DVec3, f64, f64); 36]> = SmallVec::new();
+    for (i, r1) in rays.iter().enumerate() {
+        for r2 in &rays[i + 1..] {
+            if let Some(pl) = Plane::through(r1.cross(*r2), DVec3::ZERO) {
+                if let Some((lo, hi)) = span(&pl, false) {
+                    pairs.push((pl.n, lo, hi));
+                }
+            }
+        }
+    }
     for k in 0..3 {
         for l in k + 1..3 {
             for r in &rays {
                 consider(&mut out, (a[l] - a[k]).cross(*r), a[k]);
             }
         }
-        for (n, rlo, rhi) in pairs.iter().flatten() {
+        for (n, rlo, rhi) in &pairs {
             let pl = Plane {
                 n: *n,
                 d: -n.dot(a[k]),
@@ -534,7 +547,7 @@ mod tests {
                 _ => {}
             }
             let (got, want) = (occlusion_planes(&a, &b), occlusion_planes_direct(&a, &b));
-            assert_eq!(got, want, "case {case}");
+            assert_eq!(got.as_slice(), want.as_slice(), "case {case}");
             planes += got.len();
         }
         assert!(planes > 600 * 2, "{planes} planes");

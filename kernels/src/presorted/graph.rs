@@ -4,14 +4,18 @@
 //! occlude `j` with both rendered, i.e. iff the reduced occlusion region
 //! `O_{i->j} ∩ E_i ∩ E_j` (eq. 1) has an interior.
 
-use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 use glam::DVec3;
 
-use super::geom::{occlusion_planes, Plane, Region, EPS, MIN_WIDTH};
+use super::geom::{occlusion_planes, OcclPlanes, Plane, Region, EPS};
 use super::separate::Shape;
+
+mod decide;
+#[cfg(test)]
+use decide::has_witness;
+use decide::{bounding_sphere, centre, cone_misses, may_occlude, Witness};
 
 /// One triangle instance.
 #[derive(Clone, Debug)]
@@ -186,110 +190,6 @@ pub fn facing(t: &[DVec3; 3], back: bool) -> Plane {
     }
 }
 
-/// A necessary condition for `a` to occlude `b` from a viewpoint of both regions, cheaper
-/// than the occlusion region: when every direction `a_k - b_l` has a positive component
-/// along `u` (from `b`'s centroid to `a`'s), `O_{a->b} = a + cone(a - b)` lies in the
-/// half-space `u.x >= min_k u.a_k`, which both regions must reach into.
-fn may_occlude(a: &[DVec3; 3], b: &[DVec3; 3], ra: &Region, rb: &Region) -> bool {
-    let u = (a[0] + a[1] + a[2] - b[0] - b[1] - b[2]) / 3.0;
-    if a.iter().any(|p| b.iter().any(|q| (*p - *q).dot(u) <= 0.0)) {
-        return true;
-    }
-    let Some(h) = Plane::through(u, DVec3::ZERO) else {
-        return true;
-    };
-    let lo = a.iter().map(|p| h.eval(*p)).fold(f64::INFINITY, f64::min);
-    let bound = [Plane {
-        n: h.n,
-        d: h.d - lo,
-    }];
-    !(ra.outside_any(&bound) || rb.outside_any(&bound))
-}
-
-/// A sphere holding a triangle: its centroid and the distance to its farthest vertex.
-fn bounding_sphere(t: &[DVec3; 3]) -> (DVec3, f64) {
-    let c = (t[0] + t[1] + t[2]) / 3.0;
-    let r = t.iter().map(|p| (*p - c).length()).fold(0.0, f64::max);
-    (c, r * (1.0 + 1e-9) + EPS)
-}
-
-/// Whether `region` lies wholly outside a convex set holding `O_{a->b}` (a conservative
-/// rejection, cheaper than the occlusion region): with `a` in the ball `(ca, ra)` and `b` in
-/// `(cb, rb)` (disjoint), `O_{a->b} = a + cone(a - b)` lies in the ball of `a` plus the
-/// circular cone of axis `w = (ca - cb)/|ca - cb|` and half-angle `asin((ra + rb)/|ca - cb|)`.
-/// Every direction `n` within the dual cone (at most `90° - α` from `w`) has `n . d >= 0`
-/// along that cone, so `O` lies in `n . (x - ca) >= -ra`; the test tries `w` itself and the
-/// direction of the dual cone nearest to the region's centre as seen from `ca`.
-fn cone_misses(sa: (DVec3, f64), sb: (DVec3, f64), region: &Region, centre: DVec3) -> bool {
-    let ((ca, ra), (cb, rb)) = (sa, sb);
-    let w = ca - cb;
-    let dist = w.length();
-    if region.is_empty() || dist <= (ra + rb) * (1.0 + 1e-9) {
-        return region.is_empty();
-    }
-    let w = w / dist;
-    let sin_a = (ra + rb) / dist;
-    let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
-    let m = ca - centre;
-    let along = m.dot(w);
-    let perp = m - w * along;
-    let pl = perp.length();
-    let toward = if along >= m.length() * sin_a {
-        m.normalize_or_zero()
-    } else if pl > 1e-12 {
-        w * sin_a + perp / pl * cos_a
-    } else {
-        w
-    };
-    [w, toward].iter().any(|n| {
-        *n != DVec3::ZERO
-            && region
-                .verts
-                .iter()
-                .all(|v| n.dot(*v - ca) < -ra - MIN_WIDTH)
-    })
-}
-
-/// The mean of a region's vertices (the point [`cone_misses`] aims at).
-fn centre(region: &Region) -> DVec3 {
-    region.verts.iter().copied().sum::<DVec3>() / region.verts.len() as f64
-}
-
-/// How far inside every half-space a witness viewpoint must lie ([`has_witness`]): a
-/// thousand times the tolerances of the clips ([`EPS`]) and ten times [`MIN_WIDTH`].
-const WITNESS_MARGIN: f64 = 1e-6;
-
-/// Distances from `a`'s centroid, along the centroids' direction, at which [`has_witness`]
-/// looks for a witness (inside the viewpoint box, `FAR` = 64, from a centroid in the unit
-/// ball).
-const WITNESS_REACH: [f64; 3] = [40.0, 12.0, 4.0];
-
-/// Whether the reduced occlusion region `O_{a->b} ∩ E_from ∩ E_to` provably has an interior,
-/// without clipping: a viewpoint `v` at least [`WITNESS_MARGIN`] inside every half-space of
-/// `occl` (the facets of `O_{a->b}`) and of both rendering regions (each region is the
-/// intersection of its faces' half-spaces) is the centre of a ball of that radius inside
-/// the exact region. [`Graph::try_edge`]'s clips only ever drop what lies beyond a plane
-/// by more than [`EPS`] (`1e-9`, rounding of the clipped vertices about `1e-13` in the
-/// viewpoint box), so every region they produce on the way holds that ball too: no clip
-/// finds every vertex within [`MIN_WIDTH`] of the outside (the ball reaches `2e-6` past
-/// the plane), and the result spans more than `MIN_WIDTH` in every direction; the clip
-/// would therefore have found the edge. Candidates: `c_a + s (c_a - c_b)/|c_a - c_b|` (in
-/// `O_{a->b}` by its definition, `a + cone(a - b)`) for the distances of
-/// [`WITNESS_REACH`]; when none is a witness, the clip decides.
-fn has_witness(ca: DVec3, cb: DVec3, occl: &[Plane], from: &Region, to: &Region) -> bool {
-    let w = (ca - cb).normalize_or_zero();
-    if w == DVec3::ZERO {
-        return false;
-    }
-    WITNESS_REACH.iter().any(|s| {
-        let v = ca + w * *s;
-        occl.iter()
-            .chain(&from.planes)
-            .chain(&to.planes)
-            .all(|p| p.eval(v) >= WITNESS_MARGIN)
-    })
-}
-
 /// What building rows of a graph did ([`Graph::add_rows`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RowStats {
@@ -321,6 +221,26 @@ pub enum RowWork {
 struct Row {
     to: Vec<u32>,
     stats: RowStats,
+}
+
+/// The occlusion planes of the last pair of triangles asked for: the copies of a triangle
+/// are consecutive nodes, so the pairs of copies of two triangles come one after another
+/// in [`Graph::unit_rows`] and share one computation.
+#[derive(Default)]
+struct OcclCache {
+    key: Option<(u32, u32)>,
+    planes: OcclPlanes,
+}
+
+impl OcclCache {
+    /// The occlusion planes of triangles `ta` (`a`) and `tb` (`b`).
+    fn get(&mut self, ta: u32, tb: u32, a: &[DVec3; 3], b: &[DVec3; 3]) -> &OcclPlanes {
+        if self.key != Some((ta, tb)) {
+            self.planes = occlusion_planes(a, b);
+            self.key = Some((ta, tb));
+        }
+        &self.planes
+    }
 }
 
 /// What every row reads besides the graph's nodes: per node its facing plane and region
@@ -439,12 +359,7 @@ impl Graph {
         };
         let mut done = 0u64;
         for batch in units.chunks(per_batch) {
-            let unit_rows = |unit: &&[usize]| -> Vec<Row> {
-                let mut occl_cache: HashMap<(u32, u32), Vec<Plane>> = HashMap::new();
-                unit.iter()
-                    .map(|&i| self.row(i, &inputs, &mut occl_cache))
-                    .collect()
-            };
+            let unit_rows = |unit: &&[usize]| self.unit_rows(unit, &inputs);
             let found: Vec<Vec<Row>> = match work {
                 RowWork::Sequential => batch.iter().map(unit_rows).collect(),
                 RowWork::Parallel => {
@@ -496,25 +411,27 @@ impl Graph {
         }
     }
 
-    /// Row `i`: every node `j` that node `i` occludes from some viewpoint of both regions,
-    /// in increasing order. `occl_cache` keeps the occlusion planes of `i`'s triangle's
-    /// pairs for its other copy's row.
-    fn row(
-        &self,
-        i: usize,
-        inputs: &RowInputs,
-        occl_cache: &mut HashMap<(u32, u32), Vec<Plane>>,
-    ) -> Row {
-        let mut row = Row {
-            to: Vec::new(),
-            stats: RowStats::default(),
-        };
+    /// The rows of one unit (the copies of one triangle, `unit`): for each, every node `j`
+    /// it occludes from some viewpoint of both regions, in increasing order. The rows are
+    /// walked together, so the occlusion planes of a pair of triangles are computed once for
+    /// every pair of their copies ([`OcclCache`]).
+    fn unit_rows(&self, unit: &[usize], inputs: &RowInputs) -> Vec<Row> {
+        let mut rows: Vec<Row> = unit
+            .iter()
+            .map(|_| Row {
+                to: Vec::new(),
+                stats: RowStats::default(),
+            })
+            .collect();
+        let mut cache = OcclCache::default();
         for j in 0..self.nodes.len() {
-            if self.pair(i, j, inputs, occl_cache, &mut row.stats) {
-                row.to.push(j as u32);
+            for (row, &i) in rows.iter_mut().zip(unit) {
+                if self.pair(i, j, inputs, &mut cache, &mut row.stats) {
+                    row.to.push(j as u32);
+                }
             }
         }
-        row
+        rows
     }
 
     /// Whether `i -> j` is an edge: the cheap rejections, then a witness viewpoint or the
@@ -524,7 +441,7 @@ impl Graph {
         i: usize,
         j: usize,
         inputs: &RowInputs,
-        occl_cache: &mut HashMap<(u32, u32), Vec<Plane>>,
+        cache: &mut OcclCache,
         stats: &mut RowStats,
     ) -> bool {
         let RowInputs {
@@ -557,11 +474,16 @@ impl Graph {
         {
             return false;
         }
-        let occl = occl_cache
-            .entry((ti, tj))
-            .or_insert_with(|| occlusion_planes(a, b));
         stats.pairs += 1;
-        if has_witness(centroids[ti as usize], centroids[tj as usize], occl, ri, rj) {
+        // A witness viewpoint, proven from the triangles alone where it can be (most edges),
+        // else from the occlusion region's facets; then the clip.
+        let witness = Witness::new(centroids[ti as usize], centroids[tj as usize], ri, rj);
+        if witness.as_ref().is_some_and(|w| w.proven_by_cone(a, b)) {
+            stats.witnessed += 1;
+            return true;
+        }
+        let occl = cache.get(ti, tj, a, b);
+        if witness.is_some_and(|w| w.proven_by_planes(occl)) {
             stats.witnessed += 1;
             true
         } else if self.occludes(i, j, occl) {
@@ -580,7 +502,7 @@ impl Graph {
         let inputs = self.row_inputs();
         pairs
             .par_iter()
-            .map_init(HashMap::new, |cache, &(i, j)| {
+            .map_init(OcclCache::default, |cache, &(i, j)| {
                 self.pair(i, j, &inputs, cache, &mut RowStats::default())
             })
             .collect()
@@ -712,7 +634,7 @@ impl Graph {
     }
 
     /// The occlusion region of the triangles of an edge's endpoints (section 4.1.1).
-    pub fn occl(&self, e: &Edge) -> Vec<Plane> {
+    pub fn occl(&self, e: &Edge) -> OcclPlanes {
         let t = |x: u32| &self.tris[self.nodes[x as usize].tri as usize];
         occlusion_planes(t(e.from), t(e.to))
     }

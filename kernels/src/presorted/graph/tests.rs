@@ -80,7 +80,7 @@ fn a_witness_is_found_only_for_edges_and_for_most_of_them() {
         })
         .collect();
     let dirs = directions(6).unwrap();
-    let (mut witnessed, mut edges) = (0, 0);
+    let (mut witnessed, mut by_cone, mut edges) = (0, 0, 0);
     for k in 0..dirs.len() {
         let part = partition_region(&dirs, k);
         for (ia, a) in tris.iter().enumerate() {
@@ -98,6 +98,12 @@ fn a_witness_is_found_only_for_edges_and_for_most_of_them() {
                         witnessed += 1;
                         assert!(edge, "pair {ia} -> {ib} witnessed without an edge");
                     }
+                    // The proof without the occlusion region's facets.
+                    let w = Witness::new(ca, cb, &ea, &eb);
+                    if w.is_some_and(|w| w.proven_by_cone(a, b)) {
+                        by_cone += 1;
+                        assert!(edge, "pair {ia} -> {ib} proven by the cone without an edge");
+                    }
                     edges += usize::from(edge);
                 }
             }
@@ -107,6 +113,10 @@ fn a_witness_is_found_only_for_edges_and_for_most_of_them() {
     assert!(
         witnessed * 2 > edges,
         "{witnessed} of {edges} edges witnessed"
+    );
+    assert!(
+        by_cone * 10 > witnessed * 9,
+        "{by_cone} of {witnessed} witnesses proven by the cone"
     );
 }
 
@@ -284,4 +294,34 @@ fn in_edges_indexed_or_not_are_the_same_and_follow_splits() {
         assert_eq!(g.in_edges(y).copied().collect::<Vec<_>>(), live_in);
         assert!(g.in_ids(y).iter().all(|&e| g.is_alive(e as usize)));
     }
+}
+
+#[test]
+fn the_cone_proves_no_witness_for_a_flat_occlusion_region() {
+    // Two triangles side by side in the plane z = 0: `O_{a->b}` lies in that plane (no
+    // interior), so no candidate may be proven, however deep inside the regions it is;
+    // with `b` lowered by 0.01 the region has an interior and the candidates prove it.
+    let a = [
+        DVec3::new(0.0, 0.0, 0.0),
+        DVec3::new(0.1, 0.0, 0.0),
+        DVec3::new(0.0, 0.1, 0.0),
+    ];
+    let everywhere = Region::cube(100.0);
+    let proven = |b: [DVec3; 3]| {
+        let (ca, cb) = ((a[0] + a[1] + a[2]) / 3.0, (b[0] + b[1] + b[2]) / 3.0);
+        Witness::new(ca, cb, &everywhere, &everywhere).is_some_and(|w| w.proven_by_cone(&a, &b))
+    };
+    let beside = a.map(|p| p - DVec3::new(0.5, 0.2, 0.0));
+    assert!(
+        !proven(beside),
+        "a flat occlusion region proven to have an interior"
+    );
+    let below = a.map(|p| p - DVec3::new(0.5, 0.2, 0.01));
+    assert!(proven(below), "a solid occlusion region not proven");
+    // Nearly flat: a tilt of 1e-9 leaves no room for a ball of radius WITNESS_MARGIN.
+    let barely = a.map(|p| p - DVec3::new(0.5, 0.2, 1e-9));
+    assert!(
+        !proven(barely),
+        "a sliver proven to hold a ball of radius WITNESS_MARGIN"
+    );
 }
