@@ -15,7 +15,7 @@ use super::separate::Shape;
 mod decide;
 #[cfg(test)]
 use decide::has_witness;
-use decide::{bounding_sphere, centre, cone_misses, may_occlude, Witness};
+use decide::{bounding_sphere, centre, cone_misses, may_occlude, outside, Witness};
 
 /// One triangle instance.
 #[derive(Clone, Debug)]
@@ -54,9 +54,11 @@ pub const EDGE_BYTES: u64 = (std::mem::size_of::<Edge>() + std::mem::size_of::<u
 pub const IN_EDGE_BYTES: u64 = 2 * std::mem::size_of::<u32>() as u64;
 
 /// Bytes per node beyond its region's heap: the node, its out-list, and what building the
-/// rows keeps per node (its facing plane and region centre) and per triangle (bounding
-/// sphere and centroid, counted per node).
+/// rows keeps per node (its facing plane, region centre and where its vertices start in
+/// the rows' copy of them) and per triangle (bounding sphere and centroid, counted per
+/// node).
 pub const NODE_BYTES: u64 = (std::mem::size_of::<Node>()
+    + std::mem::size_of::<usize>()
     + std::mem::size_of::<Vec<u32>>()
     + std::mem::size_of::<Plane>()
     + 2 * std::mem::size_of::<DVec3>()
@@ -250,6 +252,18 @@ struct RowInputs {
     spheres: Vec<(DVec3, f64)>,
     centroids: Vec<DVec3>,
     centres: Vec<DVec3>,
+    /// Every node's region vertices, one node after another (`verts[at[x]..at[x + 1]]`): a
+    /// row's cheap tests read every node's, and from scattered regions each node's first
+    /// read missed the cache.
+    verts: Vec<DVec3>,
+    at: Vec<usize>,
+}
+
+impl RowInputs {
+    /// The vertices of node `x`'s rendering region.
+    fn verts_of(&self, x: usize) -> &[DVec3] {
+        &self.verts[self.at[x]..self.at[x + 1]]
+    }
 }
 
 /// Rows a thread takes at once under [`RowWork::Parallel`] (a row of the 48K dragon costs
@@ -280,7 +294,11 @@ impl Graph {
         let nodes: u64 = self
             .nodes
             .iter()
-            .map(|x| NODE_BYTES + x.region.heap_bytes() as u64)
+            .map(|x| {
+                // (The rows' copy of the region's vertices too: RowInputs.)
+                let copy = x.region.verts.len() * std::mem::size_of::<DVec3>();
+                NODE_BYTES + (x.region.heap_bytes() + copy) as u64
+            })
             .sum();
         let per_edge = EDGE_BYTES + if in_edges { IN_EDGE_BYTES } else { 0 };
         nodes + edges * per_edge + edges.div_ceil(8)
@@ -408,6 +426,17 @@ impl Graph {
             spheres: tris.iter().map(bounding_sphere).collect(),
             centroids: tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect(),
             centres: self.nodes.iter().map(|x| centre(&x.region)).collect(),
+            verts: self
+                .nodes
+                .iter()
+                .flat_map(|x| x.region.verts.iter().copied())
+                .collect(),
+            at: std::iter::once(0)
+                .chain(self.nodes.iter().scan(0, |end, x| {
+                    *end += x.region.verts.len();
+                    Some(*end)
+                }))
+                .collect(),
         }
     }
 
@@ -449,6 +478,7 @@ impl Graph {
             spheres,
             centroids,
             centres,
+            ..
         } = inputs;
         let tris = &self.tris;
         let (ti, tj) = (self.nodes[i].tri, self.nodes[j].tri);
@@ -464,13 +494,14 @@ impl Graph {
         }
         // Each region must reach into the other's facing half-space.
         let (ri, rj) = (&self.nodes[i].region, &self.nodes[j].region);
-        if ri.outside_any(&planes[j..=j]) || rj.outside_any(&planes[i..=i]) {
+        let (vi, vj) = (inputs.verts_of(i), inputs.verts_of(j));
+        if outside(vi, &planes[j]) || outside(vj, &planes[i]) {
             return false;
         }
         let (sa, sb) = (spheres[ti as usize], spheres[tj as usize]);
-        if cone_misses(sa, sb, ri, centres[i])
-            || cone_misses(sa, sb, rj, centres[j])
-            || !may_occlude(a, b, ri, rj)
+        if cone_misses(sa, sb, vi, centres[i])
+            || cone_misses(sa, sb, vj, centres[j])
+            || !may_occlude(a, b, vi, vj)
         {
             return false;
         }

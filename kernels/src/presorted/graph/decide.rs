@@ -11,7 +11,7 @@ use super::super::geom::{Plane, Region, EPS, MIN_WIDTH};
 /// than the occlusion region: when every direction `a_k - b_l` has a positive component
 /// along `u` (from `b`'s centroid to `a`'s), `O_{a->b} = a + cone(a - b)` lies in the
 /// half-space `u.x >= min_k u.a_k`, which both regions must reach into.
-pub(super) fn may_occlude(a: &[DVec3; 3], b: &[DVec3; 3], ra: &Region, rb: &Region) -> bool {
+pub(super) fn may_occlude(a: &[DVec3; 3], b: &[DVec3; 3], ra: &[DVec3], rb: &[DVec3]) -> bool {
     let u = (a[0] + a[1] + a[2] - b[0] - b[1] - b[2]) / 3.0;
     if a.iter().any(|p| b.iter().any(|q| (*p - *q).dot(u) <= 0.0)) {
         return true;
@@ -20,11 +20,22 @@ pub(super) fn may_occlude(a: &[DVec3; 3], b: &[DVec3; 3], ra: &Region, rb: &Regi
         return true;
     };
     let lo = a.iter().map(|p| h.eval(*p)).fold(f64::INFINITY, f64::min);
-    let bound = [Plane {
+    let bound = Plane {
         n: h.n,
         d: h.d - lo,
-    }];
-    !(ra.outside_any(&bound) || rb.outside_any(&bound))
+    };
+    !(outside(ra, &bound) || outside(rb, &bound))
+}
+
+/// Whether a region, given by its vertices `verts`, lies wholly outside `p` (beyond the
+/// width of a sliver): [`Region::outside_any`] with one plane, on the vertices alone (the
+/// rows read them from one array, [`super::RowInputs`], not from each node's region).
+pub(super) fn outside(verts: &[DVec3], p: &Plane) -> bool {
+    let mut hi = f64::NEG_INFINITY;
+    for v in verts {
+        hi = hi.max(p.eval(*v));
+    }
+    verts.is_empty() || hi < MIN_WIDTH
 }
 
 /// A sphere holding a triangle: its centroid and the distance to its farthest vertex.
@@ -34,7 +45,7 @@ pub(super) fn bounding_sphere(t: &[DVec3; 3]) -> (DVec3, f64) {
     (c, r * (1.0 + 1e-9) + EPS)
 }
 
-/// Whether `region` lies wholly outside a convex set holding `O_{a->b}` (a conservative
+/// Whether a region (its vertices `region`) lies wholly outside a convex set holding `O_{a->b}` (a conservative
 /// rejection, cheaper than the occlusion region): with `a` in the ball `(ca, ra)` and `b` in
 /// `(cb, rb)` (disjoint), `O_{a->b} = a + cone(a - b)` lies in the ball of `a` plus the
 /// circular cone of axis `w = (ca - cb)/|ca - cb|` and half-angle `asin((ra + rb)/|ca - cb|)`.
@@ -44,7 +55,7 @@ pub(super) fn bounding_sphere(t: &[DVec3; 3]) -> (DVec3, f64) {
 pub(super) fn cone_misses(
     sa: (DVec3, f64),
     sb: (DVec3, f64),
-    region: &Region,
+    region: &[DVec3],
     centre: DVec3,
 ) -> bool {
     let ((ca, ra), (cb, rb)) = (sa, sb);
@@ -67,13 +78,9 @@ pub(super) fn cone_misses(
     } else {
         w
     };
-    [w, toward].iter().any(|n| {
-        *n != DVec3::ZERO
-            && region
-                .verts
-                .iter()
-                .all(|v| n.dot(*v - ca) < -ra - MIN_WIDTH)
-    })
+    [w, toward]
+        .iter()
+        .any(|n| *n != DVec3::ZERO && region.iter().all(|v| n.dot(*v - ca) < -ra - MIN_WIDTH))
 }
 
 /// The mean of a region's vertices (the point [`cone_misses`] aims at).

@@ -46,7 +46,9 @@ fn the_cone_test_rejects_only_pairs_without_an_edge() {
                 let occl = occlusion_planes(a, b);
                 let reduced = ea.cut(&occl).intersect(&eb);
                 let (sa, sb) = (bounding_sphere(a), bounding_sphere(b));
-                if cone_misses(sa, sb, &ea, centre(&ea)) || cone_misses(sa, sb, &eb, centre(&eb)) {
+                if cone_misses(sa, sb, &ea.verts, centre(&ea))
+                    || cone_misses(sa, sb, &eb.verts, centre(&eb))
+                {
                     rejected += 1;
                     assert!(
                         reduced.is_empty(),
