@@ -58,10 +58,14 @@ impl Plane {
 /// intersection of `m` half-spaces from plane triples costs O(m^4).
 #[derive(Clone, Debug, Default)]
 pub struct Region {
-    /// The half-spaces of the faces (`planes[k]` bounds `loops[k]`).
+    /// The half-spaces of the faces (`planes[k]` bounds face `k`).
     pub planes: Vec<Plane>,
-    /// Each face's vertices, in order around it.
-    loops: Vec<Vec<DVec3>>,
+    /// Each face's vertices, in order around it, one face after another: face `k` is
+    /// `rings[ends[k - 1]..ends[k]]` (one allocation for every face: a graph clips
+    /// regions billions of times).
+    rings: Vec<DVec3>,
+    /// Where each face's vertices end in `rings`.
+    ends: Vec<u32>,
     /// The vertices (each once).
     pub verts: Vec<DVec3>,
 }
@@ -93,7 +97,8 @@ impl Region {
                 .iter()
                 .map(|(n, _)| Plane { n: *n, d: half })
                 .collect(),
-            loops: faces.iter().map(|(_, l)| l.map(c).to_vec()).collect(),
+            rings: faces.iter().flat_map(|(_, l)| l.map(c)).collect(),
+            ends: (1..=6).map(|k| 4 * k).collect(),
             verts: (0..8).map(c).collect(),
         }
     }
@@ -114,12 +119,8 @@ impl Region {
     /// Bytes the region holds on the heap (its planes, face loops and vertices).
     pub fn heap_bytes(&self) -> usize {
         self.planes.capacity() * std::mem::size_of::<Plane>()
-            + self.loops.capacity() * std::mem::size_of::<Vec<DVec3>>()
-            + self
-                .loops
-                .iter()
-                .map(|l| l.capacity() * std::mem::size_of::<DVec3>())
-                .sum::<usize>()
+            + self.rings.capacity() * std::mem::size_of::<DVec3>()
+            + self.ends.capacity() * std::mem::size_of::<u32>()
             + self.verts.capacity() * std::mem::size_of::<DVec3>()
     }
 
@@ -128,14 +129,26 @@ impl Region {
     pub fn footprint(&self) -> usize {
         let blocks = [
             self.planes.capacity(),
-            self.loops.capacity(),
+            self.rings.capacity(),
+            self.ends.capacity(),
             self.verts.capacity(),
         ]
         .into_iter()
-        .chain(self.loops.iter().map(Vec::capacity))
         .filter(|&c| c > 0)
         .count();
         self.heap_bytes() + 16 * blocks
+    }
+
+    /// Each face's half-space and its vertices in order around it.
+    fn faces(&self) -> impl Iterator<Item = (&Plane, &[DVec3])> + '_ {
+        self.planes
+            .iter()
+            .zip(&self.ends)
+            .scan(0, |start, (pl, &end)| {
+                let face = &self.rings[*start..end as usize];
+                *start = end as usize;
+                Some((pl, face))
+            })
     }
 
     /// Whether the region has an interior.
@@ -158,37 +171,41 @@ impl Region {
             return Region::default();
         }
         let mut planes = Vec::with_capacity(self.planes.len() + 1);
-        let mut loops = Vec::with_capacity(self.planes.len() + 1);
-        let mut cap: Vec<DVec3> = Vec::new();
-        let mut d: Vec<f64> = Vec::new();
-        for (pl, lp) in self.planes.iter().zip(&self.loops) {
+        let mut rings: Vec<DVec3> = Vec::with_capacity(self.rings.len() + 2 * self.planes.len());
+        let mut ends: Vec<u32> = Vec::with_capacity(self.planes.len() + 1);
+        let mut cap: SmallVec<[DVec3; 16]> = SmallVec::new();
+        let mut d: SmallVec<[f64; 16]> = SmallVec::new();
+        for (pl, lp) in self.faces() {
             d.clear();
             d.extend(lp.iter().map(|v| h.eval(*v)));
             if d.iter().all(|x| x.abs() <= EPS) {
                 // On the cutting plane: the cap replaces it.
                 continue;
             }
-            let mut out: Vec<DVec3> = Vec::with_capacity(lp.len() + 2);
+            // The clipped face, at the end of `rings`.
+            let start = rings.len();
             for i in 0..lp.len() {
                 let j = (i + 1) % lp.len();
                 let (a, b) = (lp[i], lp[j]);
                 let (da, db) = (d[i], d[j]);
                 if da >= -EPS {
-                    out.push(a);
+                    rings.push(a);
                     if da <= EPS {
                         cap.push(a);
                     }
                 }
                 if (da > EPS && db < -EPS) || (da < -EPS && db > EPS) {
                     let x = a + (b - a) * (da / (da - db));
-                    out.push(x);
+                    rings.push(x);
                     cap.push(x);
                 }
             }
-            dedup_loop(&mut out);
-            if out.len() >= 3 {
+            dedup_loop(&mut rings, start);
+            if rings.len() - start >= 3 {
                 planes.push(*pl);
-                loops.push(out);
+                ends.push(rings.len() as u32);
+            } else {
+                rings.truncate(start);
             }
         }
         dedup_small(&mut cap);
@@ -226,14 +243,16 @@ impl Region {
         }
         if cap.len() >= 3 {
             planes.push(*h);
-            loops.push(cap);
+            rings.extend_from_slice(&cap);
+            ends.push(rings.len() as u32);
         }
         if !spans_volume(&verts) {
             return Region::default();
         }
         Region {
             planes,
-            loops,
+            rings,
+            ends,
             verts,
         }
     }
@@ -286,7 +305,7 @@ impl Region {
     /// one direction).
     pub fn edge_dirs(&self) -> Vec<DVec3> {
         let mut out: Vec<DVec3> = Vec::new();
-        for l in &self.loops {
+        for (_, l) in self.faces() {
             for i in 0..l.len() {
                 let d = (l[(i + 1) % l.len()] - l[i]).normalize_or_zero();
                 if d != DVec3::ZERO && !out.iter().any(|e| e.cross(d).length_squared() < 1e-20) {
@@ -306,26 +325,38 @@ impl Region {
     }
 }
 
-/// Removes consecutive (cyclically) points of a loop closer than [`MERGE`].
-fn dedup_loop(l: &mut Vec<DVec3>) {
-    l.dedup_by(|a, b| (*a - *b).length_squared() < MERGE * MERGE);
-    while l.len() > 1 && (l[0] - l[l.len() - 1]).length_squared() < MERGE * MERGE {
-        l.pop();
+/// Removes consecutive (cyclically) points closer than [`MERGE`] from the loop that
+/// makes up `ring[start..]`.
+fn dedup_loop(ring: &mut Vec<DVec3>, start: usize) {
+    let close = |a: DVec3, b: DVec3| (a - b).length_squared() < MERGE * MERGE;
+    // (Vec::dedup_by on the loop's part: each point against the last one kept.)
+    let mut kept = start;
+    for k in start..ring.len() {
+        if k == start || !close(ring[k], ring[kept - 1]) {
+            ring[kept] = ring[k];
+            kept += 1;
+        }
+    }
+    ring.truncate(kept);
+    while ring.len() - start > 1 && close(ring[start], ring[ring.len() - 1]) {
+        ring.pop();
     }
 }
 
 /// Removes points closer than [`MERGE`] to an earlier one (few points: quadratic).
-fn dedup_small(v: &mut Vec<DVec3>) {
-    let mut out: Vec<DVec3> = Vec::with_capacity(v.len());
-    for &p in v.iter() {
-        if !out
+fn dedup_small(v: &mut SmallVec<[DVec3; 16]>) {
+    let mut kept = 0;
+    for k in 0..v.len() {
+        let p = v[k];
+        if !v[..kept]
             .iter()
             .any(|q| (p - *q).length_squared() < MERGE * MERGE)
         {
-            out.push(p);
+            v[kept] = p;
+            kept += 1;
         }
     }
-    *v = out;
+    v.truncate(kept);
 }
 
 /// Whether points span a solid at least [`MIN_WIDTH`] thick.
