@@ -677,6 +677,32 @@ fn long_acceptance_presorted_dragon_res4_shipped_lists_256_views() {
     shipped_lists_are_exact("dragon_res4_dedup", &random_views(256));
 }
 
+/// The acceptance on lists too large to ship (dragon_res3's are 3.3 MB for a 48K-triangle
+/// mesh): the mesh and its lists named by `FRAGRACE_PRESORT_MESH` and
+/// `FRAGRACE_PRESORT_LISTS`, the first `FRAGRACE_PRESORT_VIEWS` (default 256) of the
+/// acceptances' random viewpoints. Fails when the variables are not set.
+#[test]
+#[ignore = "long tier, needs FRAGRACE_PRESORT_MESH and FRAGRACE_PRESORT_LISTS"]
+fn long_acceptance_presorted_lists_named_by_the_environment() {
+    let var = |name: &str| {
+        std::env::var(name).unwrap_or_else(|_| panic!("set {name} (see the test's docs)"))
+    };
+    let (mesh, lists) = (var("FRAGRACE_PRESORT_MESH"), var("FRAGRACE_PRESORT_LISTS"));
+    let views: usize = std::env::var("FRAGRACE_PRESORT_VIEWS")
+        .map_or(256, |v| v.parse().expect("FRAGRACE_PRESORT_VIEWS: a count"));
+    let scene = SceneSpec::Obj {
+        path: mesh.into(),
+        sha256: None,
+    };
+    let inside = exact_from_views(
+        &scene,
+        Path::new(&lists),
+        &["presorted"],
+        &random_views(views),
+    );
+    assert_eq!(inside, 0, "views inside the bounding cube");
+}
+
 /// The shipped deduplicated dragon is `assets/dragon_res4.obj.gz` without its duplicate
 /// triangles (`presorted::input::dedupe`: the first copy of each kept, the rest in order):
 /// the same positions and normals, 502 triangles fewer.
