@@ -682,8 +682,8 @@ fn long_acceptance_presorted_dragon_res4_shipped_lists_256_views() {
 /// `FRAGRACE_PRESORT_LISTS`, the first `FRAGRACE_PRESORT_VIEWS` (default 256) of the
 /// acceptances' random viewpoints. Fails when the variables are not set.
 #[test]
-#[ignore = "long tier, needs FRAGRACE_PRESORT_MESH and FRAGRACE_PRESORT_LISTS"]
-fn long_acceptance_presorted_lists_named_by_the_environment() {
+#[ignore = "needs FRAGRACE_PRESORT_MESH and FRAGRACE_PRESORT_LISTS (not in the long tier)"]
+fn env_acceptance_presorted_lists_named_by_the_environment() {
     let var = |name: &str| {
         std::env::var(name).unwrap_or_else(|_| panic!("set {name} (see the test's docs)"))
     };
