@@ -195,9 +195,9 @@ pub fn facing(t: &[DVec3; 3], back: bool) -> Plane {
 /// What building rows of a graph did ([`Graph::add_rows`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RowStats {
-    /// Pairs that passed the cheap rejections (their occlusion region was needed).
+    /// Pairs that passed the cheap rejections (a witness or the clip was needed).
     pub pairs: u64,
-    /// Of those, edges proven by a witness viewpoint ([`has_witness`]).
+    /// Of those, edges proven by a witness viewpoint (`decide::Witness`).
     pub witnessed: u64,
     /// Edges found by clipping the reduced region.
     pub clipped: u64,

@@ -88,11 +88,11 @@ pub(super) fn centre(region: &Region) -> DVec3 {
     region.verts.iter().copied().sum::<DVec3>() / region.verts.len() as f64
 }
 
-/// How far inside every half-space a witness viewpoint must lie ([`has_witness`]): a
+/// How far inside every half-space a witness viewpoint must lie ([`Witness`]): a
 /// thousand times the tolerances of the clips ([`EPS`]) and ten times [`MIN_WIDTH`].
 pub(super) const WITNESS_MARGIN: f64 = 1e-6;
 
-/// Distances from `a`'s centroid, along the centroids' direction, at which [`has_witness`]
+/// Distances from `a`'s centroid, along the centroids' direction, at which [`Witness`]
 /// looks for a witness (inside the viewpoint box, `FAR` = 64, from a centroid in the unit
 /// ball).
 pub(super) const WITNESS_REACH: [f64; 3] = [40.0, 12.0, 4.0];
@@ -101,14 +101,16 @@ pub(super) const WITNESS_REACH: [f64; 3] = [40.0, 12.0, 4.0];
 /// without clipping: a viewpoint `v` at least [`WITNESS_MARGIN`] inside every half-space of
 /// `occl` (the facets of `O_{a->b}`) and of both rendering regions (each region is the
 /// intersection of its faces' half-spaces) is the centre of a ball of that radius inside
-/// the exact region. [`Graph::try_edge`]'s clips only ever drop what lies beyond a plane
+/// the exact region. [`super::Graph::try_edge`]'s clips only ever drop what lies beyond a plane
 /// by more than [`EPS`] (`1e-9`, rounding of the clipped vertices about `1e-13` in the
 /// viewpoint box), so every region they produce on the way holds that ball too: no clip
 /// finds every vertex within [`MIN_WIDTH`] of the outside (the ball reaches `2e-6` past
 /// the plane), and the result spans more than `MIN_WIDTH` in every direction; the clip
 /// would therefore have found the edge. Candidates: `c_a + s (c_a - c_b)/|c_a - c_b|` (in
 /// `O_{a->b}` by its definition, `a + cone(a - b)`) for the distances of
-/// [`WITNESS_REACH`]; when none is a witness, the clip decides.
+/// [`WITNESS_REACH`]; when none is a witness, the clip decides. (The graph asks
+/// [`Witness`] directly, which tries [`Witness::proven_by_cone`] before the facets; this
+/// whole test is the tests' reference.)
 #[cfg(test)]
 pub(super) fn has_witness(
     ca: DVec3,
@@ -126,7 +128,7 @@ fn inside(v: DVec3, planes: &[Plane]) -> bool {
 }
 
 /// The candidate witness viewpoints of a pair that lie [`WITNESS_MARGIN`] inside both
-/// rendering regions ([`has_witness`] is the test): what remains to prove is that one of
+/// rendering regions (the argument is `has_witness`'s): what remains to prove is that one of
 /// them lies as deep inside the occlusion region `O_{a->b}`, which
 /// [`Witness::proven_by_cone`] does from the triangles alone and
 /// [`Witness::proven_by_planes`] from the region's facets (computing those costs more than
