@@ -281,7 +281,7 @@ impl Region {
     /// sliver): the paper's test before an intersection, "all vertices on the outside of
     /// one of the planes".
     pub fn outside_any(&self, planes: &[Plane]) -> bool {
-        self.is_empty() || planes.iter().any(|p| self.range(p).1 < MIN_WIDTH)
+        self.is_empty() || planes.iter().any(|p| verts_outside(&self.verts, p))
     }
 
     /// The smallest and largest value of `p` over the vertices.
@@ -323,6 +323,18 @@ impl Region {
         }
         self.cut(&o.planes)
     }
+}
+
+/// Whether a region, given by its vertices `verts`, lies wholly outside `p` (beyond the
+/// width of a sliver; no vertices: outside): [`Region::outside_any`] with one plane, for
+/// callers that hold the vertices apart from their region (the graph's rows read every
+/// node's from one array).
+pub fn verts_outside(verts: &[DVec3], p: &Plane) -> bool {
+    let hi = verts
+        .iter()
+        .map(|v| p.eval(*v))
+        .fold(f64::NEG_INFINITY, f64::max);
+    hi < MIN_WIDTH
 }
 
 /// Removes consecutive (cyclically) points closer than [`MERGE`] from the loop that

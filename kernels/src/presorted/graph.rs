@@ -9,13 +9,13 @@ use std::sync::Arc;
 
 use glam::DVec3;
 
-use super::geom::{occlusion_planes, OcclPlanes, Plane, Region, EPS};
+use super::geom::{occlusion_planes, verts_outside, OcclPlanes, Plane, Region, EPS};
 use super::separate::Shape;
 
 mod decide;
 #[cfg(test)]
 use decide::has_witness;
-use decide::{bounding_sphere, centre, cone_misses, may_occlude, outside, Witness};
+use decide::{bounding_sphere, centre, cone_misses, may_occlude, Witness};
 
 /// One triangle instance.
 #[derive(Clone, Debug)]
@@ -218,8 +218,9 @@ pub enum RowWork {
     Parallel,
 }
 
-/// The edges one row found ([`Graph::row`]): the nodes it occludes, in increasing order,
-/// and how its pairs were decided (`charged` stays 0: the caller charges the row).
+/// The edges one row found ([`Graph::unit_rows`]): the nodes it occludes, in increasing
+/// order, and how its pairs were decided (`charged` stays 0: the caller charges the row).
+#[derive(Default)]
 struct Row {
     to: Vec<u32>,
     stats: RowStats,
@@ -445,13 +446,7 @@ impl Graph {
     /// walked together, so the occlusion planes of a pair of triangles are computed once for
     /// every pair of their copies ([`OcclCache`]).
     fn unit_rows(&self, unit: &[usize], inputs: &RowInputs) -> Vec<Row> {
-        let mut rows: Vec<Row> = unit
-            .iter()
-            .map(|_| Row {
-                to: Vec::new(),
-                stats: RowStats::default(),
-            })
-            .collect();
+        let mut rows: Vec<Row> = unit.iter().map(|_| Row::default()).collect();
         let mut cache = OcclCache::default();
         for j in 0..self.nodes.len() {
             for (row, &i) in rows.iter_mut().zip(unit) {
@@ -495,7 +490,7 @@ impl Graph {
         // Each region must reach into the other's facing half-space.
         let (ri, rj) = (&self.nodes[i].region, &self.nodes[j].region);
         let (vi, vj) = (inputs.verts_of(i), inputs.verts_of(j));
-        if outside(vi, &planes[j]) || outside(vj, &planes[i]) {
+        if verts_outside(vi, &planes[j]) || verts_outside(vj, &planes[i]) {
             return false;
         }
         let (sa, sb) = (spheres[ti as usize], spheres[tj as usize]);

@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 
-use super::super::geom::{Plane, Region, EPS, MIN_WIDTH};
+use super::super::geom::{verts_outside, Plane, Region, EPS, MIN_WIDTH};
 
 /// A necessary condition for `a` to occlude `b` from a viewpoint of both regions, cheaper
 /// than the occlusion region: when every direction `a_k - b_l` has a positive component
@@ -24,18 +24,7 @@ pub(super) fn may_occlude(a: &[DVec3; 3], b: &[DVec3; 3], ra: &[DVec3], rb: &[DV
         n: h.n,
         d: h.d - lo,
     };
-    !(outside(ra, &bound) || outside(rb, &bound))
-}
-
-/// Whether a region, given by its vertices `verts`, lies wholly outside `p` (beyond the
-/// width of a sliver): [`Region::outside_any`] with one plane, on the vertices alone (the
-/// rows read them from one array, [`super::RowInputs`], not from each node's region).
-pub(super) fn outside(verts: &[DVec3], p: &Plane) -> bool {
-    let mut hi = f64::NEG_INFINITY;
-    for v in verts {
-        hi = hi.max(p.eval(*v));
-    }
-    verts.is_empty() || hi < MIN_WIDTH
+    !(verts_outside(ra, &bound) || verts_outside(rb, &bound))
 }
 
 /// A sphere holding a triangle: its centroid and the distance to its farthest vertex.
