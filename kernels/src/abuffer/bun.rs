@@ -24,7 +24,7 @@
 
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
-use super::ll::{insert, pool_from_params, ListPool, ListResolve};
+use super::ll::{list_insert, pool_from_params, ListPool, ListResolve};
 use super::walk::Walk;
 use super::run::AbRun;
 use crate::algo::{
@@ -112,7 +112,7 @@ impl FragmentKernel for BunInsert {
     async fn shade(&self, f: impl Fragment) {
         let b = bucket(&f, self.zmin, self.zmax, self.buckets).await;
         let head = f.pixel_index() * self.buckets + b;
-        insert(&f, &self.pool, head, b, b * self.region, self.region, false).await;
+        list_insert!(f, self.pool, head, b, b * self.region, self.region, false);
     }
 }
 

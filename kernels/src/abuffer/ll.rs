@@ -144,37 +144,45 @@ impl ListPool {
 /// Inserts the fragment into list `head` with a node of `region` (nodes
 /// `[base, base + cap)`): takes `i = atomicAdd(counter[region], 1)`; if `i >= cap` the
 /// fragment is dropped and counted; otherwise node `base + i` is written and published.
-/// Returns the node, if any.
-pub(super) async fn insert(
-    f: &impl Fragment,
-    pool: &ListPool,
-    head: u32,
-    region: u32,
-    base: u32,
-    cap: u32,
-    publish_before_write: bool,
-) -> Option<u32> {
-    let i = f.atomic_add(pool.counters, region, 1).await;
-    if i >= cap {
-        f.atomic_add(pool.dropped, region, 1).await;
-        return None;
-    }
-    let node = base + i;
-    let at = node * NODE_WORDS;
-    let (depth, prim) = (f.depth().to_bits(), f.primitive_id());
-    if publish_before_write {
-        // The planted bug: the node is reachable from the head before it holds anything.
-        let next = f.atomic_exchange(pool.heads, head, node).await;
-        f.store_record(pool.nodes, at, &[depth, prim, next]).await;
-    } else {
-        // Payload first; the exchange publishes a node whose payload is complete. `next` is
-        // the exchange's result, so it can only be written after it.
-        f.store_record(pool.nodes, at, &[depth, prim]).await;
-        let next = f.atomic_exchange(pool.heads, head, node).await;
-        f.store(pool.nodes, at + NEXT, next).await;
-    }
-    Some(node)
+/// Evaluates to the node, if any.
+///
+/// `list_insert!(f, pool, head, region, base, cap, publish_before_write)`, inside a kernel's
+/// `shade`. A macro rather than an `async fn`, so that it expands into the kernel's own state
+/// machine: a nested `async fn` is a second state machine whose `poll` the compiler does not
+/// inline into the shading loop (about 400 instructions of code with its fault paths). Its
+/// arguments are written into its future and read back at every fragment: `ll`'s insert
+/// pass of the bunny at 2048 x 2048 took 39 ms as a nested `async fn` and 30 ms expanded
+/// (docs/performance.md).
+macro_rules! list_insert {
+    ($f:expr, $pool:expr, $head:expr, $region:expr, $base:expr, $cap:expr, $publish_before_write:expr) => {{
+        use $crate::abuffer::ll::{NEXT, NODE_WORDS};
+        // `$f` is used as it is: bound to a reference, it would be kept in the kernel's
+        // future and every access would load it from there first.
+        let (pool, head, region) = (&$pool, $head, $region);
+        let i = $f.atomic_add(pool.counters, region, 1).await;
+        if i >= $cap {
+            $f.atomic_add(pool.dropped, region, 1).await;
+            None
+        } else {
+            let node: u32 = $base + i;
+            let at = node * NODE_WORDS;
+            let (depth, prim) = ($f.depth().to_bits(), $f.primitive_id());
+            if $publish_before_write {
+                // The planted bug: the node is reachable from the head before it holds anything.
+                let next = $f.atomic_exchange(pool.heads, head, node).await;
+                $f.store_record(pool.nodes, at, &[depth, prim, next]).await;
+            } else {
+                // Payload first; the exchange publishes a node whose payload is complete. `next`
+                // is the exchange's result, so it can only be written after it.
+                $f.store_record(pool.nodes, at, &[depth, prim]).await;
+                let next = $f.atomic_exchange(pool.heads, head, node).await;
+                $f.store(pool.nodes, at + NEXT, next).await;
+            }
+            Some(node)
+        }
+    }};
 }
+pub(super) use list_insert;
 
 /// The resolve of list A-buffers: one invocation per pixel walks each of its `lists` lists
 /// (bounded by the pool size, so a cycle cannot hang it; a link out of the pool ends the walk;
@@ -210,8 +218,42 @@ impl FragmentKernel for ListResolve {
             self.composite.output(&f, &[]);
             return;
         }
-        if self.lists == 1 && self.resolve_short(&f, head).await {
-            return;
+        if self.lists == 1 {
+            // A list of at most `SHORT` nodes, all in the pool, is gathered on the stack
+            // rather than in the thread's scratch vectors (whose take and put back cost about
+            // a tenth of the resolve's instructions). Written here, not as an `async fn` of
+            // its own, for the reason `list_insert!` gives. A longer list, or one that leaves
+            // the pool, is left to the general walk below (which counts the fault).
+            let mut nodes = [0u32; SHORT];
+            let mut frags = [CapturedFrag {
+                depth: 0.0,
+                prim: 0,
+            }; SHORT];
+            let mut n = 0;
+            let mut cur = head;
+            while cur != EMPTY && n < SHORT && cur < self.pool_nodes && (n as u32) < self.pool_nodes {
+                let mut rec = [0u32; NODE_WORDS as usize];
+                f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec)
+                    .await;
+                nodes[n] = cur;
+                frags[n] = CapturedFrag::from_bits(rec[0], rec[1]);
+                n += 1;
+                cur = rec[NEXT as usize];
+            }
+            if cur == EMPTY {
+                let frags = &mut frags[..n];
+                sort_fragments(frags);
+                for (&node, fr) in nodes.iter().zip(frags.iter()) {
+                    f.store_record(
+                        self.pool.nodes,
+                        node * NODE_WORDS,
+                        &[fr.depth.to_bits(), fr.prim],
+                    )
+                    .await;
+                }
+                self.composite.output(&f, frags);
+                return;
+            }
         }
         // The lists are gathered in this thread's scratch vectors, reused from pixel to
         // pixel (not two allocations per covered pixel). An invocation that finds them
@@ -259,50 +301,9 @@ impl FragmentKernel for ListResolve {
     }
 }
 
-/// Most nodes of a list [`ListResolve::resolve_short`] gathers on the stack (the bunny at
+/// Most nodes of a list [`ListResolve`] gathers on the stack (the bunny at
 /// 2048 x 2048 has 4 fragments a covered pixel on average, the 871K dragon 6).
 const SHORT: usize = 16;
-
-impl ListResolve {
-    /// The resolve of a single list of at most [`SHORT`] nodes, all in the pool, gathered on
-    /// the stack rather than in the thread's scratch vectors (whose take and put back cost
-    /// about a tenth of the resolve's instructions). Returns false, having only loaded,
-    /// when the list is longer or leaves the pool: the general walk then does it (and
-    /// counts the fault).
-    async fn resolve_short(&self, f: &impl Fragment, head: u32) -> bool {
-        let mut nodes = [0u32; SHORT];
-        let mut frags = [CapturedFrag {
-            depth: 0.0,
-            prim: 0,
-        }; SHORT];
-        let mut n = 0;
-        let mut cur = head;
-        while cur != EMPTY {
-            if n == SHORT || cur >= self.pool_nodes || n as u32 >= self.pool_nodes {
-                return false;
-            }
-            let mut rec = [0u32; NODE_WORDS as usize];
-            f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec)
-                .await;
-            nodes[n] = cur;
-            frags[n] = CapturedFrag::from_bits(rec[0], rec[1]);
-            n += 1;
-            cur = rec[NEXT as usize];
-        }
-        let frags = &mut frags[..n];
-        sort_fragments(frags);
-        for (&node, fr) in nodes.iter().zip(frags.iter()) {
-            f.store_record(
-                self.pool.nodes,
-                node * NODE_WORDS,
-                &[fr.depth.to_bits(), fr.prim],
-            )
-            .await;
-        }
-        self.composite.output(f, frags);
-        true
-    }
-}
 
 thread_local! {
     /// [`ListResolve`]'s per-thread scratch: the pixel's fragments, one list's nodes and
@@ -364,7 +365,7 @@ impl FragmentKernel for LlInsert {
             }
             None => (0, 0, self.cap),
         };
-        insert(&f, &self.pool, p, region, base, cap, self.publish_before_write).await;
+        list_insert!(f, self.pool, p, region, base, cap, self.publish_before_write);
         let Some(seen) = self.reader else { return };
         let mut cur = f.atomic_load(self.pool.heads, p).await;
         let mut steps = 0;
