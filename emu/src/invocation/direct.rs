@@ -86,20 +86,24 @@ impl<'c, 'a, const OWN: bool> DirectFrag<'c, 'a, OWN> {
             return None;
         }
         let st = self.ctx.state;
-        let input = st.input.get();
-        let width = self.ctx.frag.env.width;
-        match (st.own, st.own_block) {
-            (Some(own), _) if own.buffer == buf.id => Some((
-                (input.y as u64 * width as u64 + input.x as u64) * own.stride as u64,
-                own.stride as u64,
+        let own = &st.own;
+        if buf.id == own.pixel_buffer {
+            let input = st.input.get();
+            let width = self.ctx.frag.env.width;
+            Some((
+                (input.y as u64 * width as u64 + input.x as u64) * own.pixel_stride as u64,
+                own.pixel_stride as u64,
                 "with_own_pixel_array",
-            )),
-            (_, Some(own)) if own.buffer == buf.id => Some((
-                own.first_word(input.x, input.y, width),
-                own.stride as u64,
+            ))
+        } else if buf.id == own.block_buffer {
+            let input = st.input.get();
+            Some((
+                own.block_first_word(input.x, input.y),
+                own.block_stride as u64,
                 "with_own_block_array",
-            )),
-            _ => None,
+            ))
+        } else {
+            None
         }
     }
     #[inline(always)]

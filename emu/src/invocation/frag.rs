@@ -74,7 +74,7 @@ impl FragView<'_> {
     pub fn depth(&self) -> f32 {
         let i = self.input;
         match self.env.tris.get(i.tri as usize) {
-            Some(t) => t.depth_at(i.x as f32 + 0.5, i.y as f32 + 0.5),
+            Some(t) => t.depth_at_center(i.x, i.y),
             None => i.depth,
         }
     }

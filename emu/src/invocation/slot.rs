@@ -72,11 +72,66 @@ pub(crate) struct DirectState<'m> {
     pub ops: [Cell<u32>; OP_KINDS],
     /// The words of the buffers last accessed (kept across fragments, as the counters).
     pub words: WordCache<'m>,
-    /// The kernel's own per-pixel array when this worker owns the tile for the pass
-    /// ([`DirectState::owning`]): its atomics at the fragment's slot are plain.
-    pub own: Option<PixelArray>,
-    /// The kernel's own per-block array, likewise (its blocks lie in this worker's tiles).
-    pub own_block: Option<BlockArray>,
+    /// The kernel's own per-pixel and per-block arrays when this worker owns the tile for
+    /// the pass ([`DirectState::owning`]): their atomics at the fragment's slot are plain.
+    pub own: OwnArrays,
+}
+
+/// The kernel's own arrays as an access tests them: a compare of the buffer id for each
+/// (`NONE` when the kernel declared none), and what the slot's first word is computed from.
+/// Plain fields rather than two `Option`s of the declarations, so that an access that is
+/// not to an own array costs two compares, and the blocks a row holds are divided out once.
+#[derive(Clone, Copy)]
+pub(crate) struct OwnArrays {
+    pub pixel_buffer: u32,
+    pub pixel_stride: u32,
+    pub block_buffer: u32,
+    pub block_shift: u32,
+    pub block_stride: u32,
+    /// Blocks in a row of the frame.
+    pub blocks_across: u32,
+}
+
+impl OwnArrays {
+    /// No buffer has this id (ids index the device's buffers).
+    pub const NONE: u32 = u32::MAX;
+
+    /// No own array.
+    pub const fn none() -> OwnArrays {
+        OwnArrays {
+            pixel_buffer: Self::NONE,
+            pixel_stride: 0,
+            block_buffer: Self::NONE,
+            block_shift: 0,
+            block_stride: 0,
+            blocks_across: 0,
+        }
+    }
+
+    /// The declarations, for a frame `width` pixels wide.
+    pub fn new(pixel: Option<PixelArray>, block: Option<BlockArray>, width: u32) -> OwnArrays {
+        let mut o = OwnArrays::none();
+        if let Some(p) = pixel {
+            o.pixel_buffer = p.buffer;
+            o.pixel_stride = p.stride;
+        }
+        if let Some(b) = block {
+            o.block_buffer = b.buffer;
+            o.block_shift = b.shift.min(31);
+            o.block_stride = b.stride;
+            o.blocks_across = width.div_ceil(1 << o.block_shift);
+        }
+        o
+    }
+
+    /// The first word of pixel `(x, y)`'s slot of the per-block array: what
+    /// [`BlockArray::first_word`] computes.
+    #[inline(always)]
+    pub fn block_first_word(&self, x: u32, y: u32) -> u64 {
+        (u64::from(y >> self.block_shift) * u64::from(self.blocks_across)
+            + u64::from(x >> self.block_shift))
+            * u64::from(self.block_stride)
+    }
 }
 
 impl DirectState<'_> {
@@ -89,8 +144,7 @@ impl DirectState<'_> {
             depth_out: Cell::new(None),
             ops: Default::default(),
             words: WordCache::new(),
-            own: None,
-            own_block: None,
+            own: OwnArrays::none(),
         }
     }
 
@@ -99,10 +153,9 @@ impl DirectState<'_> {
     /// pixels' own (`KernelInfo::with_own_pixel_array`). Only that worker then reaches a
     /// slot of its tile during the pass, so an operation on it needs no atomic instruction.
     #[inline(always)]
-    pub fn owning(array: Option<PixelArray>, block: Option<BlockArray>) -> Self {
+    pub fn owning(array: Option<PixelArray>, block: Option<BlockArray>, width: u32) -> Self {
         let mut state = Self::new();
-        state.own = array;
-        state.own_block = block;
+        state.own = OwnArrays::new(array, block, width);
         state
     }
 
@@ -323,5 +376,39 @@ impl Invocation {
             return None;
         }
         self.fault.borrow_mut().take()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn own_block_slots_are_the_declarations_first_words() {
+        for (shift, stride, width) in [
+            (5, 16, 2048),
+            (0, 1, 7),
+            (3, 2, 33),
+            (31, 4, 100),
+            (40, 1, 9),
+        ] {
+            let decl = BlockArray {
+                buffer: 3,
+                shift,
+                stride,
+            };
+            let own = OwnArrays::new(None, Some(decl), width);
+            assert_eq!(own.pixel_buffer, OwnArrays::NONE);
+            assert_eq!(own.block_buffer, 3);
+            for y in [0, 1, 31, 32, 95, 4000] {
+                for x in [0, 1, width / 2, width - 1] {
+                    assert_eq!(
+                        own.block_first_word(x, y),
+                        decl.first_word(x, y, width),
+                        "shift {shift} width {width} at ({x}, {y})"
+                    );
+                }
+            }
+        }
     }
 }

@@ -229,6 +229,8 @@ fn near_plane_clipping() {
         let (x, y) = (f.x as f32 + 0.5, f.y as f32 + 0.5);
         let d = t.depth_at(x, y);
         assert!((0.0..=1.0).contains(&d));
+        // The pixel-centre form kernels read (`Fragment::depth`) is the same bits.
+        assert_eq!(t.depth_at_center(f.x, f.y).to_bits(), d.to_bits());
         let src = idx[t.source as usize].map(|i| eye[i as usize]);
         let (want, wd) = ray_hit(src, proj, v, x as f64, y as f64).unwrap();
         let got = t.bary_at(x, y);

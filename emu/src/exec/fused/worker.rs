@@ -248,7 +248,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let kernel = *kernel;
         let slot = &slots[0];
         let state = if OWN {
-            DirectState::owning(own, own_block)
+            DirectState::owning(own, own_block, env.width)
         } else {
             DirectState::new()
         };

@@ -43,6 +43,22 @@ impl SetupTriangle {
         z.clamp(0.0, 1.0) as f32
     }
 
+    /// [`SetupTriangle::depth_at`] at the centre of pixel `(x, y)`, bit for bit: `x + 0.5` is
+    /// exact in `f32` below 2^23 (frames are at most `MAX_DIMENSION` = 16384 pixels a side),
+    /// and `(x + 0.5) - rx` is exact in `f64`, as `(x - rx) + 0.5` is, from integers. Taking
+    /// the integers apart keeps the two coordinates in scalar registers: the packed form
+    /// loaded `(x, y)` as one 8-byte word, which the store buffer cannot forward from the
+    /// two 4-byte stores that wrote them just before (the executor writes `x` per pixel).
+    #[inline]
+    pub fn depth_at_center(&self, x: u32, y: u32) -> f32 {
+        let z = eval(
+            &self.depth,
+            (i64::from(x) - i64::from(self.rx)) as f64 + 0.5,
+            (i64::from(y) - i64::from(self.ry)) as f64 + 0.5,
+        );
+        z.clamp(0.0, 1.0) as f32
+    }
+
     /// Perspective-correct barycentrics of the *source* triangle's vertices at a screen position.
     #[inline]
     pub fn bary_at(&self, x: f32, y: f32) -> [f32; 3] {
