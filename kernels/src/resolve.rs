@@ -77,6 +77,7 @@ impl Composite {
     }
 
     /// Writes the composite of `frags` (already in front-to-back order) to target 0.
+    #[inline]
     pub fn output(&self, f: &impl Fragment, frags: &[CapturedFrag]) {
         f.output(0, composite_frags(frags, self.alpha, self.background));
     }

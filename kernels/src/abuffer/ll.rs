@@ -51,7 +51,7 @@ use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity,
     CapturedFrag, Check, Frame, HazardClass, Params,
 };
-use crate::common::{sort_fragments, EMPTY};
+use crate::common::{sort_fragments, sort_fragments_changed, EMPTY};
 use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -188,7 +188,8 @@ pub(super) use list_insert;
 /// (bounded by the pool size, so a cycle cannot hang it; a link out of the pool ends the walk;
 /// both are counted in `faults[0]` and `faults[1]`), loading every node as one record, sorts
 /// each list (`sort_fragments`), writes the sorted payloads back along the list (so the
-/// readback is in resolve order), and composites the lists' concatenation front to back.
+/// readback is in resolve order; a short list the sort left as it was is not written), and
+/// composites the lists' concatenation front to back.
 pub(super) struct ListResolve {
     pub pool: ListPool,
     /// Lists per pixel (the heads of pixel `p` are `p * lists ..`).
@@ -242,14 +243,16 @@ impl FragmentKernel for ListResolve {
             }
             if cur == EMPTY {
                 let frags = &mut frags[..n];
-                sort_fragments(frags);
-                for (&node, fr) in nodes.iter().zip(frags.iter()) {
-                    f.store_record(
-                        self.pool.nodes,
-                        node * NODE_WORDS,
-                        &[fr.depth.to_bits(), fr.prim],
-                    )
-                    .await;
+                // A list already in depth order is written back as it stands: no store.
+                if sort_fragments_changed(frags) {
+                    for (&node, fr) in nodes.iter().zip(frags.iter()) {
+                        f.store_record(
+                            self.pool.nodes,
+                            node * NODE_WORDS,
+                            &[fr.depth.to_bits(), fr.prim],
+                        )
+                        .await;
+                    }
                 }
                 self.composite.output(&f, frags);
                 return;
