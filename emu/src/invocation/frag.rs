@@ -171,6 +171,8 @@ impl<'a> Frag<'a> {
     pub fn output_u32(&self, target: usize, value: [u32; 4]) {
         self.output_bits(target, value);
     }
+    // Inline: the resolves call it once a pixel, from the kernels' crate.
+    #[inline]
     fn output_bits(&self, target: usize, value: [u32; 4]) {
         if let Some(o) = self.inv.outputs.get(target) {
             o.set(value);
