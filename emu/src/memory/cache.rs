@@ -40,22 +40,29 @@ impl PixelPrefetcher<'_> {
     }
 }
 
-/// The words of the last buffer of each width that a fragment context accessed, for the
+/// The words of the last buffers of each width that a fragment context accessed, for the
 /// fused path of the direct executors (kept in `crate::invocation::DirectState`).
 ///
 /// [`Memory::apply`] finds a word through the buffer table, the buffer's width tag and its
 /// slice: four dependent loads before the operation. On x86 a locked read-modify-write
 /// holds back the loads after it, so with one atomic per fragment those loads sat on the
 /// critical path of every fragment. Kernels touch few buffers, and the executor keeps this
-/// cache in registers across a unit's fragments, so an access is a compare of the buffer id
-/// and the operation. A miss finds the words as `apply` does (inline: a kernel that
-/// alternates between two buffers pays what it paid before, plus the compare). Buffers are
+/// cache across a unit's fragments, so an access is a compare of the buffer id and the
+/// operation. A miss finds the words as `apply` does (inline: a kernel that alternates
+/// between buffers of one way pays what it paid before, plus the compare). Buffers are
 /// neither added, resized nor replaced during a pass (that takes `&mut Memory`), so a slice
 /// found once stays the buffer's.
 pub(crate) struct WordCache<'m> {
-    w32: Cell<(u32, &'m [AtomicU32])>,
+    /// 32-bit buffers, direct-mapped by id: a device numbers its buffers in the order it
+    /// creates them, so the few buffers of a kernel (`ll`'s counters, nodes and heads, all
+    /// touched by every fragment) fall in different ways. One way for all of them missed at
+    /// every switch of buffer, three times a fragment in `ll`'s insert.
+    w32: [Cell<(u32, &'m [AtomicU32])>; WAYS],
     w64: Cell<(u32, &'m [AtomicU64])>,
 }
+
+/// Ways of [`WordCache`]'s 32-bit part.
+const WAYS: usize = 4;
 
 impl<'m> WordCache<'m> {
     #[inline(always)]
@@ -63,7 +70,7 @@ impl<'m> WordCache<'m> {
         // Nothing cached: an id no buffer reaches in practice (were one to, its accesses
         // would index the empty slice and panic, a reported fault, never another buffer).
         WordCache {
-            w32: Cell::new((u32::MAX, &[])),
+            w32: [const { Cell::new((u32::MAX, &[] as &[AtomicU32])) }; WAYS],
             w64: Cell::new((u32::MAX, &[])),
         }
     }
@@ -82,10 +89,11 @@ impl<'m> WordCache<'m> {
     /// The 32-bit words of buffer `b`: the cached slice, or the buffer's (then cached).
     #[inline(always)]
     fn words32(&self, memory: &'m Memory, b: u32) -> &'m [AtomicU32] {
-        let (id, mut words) = self.w32.get();
+        let way = &self.w32[b as usize % WAYS];
+        let (id, mut words) = way.get();
         if id != b {
             words = memory.words32(b);
-            self.w32.set((b, words));
+            way.set((b, words));
         }
         words
     }
