@@ -116,13 +116,20 @@ pub fn depth_order(a: &CapturedFrag, b: &CapturedFrag) -> std::cmp::Ordering {
     a.depth.total_cmp(&b.depth).then(a.prim.cmp(&b.prim))
 }
 
+/// Sorts a pixel's fragments the way the DFB resolve does (seeds: z-thickness paper):
+/// insertion sort under 16 fragments, shell sort above.
+pub fn sort_fragments(v: &mut [CapturedFrag]) {
+    sort_fragments_changed(v);
+}
+
 /// [`sort_fragments`], saying whether it changed the order: false when `v` was already in
-/// depth order (then nothing was moved). Under 16 fragments the insertion sort runs here,
-/// inline in the caller, and a pixel already in order costs one comparison a fragment.
+/// depth order (then nothing was moved; at 16 fragments and more, always true). Inline, so
+/// that a resolve's short lists are sorted in its own code, and a pixel already in order
+/// costs one comparison a fragment.
 #[inline]
 pub fn sort_fragments_changed(v: &mut [CapturedFrag]) -> bool {
     if v.len() >= 16 {
-        sort_fragments(v);
+        shell_sort(v);
         return true;
     }
     let mut changed = false;
@@ -142,36 +149,23 @@ pub fn sort_fragments_changed(v: &mut [CapturedFrag]) -> bool {
     changed
 }
 
-/// Sorts a pixel's fragments the way the DFB resolve does (seeds: z-thickness paper):
-/// insertion sort under 16 fragments, shell sort above.
-pub fn sort_fragments(v: &mut [CapturedFrag]) {
-    if v.len() < 16 {
-        for i in 1..v.len() {
+/// The shell sort of [`sort_fragments`] (gaps 1, 4, 13, ...), for 16 fragments and more.
+fn shell_sort(v: &mut [CapturedFrag]) {
+    let mut gap = 1;
+    while gap < v.len() / 3 {
+        gap = gap * 3 + 1;
+    }
+    while gap >= 1 {
+        for i in gap..v.len() {
             let x = v[i];
             let mut j = i;
-            while j > 0 && depth_order(&v[j - 1], &x) == std::cmp::Ordering::Greater {
-                v[j] = v[j - 1];
-                j -= 1;
+            while j >= gap && depth_order(&v[j - gap], &x) == std::cmp::Ordering::Greater {
+                v[j] = v[j - gap];
+                j -= gap;
             }
             v[j] = x;
         }
-    } else {
-        let mut gap = 1;
-        while gap < v.len() / 3 {
-            gap = gap * 3 + 1;
-        }
-        while gap >= 1 {
-            for i in gap..v.len() {
-                let x = v[i];
-                let mut j = i;
-                while j >= gap && depth_order(&v[j - gap], &x) == std::cmp::Ordering::Greater {
-                    v[j] = v[j - gap];
-                    j -= gap;
-                }
-                v[j] = x;
-            }
-            gap /= 3;
-        }
+        gap /= 3;
     }
 }
 
@@ -244,8 +238,9 @@ mod tests {
     #[test]
     fn sorting_and_saying_whether_it_changed_the_order() {
         // Lists of 0 to 20 fragments with ties in depth (broken by primitive), from a
-        // fixed generator: the same order as `sort_fragments`, and "changed" exactly when
-        // the input was out of order.
+        // fixed generator: sorted as the standard library sorts them, by `sort_fragments`
+        // and by `sort_fragments_changed`, and "changed" exactly when the input was out of
+        // order.
         let mut x = 12345u32;
         for len in 0..21 {
             for _ in 0..200 {
@@ -258,8 +253,13 @@ mod tests {
                         }
                     })
                     .collect();
+                // The reference: the standard library's sort (depth_order is total on
+                // (depth, primitive), so equal keys are equal fragments).
                 let mut want = v.clone();
-                sort_fragments(&mut want);
+                want.sort_by(depth_order);
+                let mut plain = v.clone();
+                sort_fragments(&mut plain);
+                assert_eq!(plain, want);
                 let mut got = v.clone();
                 let changed = sort_fragments_changed(&mut got);
                 assert_eq!(got, want);
