@@ -14,7 +14,7 @@ use fragrace_emu::{
 };
 
 use crate::algo::{AlgoError, CapturedFrag, Frame, Params};
-use crate::common::{self, composite_frags};
+use crate::common::{self, composite, composite_frags, prim_rgb};
 
 /// Bytes per pixel of the resolve target (one RGBA32F texel).
 pub const TARGET_BYTES: u64 = 16;
@@ -80,5 +80,14 @@ impl Composite {
     #[inline]
     pub fn output(&self, f: &impl Fragment, frags: &[CapturedFrag]) {
         f.output(0, composite_frags(frags, self.alpha, self.background));
+    }
+
+    /// [`Composite::output`] of fragments given as sort keys ([`crate::common::sort_key`],
+    /// already sorted): the same colours (a key's low word is its primitive) in the same
+    /// order, so the same bits.
+    #[inline]
+    pub fn output_keys(&self, f: &impl Fragment, keys: &[u64]) {
+        let colors = keys.iter().map(|&k| prim_rgb(k as u32));
+        f.output(0, composite(colors, self.alpha, self.background));
     }
 }

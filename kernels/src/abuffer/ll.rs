@@ -51,7 +51,7 @@ use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity,
     CapturedFrag, Check, Frame, HazardClass, Params,
 };
-use crate::common::{sort_fragments, sort_fragments_changed, EMPTY};
+use crate::common::{key_depth_bits, sort_fragments, sort_key, sort_keys_changed, EMPTY};
 use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -225,11 +225,9 @@ impl FragmentKernel for ListResolve {
             // a tenth of the resolve's instructions). Written here, not as an `async fn` of
             // its own, for the reason `list_insert!` gives. A longer list, or one that leaves
             // the pool, is left to the general walk below (which counts the fault).
+            // The fragments as sort keys (`sort_key`: one word each, see there).
             let mut nodes = [0u32; SHORT];
-            let mut frags = [CapturedFrag {
-                depth: 0.0,
-                prim: 0,
-            }; SHORT];
+            let mut keys = [0u64; SHORT];
             let mut n = 0;
             let mut cur = head;
             while cur != EMPTY && n < SHORT && cur < self.pool_nodes && (n as u32) < self.pool_nodes {
@@ -237,24 +235,24 @@ impl FragmentKernel for ListResolve {
                 f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec)
                     .await;
                 nodes[n] = cur;
-                frags[n] = CapturedFrag::from_bits(rec[0], rec[1]);
+                keys[n] = sort_key(rec[0], rec[1]);
                 n += 1;
                 cur = rec[NEXT as usize];
             }
             if cur == EMPTY {
-                let frags = &mut frags[..n];
+                let keys = &mut keys[..n];
                 // A list already in depth order is written back as it stands: no store.
-                if sort_fragments_changed(frags) {
-                    for (&node, fr) in nodes.iter().zip(frags.iter()) {
+                if sort_keys_changed(keys) {
+                    for (&node, &key) in nodes.iter().zip(keys.iter()) {
                         f.store_record(
                             self.pool.nodes,
                             node * NODE_WORDS,
-                            &[fr.depth.to_bits(), fr.prim],
+                            &[key_depth_bits(key), key as u32],
                         )
                         .await;
                     }
                 }
-                self.composite.output(&f, frags);
+                self.composite.output_keys(&f, keys);
                 return;
             }
         }
