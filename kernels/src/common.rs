@@ -272,7 +272,15 @@ mod tests {
         // fixed generator, among them negative, signed-zero, infinite and NaN depths: sorted
         // as the standard library sorts them, by `sort_fragments` and, as keys, by
         // `sort_keys_changed`, which says "changed" exactly when the input was out of order.
-        let special = [-0.0f32, 0.0, -1.5, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, -f32::NAN];
+        let special = [
+            -0.0f32,
+            0.0,
+            -1.5,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            -f32::NAN,
+        ];
         let mut x = 12345u32;
         for len in 0..21 {
             for _ in 0..200 {
@@ -301,11 +309,15 @@ mod tests {
                 let mut plain = v.clone();
                 sort_fragments(&mut plain);
                 assert_eq!(bits(&plain), bits(&want));
-                let mut keys: Vec<u64> =
-                    v.iter().map(|f| sort_key(f.depth.to_bits(), f.prim)).collect();
+                let mut keys: Vec<u64> = v
+                    .iter()
+                    .map(|f| sort_key(f.depth.to_bits(), f.prim))
+                    .collect();
                 let changed = sort_keys_changed(&mut keys);
-                let got: Vec<(u32, u32)> =
-                    keys.iter().map(|&k| (key_depth_bits(k), k as u32)).collect();
+                let got: Vec<(u32, u32)> = keys
+                    .iter()
+                    .map(|&k| (key_depth_bits(k), k as u32))
+                    .collect();
                 assert_eq!(got, bits(&want));
                 assert_eq!(changed, got != bits(&v), "{v:?}");
             }

@@ -236,6 +236,7 @@ mod slot;
 pub(crate) use access::{spurious_cas_failure, Route};
 pub use access::{Access, CompareExchange, Store};
 pub(crate) use direct::DirectCtx;
+pub(crate) use direct::Halted;
 pub use direct::{DirectFrag, Performed};
 pub use frag::Frag;
 pub(crate) use frag::FragView;

@@ -5,7 +5,7 @@ use std::cell::{Cell, RefCell};
 
 use super::StepKind;
 use crate::kernel::{FaultKind, FragInput};
-use crate::memory::{BlockArray, OpKind, PixelArray, WordCache};
+use crate::memory::{BlockArray, Memory, OpKind, PixelArray, WordCache};
 
 /// Per-invocation mutable state, owned by the executor (one per in-flight slot) and shared
 /// with the invocation's future through [`Frag`]. Single-threaded (`Cell`s).
@@ -134,16 +134,17 @@ impl OwnArrays {
     }
 }
 
-impl DirectState<'_> {
+impl<'m> DirectState<'m> {
+    /// The state of a pass over `memory`.
     #[inline(always)]
-    pub fn new() -> Self {
+    pub fn new(memory: &'m Memory) -> Self {
         DirectState {
             input: Cell::new(FragInput::default()),
             steps: Cell::new(0),
             discarded: Cell::new(false),
             depth_out: Cell::new(None),
             ops: Default::default(),
-            words: WordCache::new(),
+            words: WordCache::new(memory),
             own: OwnArrays::none(),
         }
     }
@@ -153,8 +154,13 @@ impl DirectState<'_> {
     /// pixels' own (`KernelInfo::with_own_pixel_array`). Only that worker then reaches a
     /// slot of its tile during the pass, so an operation on it needs no atomic instruction.
     #[inline(always)]
-    pub fn owning(array: Option<PixelArray>, block: Option<BlockArray>, width: u32) -> Self {
-        let mut state = Self::new();
+    pub fn owning(
+        memory: &'m Memory,
+        array: Option<PixelArray>,
+        block: Option<BlockArray>,
+        width: u32,
+    ) -> Self {
+        let mut state = Self::new(memory);
         state.own = OwnArrays::new(array, block, width);
         state
     }

@@ -40,37 +40,38 @@ impl PixelPrefetcher<'_> {
     }
 }
 
-/// The words of the last buffers of each width that a fragment context accessed, for the
-/// fused path of the direct executors (kept in `crate::invocation::DirectState`).
+/// The words of the buffers a fragment context accesses, for the fused path of the direct
+/// executors (kept in `crate::invocation::DirectState`).
 ///
 /// [`Memory::apply`] finds a word through the buffer table, the buffer's width tag and its
 /// slice: four dependent loads before the operation. On x86 a locked read-modify-write
 /// holds back the loads after it, so with one atomic per fragment those loads sat on the
-/// critical path of every fragment. Kernels touch few buffers, and the executor keeps this
-/// cache across a unit's fragments, so an access is a compare of the buffer id and the
-/// operation. A miss finds the words as `apply` does (inline: a kernel that alternates
-/// between buffers of one way pays what it paid before, plus the compare). Buffers are
+/// critical path of every fragment. Here the slices of the 32-bit buffers are found once,
+/// when the state is made, for the first [`TABLE`] buffer ids (a device numbers its buffers
+/// in the order it creates them, and a kernel's are few): an access loads its buffer's
+/// slice by id, with no compare against a cached id and nothing written back. Buffers are
 /// neither added, resized nor replaced during a pass (that takes `&mut Memory`), so a slice
-/// found once stays the buffer's.
+/// found once stays the buffer's. A buffer past the table, or not of 32-bit words, is found
+/// through the memory (which reports a handle of another memory as `apply` does); 64-bit
+/// buffers, rarer, keep a one-entry cache.
 pub(crate) struct WordCache<'m> {
-    /// 32-bit buffers, direct-mapped by id: a device numbers its buffers in the order it
-    /// creates them, so the few buffers of a kernel (`ll`'s counters, nodes and heads, all
-    /// touched by every fragment) fall in different ways. One way for all of them missed at
-    /// every switch of buffer, three times a fragment in `ll`'s insert.
-    w32: [Cell<(u32, &'m [AtomicU32])>; WAYS],
+    /// The 32-bit words of buffer `id`, for `id < TABLE`; empty for a buffer of 64-bit
+    /// words or an id no buffer has.
+    w32: [&'m [AtomicU32]; TABLE],
     w64: Cell<(u32, &'m [AtomicU64])>,
 }
 
-/// Ways of [`WordCache`]'s 32-bit part.
-const WAYS: usize = 4;
+/// Buffer ids whose 32-bit words [`WordCache`] holds.
+const TABLE: usize = 32;
 
 impl<'m> WordCache<'m> {
-    #[inline(always)]
-    pub fn new() -> Self {
-        // Nothing cached: an id no buffer reaches in practice (were one to, its accesses
-        // would index the empty slice and panic, a reported fault, never another buffer).
+    /// The table of `memory`'s buffers.
+    #[inline]
+    pub fn new(memory: &'m Memory) -> Self {
         WordCache {
-            w32: [const { Cell::new((u32::MAX, &[] as &[AtomicU32])) }; WAYS],
+            w32: std::array::from_fn(|id| memory.words32_if_any(id)),
+            // Nothing cached: an id no buffer reaches in practice (were one to, its accesses
+            // would index the empty slice and panic, a reported fault, never another buffer).
             w64: Cell::new((u32::MAX, &[])),
         }
     }
@@ -86,16 +87,13 @@ impl<'m> WordCache<'m> {
         words
     }
 
-    /// The 32-bit words of buffer `b`: the cached slice, or the buffer's (then cached).
+    /// The 32-bit words of buffer `b`: from the table, or the buffer's.
     #[inline(always)]
     fn words32(&self, memory: &'m Memory, b: u32) -> &'m [AtomicU32] {
-        let way = &self.w32[b as usize % WAYS];
-        let (id, mut words) = way.get();
-        if id != b {
-            words = memory.words32(b);
-            way.set((b, words));
+        match self.w32.get(b as usize) {
+            Some(words) if !words.is_empty() => words,
+            _ => memory.words32(b),
         }
-        words
     }
 
     /// [`Memory::apply`] through the cache: the same operation on the same word.

@@ -372,6 +372,15 @@ impl Memory {
         }
     }
 
+    /// The 32-bit words of buffer `id`; empty when it holds 64-bit words or no buffer has
+    /// that id ([`WordCache`]'s table).
+    pub(crate) fn words32_if_any(&self, id: usize) -> &[AtomicU32] {
+        match self.buffers.get(id).map(|b| &b.words) {
+            Some(Words::W32(w)) => w,
+            _ => &[],
+        }
+    }
+
     /// [`Self::words32`] for 64-bit words.
     #[inline(always)]
     fn words64(&self, buffer: u32) -> &[AtomicU64] {
@@ -553,24 +562,28 @@ mod tests {
         assert!(m.take(a).is_err());
     }
 
-    /// Through a [`WordCache`], accesses that alternate between buffers of both widths reach
-    /// the words they name: the same results and final contents as [`Memory::apply`] on a
-    /// twin memory.
+    /// Through a [`WordCache`], accesses that alternate between buffers of both widths, in
+    /// its table and past it, reach the words they name: the same results and final
+    /// contents as [`Memory::apply`] on a twin memory.
     #[test]
     fn word_cache_follows_the_buffer_named() {
         let build = || {
             let mut m = Memory::default();
             let a = m.create::<u32>("a", 5).unwrap();
             let w = m.create::<u64>("w", 3).unwrap();
+            // Ids past the cache's table: `b` and `v` are found through the memory.
+            for i in 0..40 {
+                m.create::<u32>(&format!("filler {i}"), 1).unwrap();
+            }
             let b = m.create::<i32>("b", 4).unwrap();
             let v = m.create::<u64>("v", 2).unwrap();
             (m, a, w, b, v)
         };
         let (cached, a, w, b, v) = build();
         let (plain, ..) = build();
-        let cache = WordCache::new();
+        let cache = WordCache::new(&cached);
         let ord = Ordering::AcqRel;
-        // Buffer ids, in an order that misses the cache at every change of buffer.
+        // Buffer ids, in an order that changes buffer at almost every step.
         let steps: [(u32, u32, bool); 10] = [
             (a.id, 1, false),
             (b.id, 1, false),

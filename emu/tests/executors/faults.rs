@@ -221,6 +221,41 @@ fn faults_in_draws_are_reported_under_the_direct_executors() {
     }
 }
 
+/// An invocation that faults makes no access after the faulting one (the fused path leaves
+/// the kernel there, as the others drop it): the adds before the fault land for every
+/// fragment, those after it only for the fragments that did not fault.
+#[test]
+fn an_invocation_that_faults_makes_no_access_after_it() {
+    struct AddOobAdd {
+        counters: Buf<u32>,
+        buf: Buf<u32>,
+    }
+    impl FragmentKernel for AddOobAdd {
+        fn info(&self) -> KernelInfo {
+            KernelInfo::new("add-oob-add")
+        }
+        async fn shade(&self, f: impl Fragment) {
+            f.atomic_add(self.counters, 0, 1).await;
+            f.store(self.buf, f.pixel_index() + 100, 1).await;
+            f.atomic_add(self.counters, 1, 1).await;
+            f.output(0, [1.0; 4]);
+        }
+    }
+    for e in direct_execs() {
+        let mut dev = Device::new();
+        let counters = dev.buffer::<u32>("counters", 2).unwrap();
+        let buf = dev.buffer::<u32>("small", 120).unwrap();
+        let (_, r) = draw_with(&dev, &AddOobAdd { counters, buf }, &e);
+        // Pixel indices + 100 >= 120 fault: the last 108 pixels of 128, both layers.
+        assert_eq!(r.stats.faulted, 2 * 108, "{e:?}");
+        assert_eq!(
+            dev.memory.read(counters).unwrap(),
+            vec![256, 256 - 2 * 108],
+            "{e:?}"
+        );
+    }
+}
+
 /// The same faults in a pass with nothing to write after shading (no targets: the direct
 /// path retires each fragment as soon as it is shaded, and a span's later pixels write only
 /// their position into the slot): each fault names its own invocation, and the others

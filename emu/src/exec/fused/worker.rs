@@ -9,7 +9,9 @@ use std::task::{Context, Poll, Waker};
 
 use crate::exec::{record_panic, Acc, Tally};
 use crate::framebuffer::TileMemory;
-use crate::invocation::{DirectCtx, DirectFrag, DirectState, Frag, Invocation, Mode, PassEnv};
+use crate::invocation::{
+    DirectCtx, DirectFrag, DirectState, Frag, Halted, Invocation, Mode, PassEnv,
+};
 use crate::kernel::{FragInput, FragmentKernel};
 use crate::memory::{BlockArray, PixelArray, PixelPrefetcher};
 use crate::pipeline::{BlockMask, BLOCK_SHIFT};
@@ -169,7 +171,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let slot = &slots[0];
         // The fragment's state, in registers (see `DirectState`); the slot takes colour
         // outputs and faults, and the state when the slot's path must see it.
-        let state = DirectState::new();
+        let state = DirectState::new(env.memory);
         // Counts of the unit's invocations, added to the worker's once at the end.
         let mut tally = Tally::default();
         for (i, span) in spans.iter().enumerate() {
@@ -248,9 +250,9 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         let kernel = *kernel;
         let slot = &slots[0];
         let state = if OWN {
-            DirectState::owning(own, own_block, env.width)
+            DirectState::owning(env.memory, own, own_block, env.width)
         } else {
-            DirectState::new()
+            DirectState::new(env.memory)
         };
         // The unit's tally, kept per span where it can be: per fragment only what the
         // kernel decides (steps, discard), so that the loop's state fits in registers.
@@ -356,7 +358,7 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 .iter()
                 .all(|t| t.plain_write());
         let slot = &slots[0];
-        let state = DirectState::new();
+        let state = DirectState::new(env.memory);
         let mut tally = Tally::default();
         let (x0, y0) = (tile.x0, tile.y0);
         for ly in 0..tile.h {
@@ -623,8 +625,9 @@ fn shade_direct<'a, K: FragmentKernel, const OWN: bool>(
             state,
         };
         let frag = DirectFrag::<OWN>::new(&ctx);
-        // One poll: under `DirectFrag` nothing suspends, and an invocation is pending
-        // only once it has faulted (it is then dropped).
+        // One poll: under `DirectFrag` nothing suspends, and an invocation that faults
+        // leaves its kernel by unwinding (`Halted`). Pending here is a future that is not
+        // the kernel API's, or the general context's halt after a misuse of the interlock.
         let pending = std::pin::pin!(kernel.shade(frag))
             .poll(&mut cx)
             .is_pending();
@@ -633,7 +636,10 @@ fn shade_direct<'a, K: FragmentKernel, const OWN: bool>(
         }
     }));
     if let Err(payload) = r {
-        record_panic(inv, payload.as_ref());
+        // An invocation that faulted (its fault recorded) left its kernel: nothing more.
+        if !payload.is::<Halted>() {
+            record_panic(inv, payload.as_ref());
+        }
     }
 }
 
