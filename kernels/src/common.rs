@@ -287,7 +287,7 @@ mod tests {
                 let v: Vec<CapturedFrag> = (0..len)
                     .map(|_| {
                         x = hash32(x);
-                        let depth = if x % 11 == 0 {
+                        let depth = if x.is_multiple_of(11) {
                             special[(x >> 4) as usize % special.len()]
                         } else {
                             (x % 7) as f32 / 7.0
