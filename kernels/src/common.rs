@@ -117,20 +117,22 @@ pub fn depth_order(a: &CapturedFrag, b: &CapturedFrag) -> std::cmp::Ordering {
 }
 
 /// Sorts a pixel's fragments the way the DFB resolve does (seeds: z-thickness paper):
-/// insertion sort under 16 fragments, shell sort above.
+/// insertion sort under 16 fragments ([`sort_keys_changed`] on their [`sort_key`]s), shell
+/// sort above.
 pub fn sort_fragments(v: &mut [CapturedFrag]) {
     if v.len() >= 16 {
         shell_sort(v);
         return;
     }
-    for i in 1..v.len() {
-        let x = v[i];
-        let mut j = i;
-        while j > 0 && depth_order(&v[j - 1], &x) == std::cmp::Ordering::Greater {
-            v[j] = v[j - 1];
-            j -= 1;
+    let mut keys = [0u64; 16];
+    let keys = &mut keys[..v.len()];
+    for (k, f) in keys.iter_mut().zip(v.iter()) {
+        *k = sort_key(f.depth.to_bits(), f.prim);
+    }
+    if sort_keys_changed(keys) {
+        for (f, &k) in v.iter_mut().zip(keys.iter()) {
+            *f = CapturedFrag::from_bits(key_depth_bits(k), k as u32);
         }
-        v[j] = x;
     }
 }
 
