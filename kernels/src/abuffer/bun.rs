@@ -24,6 +24,7 @@
 
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
+use super::checks::CaptureOrder;
 use super::ll::{list_insert, pool_from_params, ListPool, ListResolve};
 use super::walk::Walk;
 use super::run::AbRun;
@@ -147,6 +148,8 @@ impl Algorithm for BunLl {
         exec: &ExecConfig,
     ) -> Result<AlgoResult, AlgoError> {
         let mut run = AbRun::new(frame, params, exec)?;
+        // The resolve writes nothing back; the host sorts the lists it reads (`Walk`).
+        run.order = CaptureOrder::Host;
         let n = run.n;
         let buckets = params.buckets.max(1);
         let zmin = run.device.buffer::<f32>("bun-ll-zmin", n as u64)?;

@@ -2,8 +2,9 @@
 //!
 //! An A-buffer keeps every fragment (`Capacity::All`), so whatever its memory layout (fixed
 //! arrays, count-scan-store ranges, linked lists, buckets), what it read back must satisfy
-//! the same properties: no fragment stored twice, the resolve's order front to back, the
-//! resolve image the composite of exactly the captured fragments, no faulted invocation
+//! the same properties: no fragment stored twice, the resolve's order front to back (where
+//! the resolve writes its order back, [`CaptureOrder`]), the resolve image the composite of
+//! exactly the captured fragments, no faulted invocation
 //! ([`capture_checks`], run by [`super::run::AbRun::finish`] for every algorithm of the
 //! family). The count-scan-store A-buffers (DFB, SB) share three more ([`count_store_check`],
 //! [`ranges_check`], [`stored_once_check`]). One copy of each keeps the check names, which
@@ -14,20 +15,36 @@ use fragrace_emu::PassReport;
 use crate::algo::{Capture, Check, Params};
 use crate::common::{self, composite_frags};
 
+/// Whose order a capture is in: what [`sorted_check`] can say about it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum CaptureOrder {
+    /// The resolve wrote each pixel's fragments back in the order it composited them, and
+    /// the capture reads them as they are: [`sorted_check`] checks the resolve's sort.
+    Resolve,
+    /// The resolve sorted its own copy and wrote nothing back (the list A-buffers); the host
+    /// sorted the capture. [`sorted_check`] would only check the host's sort, so it is not
+    /// run: the resolve's order shows in [`image_check`], which composites the capture in
+    /// its order.
+    Host,
+}
+
 /// The checks every A-buffer runs on its capture, its resolve image and its merged report,
-/// in this order: [`duplicate_check`], [`sorted_check`], [`image_check`], [`fault_check`].
+/// in this order: [`duplicate_check`], [`sorted_check`] (for a capture in the resolve's
+/// order), [`image_check`], [`fault_check`].
 pub(super) fn capture_checks(
     capture: &Capture,
+    order: CaptureOrder,
     image: &[[f32; 4]],
     params: &Params,
     report: &PassReport,
-) -> [Check; 4] {
-    [
-        duplicate_check(capture),
-        sorted_check(capture),
-        image_check(image, capture, params),
-        fault_check(report),
-    ]
+) -> Vec<Check> {
+    let mut checks = vec![duplicate_check(capture)];
+    if order == CaptureOrder::Resolve {
+        checks.push(sorted_check(capture));
+    }
+    checks.push(image_check(image, capture, params));
+    checks.push(fault_check(report));
+    checks
 }
 
 /// The resolve kernel wrote, for every pixel, the composite of exactly the fragments the

@@ -44,6 +44,7 @@ use std::cell::Cell;
 
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo, PassReport};
 
+use super::checks::CaptureOrder;
 use super::run::{AbRun, Readback};
 use super::sizing::{sized_by_count, Blocks, BLOCK_SHIFT, COUNTER_STRIDE};
 use super::walk::Walk;
@@ -51,7 +52,7 @@ use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity,
     CapturedFrag, Check, Frame, HazardClass, Params,
 };
-use crate::common::{key_depth_bits, sort_fragments, sort_key, sort_keys_changed, EMPTY};
+use crate::common::{sort_fragments, sort_key, sort_keys_changed, EMPTY};
 use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -187,9 +188,18 @@ pub(super) use list_insert;
 /// The resolve of list A-buffers: one invocation per pixel walks each of its `lists` lists
 /// (bounded by the pool size, so a cycle cannot hang it; a link out of the pool ends the walk;
 /// both are counted in `faults[0]` and `faults[1]`), loading every node as one record, sorts
-/// each list (`sort_fragments`), writes the sorted payloads back along the list (so the
-/// readback is in resolve order; a short list the sort left as it was is not written), and
-/// composites the lists' concatenation front to back.
+/// each list's fragments in its own memory (`sort_fragments`) and composites the lists'
+/// concatenation front to back.
+///
+/// The pool is only read: the lists are collected and the fragments blended in order
+/// (Yang et al. 2010 "use dynamic linked lists to collect fragments and blend them in
+/// order", the depth-presorted paper, section 2), and the llvmpipe peer's resolve binds the
+/// nodes `readonly`; nothing is written back. The host sorts each list it reads back
+/// as the resolve does (`Walk::capture_sized`), so the resolve's order is checked through its
+/// image ("resolve image is the composite of the captured fragments"). Writing the sorted
+/// payloads back along the lists, as this resolve did before, was a fifth of its time: the
+/// bunny's at 2048 x 2048 on one thread took 34.5 ms with it and 27.3 ms without
+/// (docs/performance.md).
 pub(super) struct ListResolve {
     pub pool: ListPool,
     /// Lists per pixel (the heads of pixel `p` are `p * lists ..`).
@@ -226,7 +236,6 @@ impl FragmentKernel for ListResolve {
             // its own, for the reason `list_insert!` gives. A longer list, or one that leaves
             // the pool, is left to the general walk below (which counts the fault).
             // The fragments as sort keys (`sort_key`: one word each, see there).
-            let mut nodes = [0u32; SHORT];
             let mut keys = [0u64; SHORT];
             let mut n = 0;
             let mut cur = head;
@@ -234,24 +243,14 @@ impl FragmentKernel for ListResolve {
                 let mut rec = [0u32; NODE_WORDS as usize];
                 f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec)
                     .await;
-                nodes[n] = cur;
                 keys[n] = sort_key(rec[0], rec[1]);
                 n += 1;
                 cur = rec[NEXT as usize];
             }
             if cur == EMPTY {
                 let keys = &mut keys[..n];
-                // A list already in depth order is written back as it stands: no store.
-                if sort_keys_changed(keys) {
-                    for (&node, &key) in nodes.iter().zip(keys.iter()) {
-                        f.store_record(
-                            self.pool.nodes,
-                            node * NODE_WORDS,
-                            &[key_depth_bits(key), key as u32],
-                        )
-                        .await;
-                    }
-                }
+                // Whether the sort moved anything does not matter here: nothing is written back.
+                sort_keys_changed(keys);
                 self.composite.output_keys(&f, keys);
                 return;
             }
@@ -260,7 +259,7 @@ impl FragmentKernel for ListResolve {
         // pixel (not two allocations per covered pixel). An invocation that finds them
         // taken (another one on this thread is suspended holding them, under the
         // scheduled executor) starts from empty ones; the last one back keeps its own.
-        let (mut all, mut nodes, mut frags) = SCRATCH.with(Cell::take);
+        let (mut all, mut frags) = SCRATCH.with(Cell::take);
         all.clear();
         for b in 0..self.lists {
             let mut cur = if b == 0 {
@@ -268,37 +267,27 @@ impl FragmentKernel for ListResolve {
             } else {
                 f.load(self.pool.heads, first + b).await
             };
-            nodes.clear();
             frags.clear();
             while cur != EMPTY {
                 if cur >= self.pool_nodes {
                     f.atomic_add(self.faults, 0, 1).await;
                     break;
                 }
-                if nodes.len() as u32 >= self.pool_nodes {
+                if frags.len() as u32 >= self.pool_nodes {
                     f.atomic_add(self.faults, 1, 1).await;
                     break;
                 }
                 let mut rec = [0u32; NODE_WORDS as usize];
                 f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec)
                     .await;
-                nodes.push(cur);
                 frags.push(CapturedFrag::from_bits(rec[0], rec[1]));
                 cur = rec[NEXT as usize];
             }
             sort_fragments(&mut frags);
-            for (&node, fr) in nodes.iter().zip(&frags) {
-                f.store_record(
-                    self.pool.nodes,
-                    node * NODE_WORDS,
-                    &[fr.depth.to_bits(), fr.prim],
-                )
-                .await;
-            }
             all.extend_from_slice(&frags);
         }
         self.composite.output(&f, &all);
-        SCRATCH.with(|s| s.set((all, nodes, frags)));
+        SCRATCH.with(|s| s.set((all, frags)));
     }
 }
 
@@ -307,9 +296,8 @@ impl FragmentKernel for ListResolve {
 const SHORT: usize = 16;
 
 thread_local! {
-    /// [`ListResolve`]'s per-thread scratch: the pixel's fragments, one list's nodes and
-    /// its fragments.
-    static SCRATCH: Cell<(Vec<CapturedFrag>, Vec<u32>, Vec<CapturedFrag>)> = Cell::default();
+    /// [`ListResolve`]'s per-thread scratch: the pixel's fragments and one list's fragments.
+    static SCRATCH: Cell<(Vec<CapturedFrag>, Vec<CapturedFrag>)> = Cell::default();
 }
 
 /// Pool size in nodes for `params.pool_per_pixel` nodes per pixel.
@@ -470,6 +458,8 @@ impl Algorithm for LinkedList {
     ) -> Result<AlgoResult, AlgoError> {
         let mut run = AbRun::new(frame, params, exec)?;
         let n = run.n;
+        // The resolve writes nothing back; the host sorts the lists it reads (`Walk`).
+        run.order = CaptureOrder::Host;
         // The count pass is optional: the report starts empty.
         let mut report = PassReport::default();
 

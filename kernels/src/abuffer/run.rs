@@ -20,7 +20,9 @@ use fragrace_emu::{
 };
 
 use super::array::{ArrayResolve, FragmentArrays, Layout};
-use super::checks::{capture_checks, count_store_check, ranges_check, stored_once_check};
+use super::checks::{
+    capture_checks, count_store_check, ranges_check, stored_once_check, CaptureOrder,
+};
 use crate::algo::{AlgoError, AlgoResult, Capture, Check, Deferred, Frame, Params};
 use crate::common::{self, capture_state, geometry_pass, pixels};
 use crate::resolve::{self, Composite};
@@ -38,6 +40,9 @@ pub(super) struct AbRun<'a> {
     /// Bytes this frame uses that an earlier frame of the same draw kept for it instead of
     /// allocating them on the device (`ll`'s kept counts): storage all the same.
     pub kept_bytes: u64,
+    /// Whose order the capture is in ([`CaptureOrder::Resolve`] unless the algorithm says
+    /// otherwise): which of the family's checks apply.
+    pub order: CaptureOrder,
 }
 
 impl<'a> AbRun<'a> {
@@ -55,6 +60,7 @@ impl<'a> AbRun<'a> {
             n: pixels(frame),
             fb: resolve::framebuffer(frame)?,
             kept_bytes: 0,
+            order: CaptureOrder::Resolve,
         })
     }
 
@@ -132,7 +138,11 @@ impl<'a> AbRun<'a> {
         let storage_bytes =
             self.device.memory.bytes() + self.kept_bytes + self.n as u64 * resolve::TARGET_BYTES;
         let AbRun {
-            device, params, fb, ..
+            device,
+            params,
+            fb,
+            order,
+            ..
         } = self;
         let params = params.clone();
         let deferred = Deferred::new(move |r: &mut AlgoResult| {
@@ -143,7 +153,7 @@ impl<'a> AbRun<'a> {
             } = work(&device)?;
             let image = resolve::read_image(&fb);
             let mut checks = own;
-            checks.extend(capture_checks(&capture, &image, &params, &r.report));
+            checks.extend(capture_checks(&capture, order, &image, &params, &r.report));
             checks.extend(later);
             r.checks.extend(checks);
             r.capture = Some(capture);
@@ -172,7 +182,13 @@ impl<'a> AbRun<'a> {
     ) -> AlgoResult {
         let image = resolve::read_image(&self.fb);
         let mut checks = own;
-        checks.extend(capture_checks(&capture, &image, self.params, &report));
+        checks.extend(capture_checks(
+            &capture,
+            self.order,
+            &image,
+            self.params,
+            &report,
+        ));
         checks.extend(later);
         AlgoResult {
             capture: Some(capture),

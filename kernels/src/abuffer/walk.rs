@@ -2,10 +2,12 @@
 //! lists that share its pool, [`super::ll::ListPool`]): every list followed from its head,
 //! its fragments gathered as a capture, and what a broken list looks like (a link out of
 //! its region of the pool, a node reached twice) counted and described for the self-check.
+//! The lists are read as the frame left them, in insertion order; the capture sorts each
+//! one as the resolve does.
 
 use super::ll::{NEXT, NODE_WORDS};
 use crate::algo::{Capture, CapturedFrag, Check, Frame};
-use crate::common::EMPTY;
+use crate::common::{depth_order, EMPTY};
 
 /// The lists as the host finds them after the resolve.
 pub(super) struct Walk {
@@ -62,7 +64,10 @@ impl Walk {
         w
     }
 
-    /// Per pixel, its lists concatenated in bucket order, as a capture.
+    /// Per pixel, its lists each sorted front to back (`depth_order`) and concatenated in
+    /// bucket order, as a capture: the fragments in the order the resolve composites them
+    /// ([`ListResolve`](super::ll::ListResolve) sorts each list it gathers and writes
+    /// nothing back, so the lists themselves stay in insertion order).
     pub fn capture(&self, frame: &Frame<'_>, lists: u32) -> Capture {
         self.capture_sized(frame.width, frame.height, lists)
     }
@@ -70,7 +75,19 @@ impl Walk {
     /// [`Walk::capture`] for a frame of `width` x `height` pixels.
     pub fn capture_sized(&self, width: u32, height: u32, lists: u32) -> Capture {
         let per = lists.max(1) as usize;
-        Capture::from_lists(width, height, self.lists.chunks(per).map(|c| c.concat()))
+        Capture::from_lists(
+            width,
+            height,
+            self.lists.chunks(per).map(|c| {
+                let mut pixel = Vec::with_capacity(c.iter().map(Vec::len).sum());
+                for list in c {
+                    let start = pixel.len();
+                    pixel.extend_from_slice(list);
+                    pixel[start..].sort_by(depth_order);
+                }
+                pixel
+            }),
+        )
     }
 
     /// "Lists acyclic and every next index in range", from this walk and the resolve's
@@ -108,5 +125,59 @@ mod tests {
         let ok = Walk::new(&[1, EMPTY], &[0, 0, EMPTY, 0, 0, 0], 1, &[(0, 2)]);
         assert!(ok.integrity_check(&[0, 0]).passed);
         assert!(!ok.integrity_check(&[0, 1]).passed);
+    }
+
+    /// The lists stay in insertion order (the resolve writes nothing back); the capture is
+    /// sorted by the host, so a resolve that composited a list in its stored order, not
+    /// front to back, fails the image check, and one that sorted passes it.
+    #[test]
+    fn the_capture_is_sorted_and_the_image_check_sees_an_unsorted_resolve() {
+        use super::super::checks::{capture_checks, CaptureOrder};
+        use crate::algo::Params;
+        use crate::common::composite_frags;
+        use fragrace_emu::PassReport;
+        // Pixel 0: head 2 -> 1 -> 0, depths 0.25, 0.75, 0.5 (prepended: the last inserted
+        // first). Pixel 1: empty.
+        let (a, b, c) = (0.5f32.to_bits(), 0.75f32.to_bits(), 0.25f32.to_bits());
+        let nodes = [a, 7, EMPTY, b, 8, 0, c, 9, 1];
+        let walk = Walk::new(&[2, EMPTY], &nodes, 1, &[(0, 3)]);
+        let stored: Vec<f32> = walk.lists[0].iter().map(|f| f.depth).collect();
+        assert_eq!(stored, [0.25, 0.75, 0.5]);
+        let capture = walk.capture_sized(2, 1, 1);
+        let sorted: Vec<f32> = capture.pixel(0).iter().map(|f| f.depth).collect();
+        assert_eq!(sorted, [0.25, 0.5, 0.75]);
+        assert!(capture.pixel(1).is_empty());
+
+        let params = Params::default();
+        let image_of = |pixel: &[CapturedFrag]| {
+            vec![
+                composite_frags(pixel, params.alpha, params.background),
+                composite_frags(&[], params.alpha, params.background),
+            ]
+        };
+        let report = PassReport::default();
+        let good = capture_checks(
+            &capture,
+            CaptureOrder::Host,
+            &image_of(capture.pixel(0)),
+            &params,
+            &report,
+        );
+        assert!(good.iter().all(|c| c.passed), "{good:?}");
+        assert!(good
+            .iter()
+            .all(|c| c.name != "resolve order is front to back"));
+        let unsorted = capture_checks(
+            &capture,
+            CaptureOrder::Host,
+            &image_of(&walk.lists[0]),
+            &params,
+            &report,
+        );
+        let image = unsorted
+            .iter()
+            .find(|c| c.name == "resolve image is the composite of the captured fragments")
+            .unwrap();
+        assert!(!image.passed, "{}", image.detail);
     }
 }
