@@ -131,4 +131,15 @@ pub trait Fragment: Copy + sealed::Sealed {
     fn interlock_begin(&self) -> impl Future<Output = ()>;
     /// Leaves the critical section (`endInvocationInterlockARB`).
     fn interlock_end(&self) -> impl Future<Output = ()>;
+    /// A hint that the kernel will soon read the words `words` of `buf`: on the fused path
+    /// of the direct executors their cache lines are requested now (a range past the
+    /// buffer's end is cut to it; a buffer past the first 32, or of 64-bit words, is not
+    /// prefetched); under the other contexts nothing happens. It is not an access: no step,
+    /// no operation count, nothing the hazard detector sees, never a fault, no value
+    /// changes. For words a kernel will reach by following links, whose loads wait one on
+    /// another (a linked list's nodes), so that their misses overlap instead.
+    #[inline(always)]
+    fn prefetch<T: Word>(&self, buf: Buf<T>, words: std::ops::Range<u32>) {
+        let _ = (buf, words);
+    }
 }

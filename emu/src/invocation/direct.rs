@@ -299,6 +299,12 @@ impl<const OWN: bool> Fragment for DirectFrag<'_, '_, OWN> {
     fn yield_now(&self) -> impl Future<Output = ()> {
         Performed::of(self.ctx.frag.count_step(&self.ctx.state.steps))
     }
+    #[inline(always)]
+    fn prefetch<T: Word>(&self, buf: Buf<T>, words: std::ops::Range<u32>) {
+        if !T::WIDE {
+            self.ctx.state.words.prefetch32(buf.id, words);
+        }
+    }
 }
 
 impl<const OWN: bool> sealed::Sealed for DirectFrag<'_, '_, OWN> {}

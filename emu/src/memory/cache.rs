@@ -64,6 +64,9 @@ pub(crate) struct WordCache<'m> {
 /// Buffer ids whose 32-bit words [`WordCache`] holds.
 const TABLE: usize = 32;
 
+/// Bytes of a cache line (x86-64, and most others), the step of [`WordCache::prefetch32`].
+const LINE: usize = 64;
+
 impl<'m> WordCache<'m> {
     /// The table of `memory`'s buffers.
     #[inline]
@@ -93,6 +96,30 @@ impl<'m> WordCache<'m> {
         match self.w32.get(b as usize) {
             Some(words) if !words.is_empty() => words,
             _ => memory.words32(b),
+        }
+    }
+
+    /// Requests the cache lines of the words `words` of the 32-bit buffer `b`, cut to the
+    /// buffer's end; nothing for a buffer past the table (the hint of
+    /// [`crate::Fragment::prefetch`]).
+    #[inline]
+    pub fn prefetch32(&self, b: u32, words: std::ops::Range<u32>) {
+        let Some(all) = self.w32.get(b as usize) else {
+            return;
+        };
+        let end = (words.end as usize).min(all.len());
+        let start = words.start as usize;
+        if start >= end {
+            return;
+        }
+        // One hint a 64-byte line, from the line of the range's first word to the line of
+        // its last.
+        let range = &all[start..end];
+        let first = range.as_ptr().cast::<u8>();
+        let offset = first as usize % LINE;
+        let line = first.wrapping_sub(offset);
+        for at in (0..offset + std::mem::size_of_val(range)).step_by(LINE) {
+            crate::hint::prefetch(line.wrapping_add(at));
         }
     }
 

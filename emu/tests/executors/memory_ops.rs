@@ -81,3 +81,70 @@ fn buffers_reject_absurd_sizes_and_wrong_types() {
     assert!(dev.memory.write(b, 2, &[1, 2, 3]).is_err());
     assert!(dev.memory.read(b).is_ok());
 }
+
+/// Adds 1 to its pixel's word of `words`, after prefetching `hints` (ranges of every kind:
+/// in bounds, past the end, empty, reversed, and of a 64-bit buffer) when `prefetch` is set.
+struct Prefetching {
+    words: Buf<u32>,
+    wide: Buf<u64>,
+    prefetch: bool,
+}
+
+impl FragmentKernel for Prefetching {
+    fn info(&self) -> KernelInfo {
+        KernelInfo::new("prefetching")
+    }
+    async fn shade(&self, f: impl Fragment) {
+        if self.prefetch {
+            let p = f.pixel_index();
+            f.prefetch(self.words, 0..self.words.len());
+            f.prefetch(self.words, p..p + 1);
+            f.prefetch(self.words, self.words.len() - 1..u32::MAX);
+            f.prefetch(self.words, u32::MAX - 1..u32::MAX);
+            f.prefetch(self.words, 9..3);
+            f.prefetch(self.words, 5..5);
+            f.prefetch(self.wide, 0..u32::MAX);
+        }
+        let p = f.pixel_index();
+        f.atomic_add(self.words, p, 1).await;
+        f.output(0, [f.x() as f32, 0.0, 0.0, 1.0]);
+    }
+}
+
+/// A prefetch is a hint, not an access: under every executor a kernel that prefetches
+/// (in range or not, of any buffer) computes, counts and reports exactly what the same kernel
+/// without its hints does, and never faults.
+#[test]
+fn a_prefetch_is_no_access() {
+    for e in all_execs() {
+        let run = |prefetch: bool| {
+            let mut dev = Device::new();
+            let words = dev.buffer::<u32>("words", 6 * 5).unwrap();
+            let wide = dev.buffer::<u64>("wide", 7).unwrap();
+            let mut fb = Framebuffer::new(6, 5, SampleCount::X1, 8, &[Format::RGBA32F]).unwrap();
+            let mut st = FragmentState::new();
+            st.targets = vec![TargetState::new(Format::RGBA32F)];
+            let kernel = Prefetching {
+                words,
+                wide,
+                prefetch,
+            };
+            let r = dev.fullscreen(&mut fb, &st, &kernel, &e).unwrap();
+            let image: Vec<_> = (0..5)
+                .flat_map(|y| (0..6).map(move |x| (x, y)))
+                .map(|(x, y)| fb.color(0, x, y, 0))
+                .collect();
+            (dev.memory.read(words).unwrap(), image, r.stats)
+        };
+        let (with, without) = (run(true), run(false));
+        assert_eq!(with.0, vec![1; 30], "{e:?}");
+        assert_eq!(with.0, without.0, "{e:?}");
+        assert_eq!(with.1, without.1, "{e:?}");
+        assert_eq!(with.2.faulted, 0, "{e:?}");
+        assert_eq!(
+            (with.2.steps, with.2.ops, with.2.shaded),
+            (without.2.steps, without.2.ops, without.2.shaded),
+            "{e:?}"
+        );
+    }
+}

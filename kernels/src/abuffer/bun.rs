@@ -202,6 +202,8 @@ impl Algorithm for BunLl {
             pool_nodes: pool_nodes as u32,
             faults,
             composite: Composite::of(params),
+            // The buckets' regions are not cut into screen blocks.
+            blocks: None,
         };
         let generated = run.store_and_resolve(&mut report, &store, &resolve)?;
 
