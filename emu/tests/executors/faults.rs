@@ -256,6 +256,66 @@ fn an_invocation_that_faults_makes_no_access_after_it() {
     }
 }
 
+/// A misuse outside an access (an output to a target that does not exist, an interpolated
+/// value read by a kernel declared without them) ends the invocation as an access fault
+/// does: the add before it lands for every fragment, the add after it for none (the
+/// invocation stops at its next access at the latest).
+#[test]
+fn an_invocation_that_misuses_the_api_makes_no_access_after_it() {
+    #[derive(Clone, Copy)]
+    enum Misuse {
+        Target,
+        Interpolant,
+    }
+    struct AddMisuseAdd {
+        counters: Buf<u32>,
+        misuse: Misuse,
+    }
+    impl FragmentKernel for AddMisuseAdd {
+        fn info(&self) -> KernelInfo {
+            let info = KernelInfo::new("add-misuse-add");
+            match self.misuse {
+                Misuse::Target => info,
+                Misuse::Interpolant => info.without_interpolants(),
+            }
+        }
+        async fn shade(&self, f: impl Fragment) {
+            f.atomic_add(self.counters, 0, 1).await;
+            let red = match self.misuse {
+                Misuse::Target => {
+                    f.output(9, [1.0; 4]);
+                    1.0
+                }
+                Misuse::Interpolant => f.depth(),
+            };
+            f.atomic_add(self.counters, 1, 1).await;
+            f.output(0, [red, 0.0, 0.0, 1.0]);
+        }
+    }
+    for e in all_execs().into_iter().chain(direct_execs()) {
+        for misuse in [Misuse::Target, Misuse::Interpolant] {
+            let mut dev = Device::new();
+            let counters = dev.buffer::<u32>("counters", 2).unwrap();
+            let (_, r) = draw_with(&dev, &AddMisuseAdd { counters, misuse }, &e);
+            let what = format!(
+                "{e:?}, {}",
+                match misuse {
+                    Misuse::Target => "target 9",
+                    Misuse::Interpolant => "interpolant",
+                }
+            );
+            assert_eq!(r.stats.faulted, 256, "{what}");
+            assert!(
+                r.faults
+                    .iter()
+                    .all(|f| matches!(f.kind, FaultKind::Misuse { .. })),
+                "{what}"
+            );
+            assert_eq!(dev.memory.read(counters).unwrap(), vec![256, 0], "{what}");
+        }
+    }
+}
+
 /// The same faults in a pass with nothing to write after shading (no targets: the direct
 /// path retires each fragment as soon as it is shaded, and a span's later pixels write only
 /// their position into the slot): each fault names its own invocation, and the others
