@@ -3,7 +3,8 @@
 //! its fragments gathered as a capture, and what a broken list looks like (a link out of
 //! its region of the pool, a node reached twice) counted and described for the self-check.
 //! The lists are read as the frame left them, in insertion order; the capture sorts each
-//! one as the resolve does.
+//! one into the order the resolve must composite it (with the standard library's sort, an
+//! independent reference for the resolve's own).
 
 use super::ll::{NEXT, NODE_WORDS};
 use crate::algo::{Capture, CapturedFrag, Check, Frame};
@@ -83,6 +84,8 @@ impl Walk {
                 for list in c {
                     let start = pixel.len();
                     pixel.extend_from_slice(list);
+                    // The standard library's sort, not the resolve's own (`sort_fragments`):
+                    // this order is the reference the resolve's image is checked against.
                     pixel[start..].sort_by(depth_order);
                 }
                 pixel
