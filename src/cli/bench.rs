@@ -58,6 +58,9 @@ pub fn cmd_bench(a: &BenchOptions, given: &[String]) -> Result<(), CliError> {
     // (allocation and clearing of buffers, readback, host work).
     let mut phase_times: Vec<Vec<f64>> = Vec::new();
     let mut outside_times = Vec::new();
+    // Every frame in run order (its time and its passes'), for a reader looking at the
+    // spread rather than the median.
+    let mut in_order = Vec::new();
     // Hazard-prone algorithms may fail a check under real races: reported, not fatal.
     let mut failed_checks = 0;
     let mut last = None;
@@ -79,6 +82,10 @@ pub fn cmd_bench(a: &BenchOptions, given: &[String]) -> Result<(), CliError> {
             times.push(p.wall.as_secs_f64() * 1e3);
         }
         outside_times.push(r.wall_ms - r.result.report.wall.as_secs_f64() * 1e3);
+        in_order.push(serde_json::json!({
+            "ms": r.wall_ms,
+            "passes_ms": passes.iter().map(|p| p.wall.as_secs_f64() * 1e3).collect::<Vec<_>>(),
+        }));
         last = Some(r);
         bar.inc(1);
     }
@@ -170,6 +177,7 @@ pub fn cmd_bench(a: &BenchOptions, given: &[String]) -> Result<(), CliError> {
             .iter()
             .map(|(pass, ms)| serde_json::json!({ "pass": pass, "median_ms": ms }))
             .collect::<Vec<_>>(),
+        "frames_in_order": in_order,
     });
     merge(&mut v, &memory);
     v["peak_rss_bytes"] = serde_json::json!(crate::budget::peak_rss());
