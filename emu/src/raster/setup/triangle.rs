@@ -6,10 +6,13 @@ use crate::raster::SUBPIXEL_BITS;
 
 /// A triangle after clipping and snapping, ready to rasterize.
 ///
-/// 64 bytes (one cache line), no heap: the depth plane and three barycentric planes, each
+/// 64 bytes, aligned to 64 (one cache line each in an array: a record that straddled two
+/// lines cost a fragment two misses where the records come from memory, as a binned
+/// pass's over a large mesh), no heap: the depth plane and three barycentric planes, each
 /// relative to a reference pixel inside the viewport. The snapped vertices, needed only to
 /// rasterize triangles larger than a pixel, live in the tile bins instead.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(align(64))]
 pub struct SetupTriangle {
     /// Index of the input triangle (into `indices`) this comes from (several setup triangles share one
     /// source when clipping split it).
