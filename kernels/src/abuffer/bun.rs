@@ -25,7 +25,8 @@
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo};
 
 use super::checks::CaptureOrder;
-use super::ll::{list_insert, pool_from_params, ListPool, ListResolve};
+use super::list_resolve::ListResolve;
+use super::ll::{list_insert, pool_from_params, ListPool};
 use super::walk::Walk;
 use super::run::AbRun;
 use crate::algo::{

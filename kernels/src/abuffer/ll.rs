@@ -40,19 +40,18 @@
 //! ([`LinkedList::concurrent_reader`]), where the hazard detector reports the reader's
 //! payload record as torn and the reader itself counts half-written nodes.
 
-use std::cell::Cell;
-
 use fragrace_emu::{Buf, ExecConfig, Fragment, FragmentKernel, KernelInfo, PassReport};
 
 use super::checks::CaptureOrder;
+use super::list_resolve::ListResolve;
 use super::run::{AbRun, Readback};
 use super::sizing::{sized_by_count, Blocks, BLOCK_SHIFT, COUNTER_STRIDE};
 use super::walk::Walk;
 use crate::algo::{
     AlgoError, AlgoInfo, AlgoResult, Algorithm, Capacity,
-    CapturedFrag, Check, Frame, HazardClass, Params,
+    Check, Frame, HazardClass, Params,
 };
-use crate::common::{sort_fragments, sort_key, sort_keys_changed, EMPTY};
+use crate::common::EMPTY;
 use crate::resolve::Composite;
 
 pub(super) fn algorithms() -> Vec<Box<dyn Algorithm>> {
@@ -184,139 +183,6 @@ macro_rules! list_insert {
     }};
 }
 pub(super) use list_insert;
-
-/// The resolve of list A-buffers: one invocation per pixel walks each of its `lists` lists
-/// (bounded by the pool size, so a cycle cannot hang it; a link out of the pool ends the walk;
-/// both are counted in `faults[0]` and `faults[1]`), loading every node as one record, sorts
-/// each list's fragments in its own memory (`sort_fragments`) and composites the lists'
-/// concatenation front to back.
-///
-/// The pool is only read: the lists are collected and the fragments blended in order
-/// (Yang et al. 2010 "use dynamic linked lists to collect fragments and blend them in
-/// order", the depth-presorted paper, section 2), and the llvmpipe peer's resolve binds the
-/// nodes `readonly`; nothing is written back. The host sorts each list it reads back
-/// as the resolve does (`Walk::capture_sized`), so the resolve's order is checked through its
-/// image ("resolve image is the composite of the captured fragments"). Writing the sorted
-/// payloads back along the lists, as this resolve did before, was a fifth of its time: the
-/// bunny's at 2048 x 2048 on one thread took 34.5 ms with it and 27.3 ms without
-/// (docs/performance.md).
-pub(super) struct ListResolve {
-    pub pool: ListPool,
-    /// Lists per pixel (the heads of pixel `p` are `p * lists ..`).
-    pub lists: u32,
-    /// Nodes in the pool.
-    pub pool_nodes: u32,
-    /// `[links out of the pool, walks cut at the pool size]`.
-    pub faults: Buf<u32>,
-    pub composite: Composite,
-    /// The pool's screen blocks, when it is cut into them ([`LlInsert::blocks`]): each
-    /// block's nodes are prefetched at its first pixel.
-    pub blocks: Option<Blocks>,
-}
-
-impl FragmentKernel for ListResolve {
-    fn info(&self) -> KernelInfo {
-        // A pixel no fragment reached has empty lists (the heads are filled with `EMPTY`):
-        // it writes the background.
-        KernelInfo::new("list-resolve")
-            .with_untouched_output(self.composite.background_bits())
-            // A pixel's lists hold only nodes its own fragments inserted.
-            .with_by_region_reads()
-    }
-    async fn shade(&self, f: impl Fragment) {
-        let p = f.pixel_index();
-        // At a block's first pixel, the block's nodes (its pixels' nodes, and only theirs)
-        // are asked of the cache: the walks below follow them link by link, each load
-        // waiting for the one before, so a pool read from memory (a pass whose resolve runs
-        // after all of its geometry, the 871K dragon's at 2048 x 2048) would wait for one
-        // miss at a time. A hint: no access, no effect on any value.
-        if let Some(blocks) = &self.blocks {
-            let (x, y) = (f.x(), f.y());
-            if (x | y) & ((1 << BLOCK_SHIFT) - 1) == 0 {
-                let (start, count) = blocks.range(blocks.of(x, y));
-                f.prefetch(
-                    self.pool.nodes,
-                    start * NODE_WORDS..(start + count) * NODE_WORDS,
-                );
-            }
-        }
-        let first = p * self.lists;
-        let head = f.load(self.pool.heads, first).await;
-        // An empty pixel (most of a frame) loads its one head and writes the background.
-        if self.lists == 1 && head == EMPTY {
-            self.composite.output(&f, &[]);
-            return;
-        }
-        if self.lists == 1 {
-            // A list of at most `SHORT` nodes, all in the pool, is gathered on the stack
-            // rather than in the thread's scratch vectors (whose take and put back cost about
-            // a tenth of the resolve's instructions). Written here, not as an `async fn` of
-            // its own, for the reason `list_insert!` gives. A longer list, or one that leaves
-            // the pool, is left to the general walk below (which counts the fault).
-            // The fragments as sort keys (`sort_key`: one word each, see there).
-            let mut keys = [0u64; SHORT];
-            let mut n = 0;
-            let mut cur = head;
-            while cur != EMPTY && n < SHORT && cur < self.pool_nodes && (n as u32) < self.pool_nodes {
-                let mut rec = [0u32; NODE_WORDS as usize];
-                f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec)
-                    .await;
-                keys[n] = sort_key(rec[0], rec[1]);
-                n += 1;
-                cur = rec[NEXT as usize];
-            }
-            if cur == EMPTY {
-                let keys = &mut keys[..n];
-                // Whether the sort moved anything does not matter here: nothing is written back.
-                sort_keys_changed(keys);
-                self.composite.output_keys(&f, keys);
-                return;
-            }
-        }
-        // The lists are gathered in this thread's scratch vectors, reused from pixel to
-        // pixel (not two allocations per covered pixel). An invocation that finds them
-        // taken (another one on this thread is suspended holding them, under the
-        // scheduled executor) starts from empty ones; the last one back keeps its own.
-        let (mut all, mut frags) = SCRATCH.with(Cell::take);
-        all.clear();
-        for b in 0..self.lists {
-            let mut cur = if b == 0 {
-                head
-            } else {
-                f.load(self.pool.heads, first + b).await
-            };
-            frags.clear();
-            while cur != EMPTY {
-                if cur >= self.pool_nodes {
-                    f.atomic_add(self.faults, 0, 1).await;
-                    break;
-                }
-                if frags.len() as u32 >= self.pool_nodes {
-                    f.atomic_add(self.faults, 1, 1).await;
-                    break;
-                }
-                let mut rec = [0u32; NODE_WORDS as usize];
-                f.load_record(self.pool.nodes, cur * NODE_WORDS, &mut rec)
-                    .await;
-                frags.push(CapturedFrag::from_bits(rec[0], rec[1]));
-                cur = rec[NEXT as usize];
-            }
-            sort_fragments(&mut frags);
-            all.extend_from_slice(&frags);
-        }
-        self.composite.output(&f, &all);
-        SCRATCH.with(|s| s.set((all, frags)));
-    }
-}
-
-/// Most nodes of a list [`ListResolve`] gathers on the stack (the bunny at
-/// 2048 x 2048 has 4 fragments a covered pixel on average, the 871K dragon 6).
-const SHORT: usize = 16;
-
-thread_local! {
-    /// [`ListResolve`]'s per-thread scratch: the pixel's fragments and one list's fragments.
-    static SCRATCH: Cell<(Vec<CapturedFrag>, Vec<CapturedFrag>)> = Cell::default();
-}
 
 /// Pool size in nodes for `params.pool_per_pixel` nodes per pixel.
 pub(super) fn pool_from_params(per_pixel: f32, pixels: usize) -> u64 {

@@ -67,7 +67,7 @@ impl Walk {
 
     /// Per pixel, its lists each sorted front to back (`depth_order`) and concatenated in
     /// bucket order, as a capture: the fragments in the order the resolve composites them
-    /// ([`ListResolve`](super::ll::ListResolve) sorts each list it gathers and writes
+    /// ([`ListResolve`](super::list_resolve::ListResolve) sorts each list it gathers and writes
     /// nothing back, so the lists themselves stay in insertion order).
     pub fn capture(&self, frame: &Frame<'_>, lists: u32) -> Capture {
         self.capture_sized(frame.width, frame.height, lists)
@@ -94,7 +94,7 @@ impl Walk {
     }
 
     /// "Lists acyclic and every next index in range", from this walk and the resolve's
-    /// own counts (`faults` of [`ListResolve`](super::ll::ListResolve)).
+    /// own counts (`faults` of [`ListResolve`](super::list_resolve::ListResolve)).
     pub fn integrity_check(&self, resolve_faults: &[u32]) -> Check {
         let ok =
             self.bad_links == 0 && self.revisits == 0 && resolve_faults.iter().all(|&c| c == 0);
