@@ -726,6 +726,7 @@ impl Row<'_> {
     }
 }
 
+mod ahead;
 mod worker;
 
 use worker::Worker;

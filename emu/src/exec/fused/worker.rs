@@ -13,10 +13,11 @@ use crate::invocation::{
     DirectCtx, DirectFrag, DirectState, Frag, Halted, Invocation, Mode, PassEnv,
 };
 use crate::kernel::{FragInput, FragmentKernel};
-use crate::memory::{BlockArray, PixelArray, PixelPrefetcher};
+use crate::memory::{BlockArray, PixelArray};
 use crate::pipeline::{BlockMask, BLOCK_SHIFT};
-use crate::raster::{SampleCount, SetupTriangle, Span};
+use crate::raster::{SampleCount, Span};
 
+use super::ahead::{prefetch_ahead, Ahead};
 use super::{tile_of, FusedCounts, FusedPass, RowSetup, SpanSource, TileAccess};
 
 /// One worker thread's state: its warp of invocation slots and its tallies.
@@ -44,11 +45,6 @@ pub(super) struct Worker<'a, K> {
     /// too on an owned tile that holds whole blocks.
     own_block: Option<BlockArray>,
 }
-
-/// Covered runs ahead of the one being shaded whose per-pixel slots are prefetched: far
-/// enough for a miss to the last-level cache to land (about a dozen fragments of a dense
-/// mesh), near enough for the line to still be there.
-const PREFETCH_SPANS: usize = 8;
 
 impl<'a, K: FragmentKernel> Worker<'a, K> {
     pub(super) fn new(kernel: &'a K, env: &PassEnv<'_>, pass: &'a FusedPass<'a>) -> Self {
@@ -79,16 +75,9 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
         }
     }
 
-    /// What the shading loops prefetch ahead: the slots of the kernel's per-pixel array
-    /// (`None`: no hint, or no such buffer) and the setup records of a kernel that reads
-    /// interpolants (`Fragment::depth` evaluates the plane of the fragment's record).
+    /// What the shading loops prefetch ahead (`Ahead`).
     fn prefetcher<'e>(&self, env: &PassEnv<'e>) -> Ahead<'e> {
-        Ahead {
-            slots: self
-                .pixel_array
-                .and_then(|a| env.memory.pixel_prefetcher(a, env.width)),
-            records: if env.no_interpolants { &[] } else { env.tris },
-        }
+        Ahead::of(self.pixel_array, env)
     }
 
     pub(super) fn finish(mut self) -> (Acc, FusedCounts) {
@@ -544,33 +533,6 @@ impl<'a, K: FragmentKernel> Worker<'a, K> {
                 slot,
                 tile_of(tile),
             );
-        }
-    }
-}
-
-/// What a shading loop prefetches [`PREFETCH_SPANS`] covered runs ahead
-/// ([`Worker::prefetcher`]).
-struct Ahead<'e> {
-    slots: Option<PixelPrefetcher<'e>>,
-    /// The unit's setup records; empty when the kernel reads no interpolant.
-    records: &'e [SetupTriangle],
-}
-
-/// Prefetches, for the covered run [`PREFETCH_SPANS`] after run `i` (runs are short on
-/// dense meshes, and the hardware prefetcher follows a long one), the per-pixel slot of its
-/// first pixel and its triangle's setup record. A binned pass over a large mesh sets up
-/// every triangle before shading any, so a record is read from memory when its first
-/// fragment interpolates its depth: on the 871K dragon at 2048 x 2048, binned, a third of
-/// `ll`'s insert loop waited for it (`perf annotate`).
-#[inline(always)]
-fn prefetch_ahead(ahead: &Ahead<'_>, spans: &[Span], i: usize) {
-    if let Some(s) = spans.get(i + PREFETCH_SPANS) {
-        if let Some(p) = &ahead.slots {
-            p.pixel(s.x0, s.y);
-        }
-        // Full-screen runs have no record (`tri` is `u32::MAX`).
-        if let Some(t) = ahead.records.get(s.tri as usize) {
-            crate::hint::prefetch(t);
         }
     }
 }
